@@ -1,0 +1,101 @@
+"""simgrad: a differentiable, Taichi-compatible kernel language compiled to native code.
+
+`import simgrad as ti` and write Taichi programs: kernels are parsed from Python source, lowered to our
+IR, optimised, differentiated in the IR, and compiled with LLVM to multithreaded native code.
+"""
+
+from simgrad import dtypes as _dt
+from simgrad.dtypes import f16, f32, f64, i8, i16, i32, i64, u1, u8, u16, u32, u64
+from simgrad.errors import (
+    GradientError,
+    SimgradAssertionError,
+    SimgradError,
+    SimgradIndexError,
+    SimgradRuntimeError,
+    SimgradSyntaxError,
+    SimgradTypeError,
+)
+from simgrad.lang import mathlib as math
+from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, metal, opengl, vulkan, x64
+from simgrad.lang.factories import FieldsBuilder, field, root
+from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.kernel import func, kernel, pyfunc
+from simgrad.lang.loops import grouped, loop_config, ndrange, static, static_assert, static_print
+from simgrad.lang.matrix import Matrix, Vector
+from simgrad.lang.ops import (
+    abs,
+    acos,
+    asin,
+    atan2,
+    bit_cast,
+    bit_shr,
+    cast,
+    ceil,
+    cos,
+    exp,
+    floor,
+    log,
+    logical_and,
+    logical_not,
+    logical_or,
+    max,
+    min,
+    pow,
+    randn,
+    random,
+    raw_div,
+    raw_mod,
+    round,
+    rsqrt,
+    select,
+    sin,
+    sqrt,
+    tan,
+    tanh,
+)
+from simgrad.lang.snode import i, ij, ijk, ijkl, ik, il, j, jk, jkl, jl, k, kl, l, axes
+from simgrad.lang.types import template, types
+from simgrad.lang.atomics import (
+    atomic_add,
+    atomic_and,
+    atomic_max,
+    atomic_min,
+    atomic_or,
+    atomic_sub,
+    atomic_xor,
+)
+from simgrad.lang.linalg import polar_decompose, svd, sym_eig
+from simgrad.lang import profiler
+from simgrad.runtime.program import init, reset
+
+int8, int16, int32, int64 = i8, i16, i32, i64
+uint8, uint16, uint32, uint64 = u8, u16, u32, u64
+float16, float32, float64 = f16, f32, f64
+ScalarField = ScalarField
+MatrixField = MatrixField
+Vector.field = staticmethod(__import__("simgrad.lang.factories", fromlist=["x"]).vector_field)
+Matrix.field = staticmethod(__import__("simgrad.lang.factories", fromlist=["x"]).matrix_field)
+
+
+def sync():
+    """Kernels finish before their launch returns on the CPU; nothing to wait for."""
+
+
+def get_runtime():
+    from simgrad.runtime.program import get_program
+
+    return get_program()
+
+
+def __getattr__(name):
+    if name in ("GUI", "rgb_to_hex", "hex_to_rgb", "tools", "ui"):
+        import simgrad.gui as _gui
+
+        if name == "tools":
+            return _gui
+        return getattr(_gui, name)
+    if name in ("ad", "Tape", "clear_all_gradients", "no_grad", "grad_replaced", "grad_for"):
+        from simgrad import autodiff as _ad
+
+        return getattr(_ad.api, name) if name != "ad" else _ad.api
+    raise AttributeError(f"module 'simgrad' has no attribute '{name}'")

@@ -1,0 +1,486 @@
+"""IR -> LLVM IR text. One `lower_<op>` per Op; structured control flow maps to basic blocks.
+
+A kernel becomes one entry function `void entry(ptr ctx)`. Each top-level parallel loop is outlined
+into a task function `void task(ptr closure, i64 lo, i64 hi, i32 tid)` that the runtime's
+parallel_for splits across threads; the closure carries every value the loop body uses from outside.
+
+Context layout (8-byte slots): 0 roots table, 1 error buffer, 2 RNG states, 3 parallel_for, 4.. args.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.ops import Op
+
+CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_ARGS = 0, 1, 2, 3, 4
+
+_INT_BIN = {Op.ADD: "add", Op.SUB: "sub", Op.MUL: "mul", Op.BIT_AND: "and", Op.BIT_OR: "or",
+            Op.BIT_XOR: "xor", Op.SHL: "shl"}
+_FLT_BIN = {Op.ADD: "fadd", Op.SUB: "fsub", Op.MUL: "fmul", Op.DIV: "fdiv"}
+_ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op.NE: "ne"}
+_UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
+_FCMP = {Op.LT: "olt", Op.LE: "ole", Op.GT: "ogt", Op.GE: "oge", Op.EQ: "oeq", Op.NE: "une"}
+_INTRINSIC1 = {Op.SQRT: "sqrt", Op.SIN: "sin", Op.COS: "cos", Op.EXP: "exp", Op.LOG: "log",
+               Op.FLOOR: "floor", Op.CEIL: "ceil", Op.ROUND: "round", Op.TAN: "tan", Op.ASIN: "asin",
+               Op.ACOS: "acos", Op.TANH: "tanh"}
+_LIBM2 = {Op.ATAN2: "atan2"}
+
+
+def llvm_type(t: dt.DataType) -> str:
+    return t.llvm
+
+
+def const_text(value, t: dt.DataType) -> str:
+    if t.is_float:
+        if t is dt.f16:
+            return "0xH%04X" % np.float16(value).view(np.uint16)
+        if t is dt.f32:
+            value = float(np.float32(value))
+        return "0x%016X" % struct.unpack("<Q", struct.pack("<d", float(value)))[0]
+    if t is dt.u1:
+        return "true" if value else "false"
+    return str(int(value))
+
+
+class ModuleText:
+    """Declarations and globals shared by the functions of one kernel module."""
+
+    def __init__(self) -> None:
+        self.decls: set[str] = set()
+        self.globals: list[str] = []
+        self.functions: list[str] = []
+
+    def declare(self, text: str) -> None:
+        self.decls.add(text)
+
+    def string(self, s: str) -> str:
+        data = s.encode() + b"\0"
+        name = f"@.str{len(self.globals)}"
+        esc = "".join(chr(b) if 32 <= b < 127 and b not in (34, 92) else "\\%02X" % b for b in data)
+        self.globals.append(f'{name} = private unnamed_addr constant [{len(data)} x i8] c"{esc}"')
+        return name
+
+    def text(self) -> str:
+        return "\n".join(sorted(self.decls) + self.globals + self.functions + [_RUNTIME_HELPERS]) + "\n"
+
+
+_RUNTIME_HELPERS = r"""
+define internal void @sg_report(ptr %ctx, i64 %code, i64 %value) noinline {
+  %ep = getelementptr i64, ptr %ctx, i64 1
+  %err = load ptr, ptr %ep
+  %r = cmpxchg ptr %err, i64 0, i64 %code monotonic monotonic
+  %ok = extractvalue { i64, i1 } %r, 1
+  br i1 %ok, label %store, label %done
+store:
+  %vp = getelementptr i64, ptr %err, i64 1
+  store i64 %value, ptr %vp
+  br label %done
+done:
+  ret void
+}
+
+define internal i32 @sg_rand_u32(ptr %ctx, i32 %tid) {
+  %rp = getelementptr i64, ptr %ctx, i64 2
+  %base = load ptr, ptr %rp
+  %off = mul i32 %tid, 16
+  %s = getelementptr i8, ptr %base, i32 %off
+  %p1 = getelementptr i32, ptr %s, i32 1
+  %p2 = getelementptr i32, ptr %s, i32 2
+  %p3 = getelementptr i32, ptr %s, i32 3
+  %x = load i32, ptr %s
+  %y = load i32, ptr %p1
+  %z = load i32, ptr %p2
+  %w = load i32, ptr %p3
+  %t0 = shl i32 %x, 11
+  %t = xor i32 %x, %t0
+  %t1 = lshr i32 %t, 8
+  %t2 = xor i32 %t, %t1
+  %w1 = lshr i32 %w, 19
+  %w2 = xor i32 %w, %w1
+  %n = xor i32 %w2, %t2
+  store i32 %y, ptr %s
+  store i32 %z, ptr %p1
+  store i32 %w, ptr %p2
+  store i32 %n, ptr %p3
+  ret i32 %n
+}
+"""
+
+
+class FunctionText:
+    """Emits one LLVM function; keeps allocas in the entry block so LLVM can promote them."""
+
+    def __init__(self, gen: KernelCodegen, name: str, params: str, in_task: bool):
+        self.gen = gen
+        self.name = name
+        self.params = params
+        self.in_task = in_task
+        self.prologue: list[str] = []
+        self.body: list[str] = []
+        self.names: dict[Stmt, str] = {}
+        self.counter = 0
+        self.loops: list[tuple[str, str]] = []  # (break label, continue label)
+        self.roots: dict[int, str] = {}
+        self.array_bases: dict[int, str] = {}
+        self.array_shapes: dict[tuple[int, int], str] = {}
+        self.tid = "%tid" if in_task else "0"
+        self.shared: set = set()  # locals of the caller that a task writes through a pointer
+
+    def tmp(self, hint: str = "t") -> str:
+        self.counter += 1
+        return f"%{hint}{self.counter}"
+
+    def label(self, hint: str) -> str:
+        self.counter += 1
+        return f"{hint}{self.counter}"
+
+    def emit(self, line: str) -> None:
+        self.body.append("  " + line)
+
+    def start_block(self, label: str) -> None:
+        self.body.append(f"{label}:")
+
+    def ctx_slot(self, slot: int, ty: str) -> str:
+        p = self.tmp("cp")
+        v = self.tmp("cv")
+        self.prologue.append(f"  {p} = getelementptr i64, ptr %ctx, i64 {slot}")
+        self.prologue.append(f"  {v} = load {ty}, ptr {p}")
+        return v
+
+    def root(self, tree_id: int) -> str:
+        if tree_id not in self.roots:
+            table = self.ctx_slot(CTX_ROOTS, "ptr")
+            p = self.tmp("rp")
+            v = self.tmp("root")
+            self.prologue.append(f"  {p} = getelementptr ptr, ptr {table}, i64 {tree_id}")
+            self.prologue.append(f"  {v} = load ptr, ptr {p}, !invariant.load !0")
+            self.roots[tree_id] = v
+        return self.roots[tree_id]
+
+    def array_base(self, arg) -> str:
+        if arg.slot not in self.array_bases:
+            self.array_bases[arg.slot] = self.ctx_slot(CTX_ARGS + arg.slot, "ptr")
+        return self.array_bases[arg.slot]
+
+    def array_shape(self, arg, dim: int) -> str:
+        key = (arg.slot, dim)
+        if key not in self.array_shapes:
+            self.array_shapes[key] = self.ctx_slot(CTX_ARGS + arg.slot + 1 + dim, "i64")
+        return self.array_shapes[key]
+
+    def v(self, s: Stmt) -> str:
+        return self.names[s]
+
+    def text(self) -> str:
+        return "\n".join([f"define {self.params} {{", "entry:", *self.prologue, *self.body, "}"])
+
+
+class KernelCodegen:
+    def __init__(self, kernel: Kernel, symbol: str, debug: bool = False):
+        self.kernel = kernel
+        self.symbol = symbol
+        self.debug = debug
+        self.module = ModuleText()
+        self.error_table: list[tuple] = []  # (kind, loc, detail) per error code - 1
+        self.ntasks = 0
+
+    def generate(self) -> str:
+        f = FunctionText(self, self.symbol, f"void @{self.symbol}(ptr %ctx)", in_task=False)
+        self.lower_block(f, self.kernel.body)
+        f.emit("ret void")
+        self.module.functions.append(f.text())
+        self.module.globals.append("!0 = !{}")
+        return self.module.text()
+
+    def error_code(self, kind: str, loc, detail) -> int:
+        self.error_table.append((kind, loc, detail))
+        return len(self.error_table)
+
+    # -- blocks and control flow -------------------------------------------------------------------
+    def lower_block(self, f: FunctionText, block: Block) -> None:
+        for s in block.stmts:
+            getattr(self, "lower_" + s.op.name.lower())(f, s)
+
+    def lower_if(self, f, s):
+        c = f.tmp("c")
+        f.emit(f"{c} = icmp ne i32 {f.v(s.operands[0])}, 0")
+        then_l, else_l, end_l = f.label("then"), f.label("else"), f.label("endif")
+        f.emit(f"br i1 {c}, label %{then_l}, label %{else_l}")
+        f.start_block(then_l)
+        self.lower_block(f, s.blocks[0])
+        f.emit(f"br label %{end_l}")
+        f.start_block(else_l)
+        self.lower_block(f, s.blocks[1])
+        f.emit(f"br label %{end_l}")
+        f.start_block(end_l)
+
+    def lower_while(self, f, s):
+        head, end = f.label("while"), f.label("endwhile")
+        f.emit(f"br label %{head}")
+        f.start_block(head)
+        f.loops.append((end, head))
+        self.lower_block(f, s.blocks[0])
+        f.loops.pop()
+        f.emit(f"br label %{head}")
+        f.start_block(end)
+
+    def lower_break(self, f, s):
+        f.emit(f"br label %{f.loops[-1][0]}")
+        f.start_block(f.label("dead"))
+
+    def lower_continue(self, f, s):
+        f.emit(f"br label %{f.loops[-1][1]}")
+        f.start_block(f.label("dead"))
+
+    def lower_range_for(self, f, s):
+        if s.attrs.get("parallel") and not f.in_task:
+            self._parallel_for(f, s)
+        else:
+            self._serial_loop(f, s, f.v(s.operands[0]), f.v(s.operands[1]))
+
+    def _serial_loop(self, f, s, begin: str, end: str):
+        ty = llvm_type(s.type)
+        pre = f.label("pre")
+        f.emit(f"br label %{pre}")
+        f.start_block(pre)
+        head, body, latch, done = f.label("head"), f.label("body"), f.label("latch"), f.label("done")
+        f.emit(f"br label %{head}")
+        f.start_block(head)
+        i, nxt = f.tmp("i"), f.tmp("inext")
+        f.emit(f"{i} = phi {ty} [{begin}, %{pre}], [{nxt}, %{latch}]")
+        c = f.tmp("c")
+        f.emit(f"{c} = icmp slt {ty} {i}, {end}")
+        f.emit(f"br i1 {c}, label %{body}, label %{done}")
+        f.start_block(body)
+        f.names[s] = i
+        f.loops.append((done, latch))
+        self.lower_block(f, s.blocks[0])
+        f.loops.pop()
+        f.emit(f"br label %{latch}")
+        f.start_block(latch)
+        f.emit(f"{nxt} = add {ty} {i}, 1")
+        f.emit(f"br label %{head}")
+        f.start_block(done)
+
+    def _parallel_for(self, f, s):
+        captured = _free_values(s)
+        self.ntasks += 1
+        tname = f"{self.symbol}_task{self.ntasks}"
+        t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
+        t.prologue.append("  %ctx = load ptr, ptr %clo")
+        clo = f.tmp("clo")
+        f.prologue.append(f"  {clo} = alloca [{len(captured) + 1} x i64], align 8")
+        f.emit(f"store ptr %ctx, ptr {clo}")
+        stored = {id(x.operands[0]) for x in walk(s.blocks[0]) if x.op in (Op.LOCAL_STORE, Op.ATOMIC)}
+        for k, v in enumerate(captured, start=1):
+            by_value = v.op is Op.ALLOCA and id(v) not in stored  # read-only local: a private copy
+            ty = "ptr" if v.op is Op.ALLOCA and not by_value else llvm_type(v.type)
+            src = f.v(v)
+            if by_value:
+                src = f.tmp("ld")
+                f.emit(f"{src} = load {ty}, ptr {f.v(v)}")
+            p = f.tmp("cap")
+            f.emit(f"{p} = getelementptr i64, ptr {clo}, i64 {k}")
+            f.emit(f"store {ty} {src}, ptr {p}")
+            q, val = t.tmp("cap"), t.tmp("capv")
+            t.prologue.append(f"  {q} = getelementptr i64, ptr %clo, i64 {k}")
+            t.prologue.append(f"  {val} = load {ty}, ptr {q}")
+            if by_value:
+                copy = t.tmp("var")
+                t.prologue.append(f"  {copy} = alloca {ty}")
+                t.prologue.append(f"  store {ty} {val}, ptr {copy}")
+                val = copy
+            t.names[v] = val
+            if v.op is Op.ALLOCA and not by_value:
+                t.shared.add(v)
+        ty = llvm_type(s.type)
+        lo, hi = t.tmp("lo"), t.tmp("hi")
+        t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
+        t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
+        self._serial_loop(t, s, lo, hi)
+        t.emit("ret void")
+        self.module.functions.append(t.text())
+        b64, e64 = f.tmp("b"), f.tmp("e")
+        ext = "sext" if ty != "i64" else None
+        for dst, src in ((b64, s.operands[0]), (e64, s.operands[1])):
+            f.emit(f"{dst} = {ext} {ty} {f.v(src)} to i64" if ext else f"{dst} = add i64 {f.v(src)}, 0")
+        pfor = f.ctx_slot(CTX_PFOR, "ptr")
+        grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
+        f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
+
+    # -- memory ------------------------------------------------------------------------------------
+    def lower_const(self, f, s):
+        f.names[s] = const_text(s.attrs["value"], s.type)
+
+    def lower_arg(self, f, s):
+        f.names[s] = f.ctx_slot(CTX_ARGS + s.attrs["slot"], llvm_type(s.type))
+
+    def lower_array_shape(self, f, s):
+        v = f.array_shape(s.attrs["arg"], s.attrs["dim"])
+        r = f.tmp("sh")
+        f.emit(f"{r} = trunc i64 {v} to i32" if s.type is dt.i32 else f"{r} = add i64 {v}, 0")
+        f.names[s] = r
+
+    def lower_alloca(self, f, s):
+        a = f.tmp("var")
+        f.prologue.append(f"  {a} = alloca {llvm_type(s.type)}")
+        f.prologue.append(f"  store {llvm_type(s.type)} {const_text(0, s.type)}, ptr {a}")
+        f.names[s] = a
+
+    def lower_local_load(self, f, s):
+        r = f.tmp("l")
+        f.emit(f"{r} = load {llvm_type(s.type)}, ptr {f.v(s.operands[0])}")
+        f.names[s] = r
+
+    def lower_local_store(self, f, s):
+        a, v = s.operands
+        f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {f.v(a)}")
+
+    def lower_global_ptr(self, f, s):
+        from simgrad.codegen.access import lower_global_ptr
+
+        f.names[s] = lower_global_ptr(self, f, s)
+
+    def lower_global_load(self, f, s):
+        r = f.tmp("g")
+        f.emit(f"{r} = load {llvm_type(s.type)}, ptr {f.v(s.operands[0])}")
+        f.names[s] = r
+
+    def lower_global_store(self, f, s):
+        p, v = s.operands
+        f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {f.v(p)}")
+
+    def lower_atomic(self, f, s):
+        p, v = s.operands
+        t = s.type
+        ty = llvm_type(t)
+        kind = s.attrs["kind"]
+        if t.is_float:
+            op = {"add": "fadd", "min": "fmin", "max": "fmax"}[kind]
+        else:
+            op = {"add": "add", "and": "and", "or": "or", "xor": "xor",
+                  "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
+        r = f.tmp("old")
+        private = p.op is Op.ALLOCA and p not in f.shared
+        if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
+            f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
+            n = f.tmp("new")
+            f.emit(_combine_text(n, op, ty, r, f.v(v), t))
+            f.emit(f"store {ty} {n}, ptr {f.v(p)}")
+        else:
+            f.emit(f"{r} = atomicrmw {op} ptr {f.v(p)}, {ty} {f.v(v)} monotonic")
+        f.names[s] = r
+
+    def lower_ret_store(self, f, s):
+        (v,) = s.operands
+        slot = CTX_ARGS + self.kernel.ret_slot + s.attrs["slot"]
+        p = f.tmp("rp")
+        f.emit(f"{p} = getelementptr i64, ptr %ctx, i64 {slot}")
+        f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}")
+
+    # -- arithmetic ----------------------------------------------------------------------------------
+    def _bin(self, f, s):
+        from simgrad.codegen.arith import lower_binary
+
+        f.names[s] = lower_binary(f, s)
+
+    def _un(self, f, s):
+        from simgrad.codegen.arith import lower_unary
+
+        f.names[s] = lower_unary(f, s)
+
+    def lower_cast(self, f, s):
+        from simgrad.codegen.arith import lower_cast
+
+        f.names[s] = lower_cast(f, s.operands[0], s.type)
+
+    def lower_bitcast(self, f, s):
+        r = f.tmp("bc")
+        (a,) = s.operands
+        f.emit(f"{r} = bitcast {llvm_type(a.type)} {f.v(a)} to {llvm_type(s.type)}")
+        f.names[s] = r
+
+    def lower_select(self, f, s):
+        c, a, b = s.operands
+        ci, r = f.tmp("c"), f.tmp("sel")
+        f.emit(f"{ci} = icmp ne {llvm_type(c.type)} {f.v(c)}, 0")
+        f.emit(f"{r} = select i1 {ci}, {llvm_type(a.type)} {f.v(a)}, {llvm_type(b.type)} {f.v(b)}")
+        f.names[s] = r
+
+    # -- runtime services ----------------------------------------------------------------------------
+    def lower_print(self, f, s):
+        from simgrad.codegen.arith import lower_cast
+
+        self.module.declare("declare i32 @printf(ptr, ...)")
+        self.module.declare("declare i32 @fflush(ptr)")
+        fmt = self.module.string(s.attrs["format"])
+        args = []
+        for v in s.operands:
+            t = v.type
+            if t.is_float:
+                args.append(f"double {lower_cast(f, v, dt.f64)}")
+            elif t.bits < 32:
+                args.append(f"i32 {lower_cast(f, v, dt.i32 if t.is_signed else dt.u32)}")
+            else:
+                args.append(f"{llvm_type(t)} {f.v(v)}")
+        f.emit(f"call i32 (ptr, ...) @printf(ptr {fmt}{''.join(', ' + a for a in args)})")
+        f.emit("call i32 @fflush(ptr null)")
+
+    def lower_assert(self, f, s):
+        code = self.error_code("assert", s.loc, s.attrs["message"])
+        self._check(f, f.v(s.operands[0]), code, "0")
+
+    def _check(self, f, ok_i32: str, code: int, value: str) -> None:
+        c = f.tmp("ok")
+        f.emit(f"{c} = icmp ne i32 {ok_i32}, 0")
+        good, bad = f.label("ok"), f.label("fail")
+        f.emit(f"br i1 {c}, label %{good}, label %{bad}, !prof !1")
+        f.start_block(bad)
+        f.emit(f"call void @sg_report(ptr %ctx, i64 {code}, i64 {value})")
+        f.emit(f"br label %{good}")
+        f.start_block(good)
+        if "!1 = " not in "".join(self.module.globals):
+            self.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
+
+    def lower_random(self, f, s):
+        from simgrad.codegen.arith import random_value
+
+        f.names[s] = random_value(f, s.type)
+
+
+def _combine_text(dst, op, ty, a, b, t) -> str:
+    if op in ("fadd", "add", "and", "or", "xor"):
+        return f"{dst} = {op} {ty} {a}, {b}"
+    intr = {"fmin": "minnum", "fmax": "maxnum", "min": "smin", "max": "smax", "umin": "umin", "umax": "umax"}[op]
+    suffix = {"float": "f32", "double": "f64", "half": "f16"}.get(ty, ty)
+    return f"{dst} = call {ty} @llvm.{intr}.{suffix}({ty} {a}, {ty} {b})"
+
+
+for _op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.RAW_MOD, Op.POW, Op.MIN,
+            Op.MAX, Op.BIT_AND, Op.BIT_OR, Op.BIT_XOR, Op.SHL, Op.SHR, Op.ATAN2, Op.LT, Op.LE, Op.GT, Op.GE,
+            Op.EQ, Op.NE):
+    setattr(KernelCodegen, "lower_" + _op.name.lower(), KernelCodegen._bin)
+for _op in (Op.NEG, Op.BIT_NOT, Op.LOGICAL_NOT, Op.SQRT, Op.RSQRT, Op.SIN, Op.COS, Op.TAN, Op.ASIN,
+            Op.ACOS, Op.EXP, Op.LOG, Op.TANH, Op.FLOOR, Op.CEIL, Op.ROUND, Op.ABS):
+    setattr(KernelCodegen, "lower_" + _op.name.lower(), KernelCodegen._un)
+
+
+def _free_values(loop: Stmt) -> list[Stmt]:
+    """Values used inside `loop` but defined outside it (constants excepted), in first-use order."""
+    inside = {id(s) for s in walk(loop.blocks[0])}
+    inside.add(id(loop))
+    seen: dict[int, Stmt] = {}
+    for s in walk(loop.blocks[0]):
+        for o in s.operands:
+            if id(o) not in inside and o.op is not Op.CONST and id(o) not in seen:
+                seen[id(o)] = o
+    return list(seen.values())
+
+
+def _cost(block: Block) -> int:
+    return sum(1 for _ in walk(block))

@@ -1,0 +1,80 @@
+"""User-facing errors. Each names the user's file and line and shows the offending source line with a
+caret; each also subclasses the builtin exception a Python user would expect."""
+
+from __future__ import annotations
+
+import linecache
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Loc:
+    """A place in the user's source: file, 1-based line, 0-based column."""
+
+    file: str
+    line: int
+    col: int = 0
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}"
+
+    def render(self) -> str:
+        src = linecache.getline(self.file, self.line).rstrip("\n")
+        if not src:
+            return f'File "{self.file}", line {self.line}'
+        stripped = src.lstrip()
+        indent = len(src) - len(stripped)
+        caret = " " * max(0, self.col - indent) + "^"
+        return f'File "{self.file}", line {self.line}:\n    {stripped}\n    {caret}'
+
+
+class SimgradError(Exception):
+    """Base of every simgrad error; `loc` (when known) is rendered above the message."""
+
+    def __init__(self, message: str, loc: Loc | None = None):
+        self.message = message
+        self.loc = loc
+        super().__init__(self._text())
+
+    def _text(self) -> str:
+        if self.loc is None:
+            return self.message
+        return f"{self.loc.render()}\n{self.message}"
+
+    def __str__(self) -> str:
+        return self._text()
+
+
+class SimgradSyntaxError(SimgradError, SyntaxError):
+    """A Python construct the kernel language does not support, or misuse of one it does."""
+
+    def __init__(self, message: str, loc: Loc | None = None):
+        SimgradError.__init__(self, message, loc)
+        self.args = (self._text(),)
+
+    def __str__(self) -> str:
+        return self._text()
+
+
+class SimgradTypeError(SimgradError, TypeError):
+    pass
+
+
+class SimgradNameError(SimgradError, NameError):
+    pass
+
+
+class SimgradIndexError(SimgradError, IndexError):
+    pass
+
+
+class SimgradAssertionError(SimgradError, AssertionError):
+    pass
+
+
+class SimgradRuntimeError(SimgradError, RuntimeError):
+    pass
+
+
+class GradientError(SimgradError, RuntimeError):
+    """A kernel that cannot be differentiated correctly: we refuse instead of returning wrong numbers."""

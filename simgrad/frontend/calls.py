@@ -1,0 +1,160 @@
+"""Calls inside kernels: ti.func inlining, Python builtins with kernel meaning, print, plain Python."""
+
+from __future__ import annotations
+
+import ast
+import builtins
+import inspect
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
+from simgrad.frontend.refs import MatrixRef, VarRef
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.field import Field
+from simgrad.lang.matrix import Matrix
+
+
+def _builtin_int(x=0, *rest):
+    return ops.cast(x, dt.Defaults.ip) if isinstance(x, (Expr, Matrix)) else int(x, *rest)
+
+
+def _builtin_float(x=0.0):
+    return ops.cast(x, dt.Defaults.fp) if isinstance(x, (Expr, Matrix)) else float(x)
+
+
+def _builtin_len(x):
+    if isinstance(x, Field):
+        return x.shape[0]
+    return len(x)
+
+
+def _builtin_round(x, ndigits=None):
+    if isinstance(x, (Expr, Matrix)):
+        return ops.round(x)
+    return round(x, ndigits) if ndigits is not None else round(x)
+
+
+def _builtin_bool(x=False):
+    return ops.ne(x, 0) if isinstance(x, Expr) else bool(x)
+
+
+def _builtin_range(*args):
+    from simgrad.frontend.lower import RangeSpec
+
+    return RangeSpec(*args)
+
+
+_BUILTINS = {
+    builtins.range: _builtin_range,
+    builtins.int: _builtin_int,
+    builtins.float: _builtin_float,
+    builtins.abs: ops.abs,
+    builtins.min: ops.min,
+    builtins.max: ops.max,
+    builtins.pow: ops.pow,
+    builtins.len: _builtin_len,
+    builtins.round: _builtin_round,
+    builtins.bool: _builtin_bool,
+}
+
+
+def call(comp, node: ast.Call):
+    fn = comp.eval(node.func)
+    kind = getattr(fn, "atomic_kind", None)
+    if kind is not None:
+        return _atomic(comp, node, kind)
+    args = []
+    for a in node.args:
+        v = comp.eval(a)
+        if type(v).__name__ == "_Starred":
+            args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
+        else:
+            args.append(v)
+    kwargs = {}
+    for kw in node.keywords:
+        if kw.arg is None:
+            kwargs.update(comp.eval(kw.value))
+        else:
+            kwargs[kw.arg] = comp.eval(kw.value)
+    if fn is builtins.print:
+        from simgrad.frontend.printing import emit_print
+
+        emit_print(comp, args, kwargs)
+        return None
+    try:
+        hashable = fn in _BUILTINS
+    except TypeError:
+        hashable = False
+    if hashable:
+        return _BUILTINS[fn](*args, **kwargs)
+    from simgrad.lang.kernel import Func, Kernel
+
+    if isinstance(fn, Func):
+        return inline(comp, fn, args, kwargs, node)
+    if isinstance(fn, Kernel):
+        raise SimgradSyntaxError(f"kernel {fn.name} cannot be called from inside a kernel; make it a @ti.func",
+                                 comp.loc(node))
+    if not callable(fn):
+        raise SimgradTypeError(f"'{type(fn).__name__}' object is not callable", comp.loc(node))
+    return fn(*args, **kwargs)
+
+
+def _atomic(comp, node: ast.Call, kind: str):
+    if len(node.args) != 2:
+        raise SimgradSyntaxError(f"ti.atomic_{kind}(dest, value) takes two arguments", comp.loc(node))
+    ref = comp.ref(node.args[0])
+    if ref is None:
+        raise SimgradSyntaxError(f"the first argument of ti.atomic_{kind} must be a field element, an ndarray "
+                                 "element or a local variable", comp.loc(node))
+    return ref.atomic(kind, comp.eval(node.args[1]))
+
+
+def inline(comp, fn, args, kwargs, node):
+    """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
+    from simgrad.frontend.lower import Frame
+    from simgrad.frontend.source import get_source
+    from simgrad.lang.types import MatrixType, is_template
+
+    if len(comp.frames) > comp.MAX_INLINE_DEPTH:
+        raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
+                                 comp.loc(node))
+    sig = fn.signature
+    try:
+        bound = sig.bind(*args, **kwargs)
+    except TypeError as e:
+        raise SimgradTypeError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
+    bound.apply_defaults()
+    frame = Frame(get_source(fn.func), False)
+    for name, value in bound.arguments.items():
+        ann = sig.parameters[name].annotation
+        if is_template(ann) or not isinstance(value, (Expr, Matrix, int, float)) or isinstance(value, bool):
+            frame.scopes[0][name] = value
+        elif isinstance(ann, MatrixType):
+            frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
+        elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
+            frame.scopes[0][name] = comp.new_var(value, ann)
+        else:
+            frame.scopes[0][name] = comp.new_var(value)
+    comp.frames.append(frame)
+    try:
+        comp.visit_block(frame.src.tree.body)
+    except SimgradError:
+        raise
+    finally:
+        comp.frames.pop()
+    rv = frame.return_value
+    ret_ann = frame.src.tree.returns
+    if ret_ann is not None and rv is not None:
+        ann = comp.eval(ret_ann)
+        if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
+            rv = ops.cast(rv, ann)
+    return rv
+
+
+def _is_scalar_type(ann) -> bool:
+    return isinstance(ann, dt.DataType) or ann in (int, float)
+
+
+__all__ = ["call", "inline", "VarRef", "MatrixRef", "Op"]

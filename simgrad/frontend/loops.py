@@ -1,0 +1,178 @@
+"""For loops: ti.static unrolling, range-for, ti.ndrange, struct-for over fields, ti.grouped.
+
+Every run-time loop becomes one RANGE_FOR over a flat index; multi-dimensional loops recover their
+indices by division, so the outermost loop of a kernel is always one parallel range."""
+
+from __future__ import annotations
+
+import ast
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradSyntaxError
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.field import Field
+from simgrad.lang.loops import grouped, ndrange, static
+from simgrad.lang.matrix import Matrix
+
+
+def _is_static_call(comp, node) -> bool:
+    if not isinstance(node, ast.Call):
+        return False
+    try:
+        fn = comp.eval(node.func)
+    except Exception:
+        return False
+    return fn is static
+
+
+def lower_for(comp, node: ast.For) -> None:
+    if _is_static_call(comp, node.iter):
+        _unroll(comp, node)
+        return
+    it = comp.eval(node.iter)
+    from simgrad.frontend.lower import RangeSpec
+
+    if isinstance(it, RangeSpec):
+        _range_for(comp, node, it)
+    elif isinstance(it, ndrange):
+        _nd_for(comp, node, it.bounds, grouped_=False)
+    elif isinstance(it, grouped):
+        t = it.target
+        bounds = t.bounds if isinstance(t, ndrange) else [(0, n) for n in _shape_of(comp, t, node)]
+        _nd_for(comp, node, bounds, grouped_=True)
+    elif isinstance(it, Field) or _is_array(it):
+        _nd_for(comp, node, [(0, n) for n in _shape_of(comp, it, node)], grouped_=False)
+    else:
+        raise SimgradSyntaxError(
+            f"cannot loop over a {type(it).__name__} at run time; wrap Python sequences in ti.static(...) "
+            "to unroll the loop", comp.loc(node.iter))
+
+
+def _is_array(v) -> bool:
+    from simgrad.lang.ndarray import ArrayArg
+
+    return isinstance(v, ArrayArg)
+
+
+def _shape_of(comp, target, node):
+    if isinstance(target, Field):
+        target._ensure()
+        return list(target.shape)
+    if _is_array(target):
+        return [target.shape_expr(k) for k in range(target.ndim)]
+    raise SimgradSyntaxError(f"ti.grouped() expects a field or ti.ndrange, got {type(target).__name__}",
+                             comp.loc(node))
+
+
+def _unroll(comp, node: ast.For) -> None:
+    seq = comp.eval(node.iter)
+    for item in seq:
+        comp.frame.scopes.append({})
+        try:
+            if isinstance(node.target, ast.Name):
+                comp.bind(node.target.id, item)
+            else:
+                comp._bind_target(node.target, item)
+            comp.visit_block(node.body)
+        finally:
+            comp.frame.scopes.pop()
+
+
+def _index_type(*vals) -> dt.DataType:
+    for v in vals:
+        if isinstance(v, Expr) and v.dtype in (dt.i64, dt.u64):
+            return dt.i64
+    return dt.i32
+
+
+def _emit_loop(comp, node, begin, end, bind) -> None:
+    """One RANGE_FOR over [begin, end); parallel when it is the outermost loop of the kernel."""
+    cfg = comp.next_loop_config or {}
+    comp.next_loop_config = None
+    t = _index_type(begin, end)
+    b = ops.cast_expr(ops.to_expr(begin, t), t)
+    e = ops.cast_expr(ops.to_expr(end, t), t)
+    top = comp.depth == 0 and not comp.loop_stack
+    parallel = top and not cfg.get("serialize", False)
+    attrs = {"parallel": parallel, "top": top}
+    if cfg.get("block_dim"):
+        attrs["block_dim"] = cfg["block_dim"]
+    loop = comp.builder.emit(Op.RANGE_FOR, t, (b.stmt, e.stmt), attrs, nblocks=1)
+    comp.loop_stack.append("parallel" if parallel else "serial")
+    try:
+        with comp.dynamic(loop.blocks[0]):
+            bind(Expr(loop))
+            comp.visit_block(node.body)
+    finally:
+        comp.loop_stack.pop()
+
+
+def _range_for(comp, node, r) -> None:
+    if not isinstance(node.target, ast.Name):
+        raise SimgradSyntaxError("a range-for takes one loop variable", comp.loc(node.target))
+    name = node.target.id
+    if r.step == 1:
+        _emit_loop(comp, node, r.start, r.stop, lambda i: comp.bind(name, i))
+        return
+    step = r.step
+    count = ops.floordiv(ops.sub(r.stop, r.start) + (step - 1 if step > 0 else step + 1), step)
+    count = ops.max(count, 0)
+    _emit_loop(comp, node, 0, count, lambda k: comp.bind(name, ops.add(r.start, ops.mul(k, step))))
+
+
+def _nd_for(comp, node, bounds, grouped_: bool) -> None:
+    names = _target_names(comp, node.target)
+    nd = len(bounds)
+    if grouped_:
+        if len(names) != 1:
+            raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
+    elif len(names) != nd:
+        raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
+                                 comp.loc(node.target))
+    extents = [ops.max(ops.sub(e, b), 0) if isinstance(e, Expr) or isinstance(b, Expr) else max(e - b, 0)
+               for b, e in bounds]
+    total = 1
+    for n in extents:
+        total = ops.mul(total, n)
+
+    def bind(flat):
+        idx = []
+        rest = flat
+        for k in range(nd - 1, -1, -1):
+            if k == 0:
+                digit = rest
+            else:
+                digit = _raw(Op.RAW_MOD, rest, extents[k])
+                rest = _raw(Op.RAW_DIV, rest, extents[k])
+            idx.append(ops.add(digit, bounds[k][0]) if not _is_zero(bounds[k][0]) else digit)
+        idx.reverse()
+        if grouped_:
+            comp.bind(names[0], Matrix(idx))
+        else:
+            for n, v in zip(names, idx):
+                comp.bind(n, v)
+
+    _emit_loop(comp, node, 0, total, bind)
+
+
+def _raw(op: Op, a: Expr, n):
+    from simgrad.frontend import context
+
+    if isinstance(n, int) and n == 1:
+        return a if op is Op.RAW_DIV else ops.to_expr(0, a.dtype)
+    n = ops.cast_expr(ops.to_expr(n, a.dtype), a.dtype)
+    return Expr(context.builder().binary(op, a.stmt, n.stmt))
+
+
+def _is_zero(v) -> bool:
+    return isinstance(v, int) and v == 0
+
+
+def _target_names(comp, target) -> list[str]:
+    if isinstance(target, ast.Name):
+        return [target.id]
+    if isinstance(target, ast.Tuple) and all(isinstance(e, ast.Name) for e in target.elts):
+        return [e.id for e in target.elts]
+    raise SimgradSyntaxError("loop variables must be plain names", comp.loc(target))

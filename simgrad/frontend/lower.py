@@ -1,0 +1,630 @@
+"""Python AST -> IR. One visitor; a `visit_<Node>` per supported construct, a located error for the rest.
+
+The visitor evaluates what is known at compile time in Python (constants, ti.static, Python objects
+such as fields) and emits IR for everything that depends on run-time values. ti.func calls are inlined.
+"""
+
+from __future__ import annotations
+
+import ast
+import builtins
+import inspect
+import operator
+
+from simgrad import dtypes as dt
+from simgrad.errors import (
+    SimgradError,
+    SimgradIndexError,
+    SimgradNameError,
+    SimgradSyntaxError,
+    SimgradTypeError,
+)
+from simgrad.frontend import context
+from simgrad.frontend.refs import GlobalRef, MatrixRef, VarRef
+from simgrad.frontend.source import FunctionSource, get_source
+from simgrad.ir.builder import Builder
+from simgrad.ir.nodes import Kernel
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.loops import grouped, ndrange, static
+from simgrad.lang.matrix import Matrix, dtype_of
+
+_BINOPS = {
+    ast.Add: ops.add, ast.Sub: ops.sub, ast.Mult: ops.mul, ast.Div: ops.truediv, ast.FloorDiv: ops.floordiv,
+    ast.Mod: ops.mod, ast.Pow: ops.pow, ast.BitAnd: ops.bit_and, ast.BitOr: ops.bit_or,
+    ast.BitXor: ops.bit_xor, ast.LShift: ops.shl, ast.RShift: ops.shr,
+    ast.MatMult: lambda a, b: a @ b,
+}
+_AUG_KIND = {
+    ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div", ast.FloorDiv: "floordiv",
+    ast.Mod: "mod", ast.Pow: "pow", ast.BitAnd: "and", ast.BitOr: "or", ast.BitXor: "xor",
+    ast.LShift: "shl", ast.RShift: "shr",
+}
+_CMPOPS = {
+    ast.Lt: ops.lt, ast.LtE: ops.le, ast.Gt: ops.gt, ast.GtE: ops.ge, ast.Eq: ops.eq, ast.NotEq: ops.ne,
+}
+_PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b: a in b,
+           ast.NotIn: lambda a, b: a not in b}
+
+
+class RangeSpec:
+    """`range(...)` seen inside a kernel: a run-time loop unless wrapped in ti.static."""
+
+    def __init__(self, *args):
+        if len(args) == 1:
+            self.start, self.stop, self.step = 0, args[0], 1
+        elif len(args) == 2:
+            self.start, self.stop, self.step = args[0], args[1], 1
+        else:
+            self.start, self.stop, self.step = args
+        if isinstance(self.step, Expr):
+            raise SimgradSyntaxError("range() step must be a compile-time constant", context.current_loc())
+
+    def __iter__(self):
+        return iter(builtins.range(self.start, self.stop, self.step))
+
+    def __len__(self):
+        return len(builtins.range(self.start, self.stop, self.step))
+
+
+class _Return(Exception):
+    pass
+
+
+class Frame:
+    def __init__(self, src: FunctionSource, is_kernel: bool):
+        self.src = src
+        self.is_kernel = is_kernel
+        self.scopes: list[dict] = [{}]
+        self.return_value = None
+        self.has_returned = False
+        self.dynamic_depth = 0  # run-time control flow nesting inside this frame
+
+
+class Compiler:
+    """Compiles one kernel instantiation. `bind` the parameters, then `compile_body`."""
+
+    MAX_INLINE_DEPTH = 64
+
+    def __init__(self, ir: Kernel, src: FunctionSource, debug: bool = False):
+        self.ir = ir
+        self.builder = Builder(ir.body)
+        self.frames = [Frame(src, True)]
+        self.loop_stack: list[str] = []  # "parallel" | "serial" for enclosing run-time loops
+        self.depth = 0  # run-time control flow nesting across inlined frames
+        self.next_loop_config: dict | None = None
+        self.debug = debug
+        self.return_types: list | None = None
+
+    @property
+    def frame(self) -> Frame:
+        return self.frames[-1]
+
+    # -- scopes --------------------------------------------------------------------------------------
+    def bind(self, name: str, value) -> None:
+        self.frame.scopes[-1][name] = value
+
+    def lookup(self, name: str, node: ast.AST):
+        for scope in reversed(self.frame.scopes):
+            if name in scope:
+                return scope[name]
+        src = self.frame.src
+        if name in src.closure:
+            return src.closure[name]
+        if name in src.globals:
+            return src.globals[name]
+        if hasattr(builtins, name):
+            return getattr(builtins, name)
+        raise SimgradNameError(f"name '{name}' is not defined", src.loc(node))
+
+    def new_var(self, value, dtype=None):
+        """A fresh local initialised with `value` (a scalar or a matrix)."""
+        if isinstance(value, Matrix):
+            t = dt.from_any(dtype) if dtype is not None else dtype_of(value)
+            refs = [VarRef(t) for _ in value.entries]
+            ref = MatrixRef(refs, value.n, value.m)
+            ref.store(value)
+            return ref
+        if isinstance(value, Expr):
+            t = value.dtype
+        elif isinstance(value, bool):
+            t = dt.Defaults.ip
+        else:
+            t = ops.to_expr(value).dtype
+        if dtype is not None:
+            t = dt.from_any(dtype)
+        ref = VarRef(t)
+        ref.store(value)
+        return ref
+
+    # -- entry points ---------------------------------------------------------------------------------
+    def compile_body(self) -> None:
+        context.push(self)
+        try:
+            self.visit_block(self.frame.src.tree.body)
+        finally:
+            context.pop()
+
+    def loc(self, node):
+        return self.frame.src.loc(node)
+
+    def visit_block(self, stmts: list[ast.stmt]) -> None:
+        for s in stmts:
+            if self.frame.has_returned:
+                raise SimgradSyntaxError("code after a return statement is not supported", self.loc(s))
+            self.visit_stmt(s)
+
+    def visit_stmt(self, node: ast.stmt) -> None:
+        saved = self.builder.loc
+        self.builder.loc = self.loc(node)
+        try:
+            method = getattr(self, "visit_" + type(node).__name__, None)
+            if method is None:
+                raise SimgradSyntaxError(
+                    f"the Python construct '{type(node).__name__}' is not supported in kernels", self.loc(node)
+                )
+            method(node)
+        except SimgradError as e:
+            if e.loc is None:
+                e.loc = self.loc(node)
+                e.args = (str(e),)
+            raise
+        except (TypeError, ValueError, IndexError, NameError, AttributeError, KeyError, ZeroDivisionError) as e:
+            cls = {TypeError: SimgradTypeError, IndexError: SimgradIndexError, NameError: SimgradNameError}
+            err = cls.get(type(e), SimgradSyntaxError)
+            raise err(f"{type(e).__name__}: {e}", self.loc(node)) from e
+        finally:
+            self.builder.loc = saved
+
+    # -- statements ---------------------------------------------------------------------------------
+    def visit_Expr(self, node: ast.Expr) -> None:
+        if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            return  # docstring
+        self.eval(node.value)
+
+    def visit_Pass(self, node) -> None:
+        pass
+
+    def visit_Assign(self, node: ast.Assign) -> None:
+        value = self.eval(node.value)
+        for target in node.targets:
+            self.assign(target, value)
+
+    def visit_AnnAssign(self, node: ast.AnnAssign) -> None:
+        if not isinstance(node.target, ast.Name):
+            raise SimgradSyntaxError("annotated assignment needs a plain name", self.loc(node))
+        ann = self.eval(node.annotation)
+        value = self.eval(node.value) if node.value is not None else 0
+        from simgrad.lang.types import MatrixType
+
+        if isinstance(ann, MatrixType):
+            self.bind(node.target.id, self.new_var(ann.make(value), ann.dtype))
+        else:
+            self.bind(node.target.id, self.new_var(value, ann))
+
+    def assign(self, target: ast.expr, value) -> None:
+        if isinstance(target, ast.Name):
+            name = target.id
+            current = self._local(name)
+            if isinstance(current, (VarRef, MatrixRef)):
+                current.store(value)
+            elif isinstance(current, Expr):  # an argument or loop index: a new local shadows it
+                self.bind(name, self.new_var(value))
+            elif isinstance(value, (Expr, Matrix, int, float, bool)) and not _is_py_matrix_const(value):
+                self.bind(name, self.new_var(value))
+            else:
+                self.bind(name, value)
+        elif isinstance(target, (ast.Tuple, ast.List)):
+            values = list(value.entries if isinstance(value, Matrix) and value.m == 0 else value)
+            if len(values) != len(target.elts):
+                raise SimgradSyntaxError(
+                    f"cannot unpack {len(values)} values into {len(target.elts)} names", self.loc(target)
+                )
+            for t, v in zip(target.elts, values):
+                self.assign(t, v)
+        elif isinstance(target, (ast.Subscript, ast.Attribute)):
+            ref = self.ref(target)
+            if ref is None:
+                self._python_setitem(target, value)
+            else:
+                ref.store(value)
+        else:
+            raise SimgradSyntaxError(f"cannot assign to {type(target).__name__}", self.loc(target))
+
+    def _python_setitem(self, target, value):
+        obj = self.eval(target.value)
+        if isinstance(target, ast.Subscript):
+            obj[self.eval_index(target.slice)] = value
+        else:
+            setattr(obj, target.attr, value)
+
+    def _local(self, name):
+        for scope in reversed(self.frame.scopes):
+            if name in scope:
+                return scope[name]
+        return None
+
+    def visit_AugAssign(self, node: ast.AugAssign) -> None:
+        kind = _AUG_KIND.get(type(node.op))
+        if kind is None:
+            raise SimgradSyntaxError(f"augmented assignment {type(node.op).__name__} is not supported",
+                                     self.loc(node))
+        value = self.eval(node.value)
+        if isinstance(node.target, ast.Name):
+            ref = self._local(node.target.id)
+            if not isinstance(ref, (VarRef, MatrixRef)):
+                cur = self.eval(node.target)
+                self.assign(node.target, _BINOPS[type(node.op)](cur, value))
+                return
+        else:
+            ref = self.ref(node.target)
+            if ref is None:
+                cur = self.eval(node.target)
+                self._python_setitem(node.target, _BINOPS[type(node.op)](cur, value))
+                return
+        ref.atomic(kind, value)
+
+    def visit_If(self, node: ast.If) -> None:
+        cond = self.eval(node.test)
+        if not isinstance(cond, (Expr, Matrix)):
+            self.visit_block(node.body if cond else node.orelse)
+            return
+        if isinstance(cond, Matrix):
+            raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",
+                                   self.loc(node.test))
+        c = ops.ne(cond, 0)
+        stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
+        for block, body in zip(stmt.blocks, (node.body, node.orelse)):
+            with self.dynamic(block):
+                self.visit_block(body)
+
+    def dynamic(self, block):
+        """Enter a run-time block: a new scope, one more level of run-time nesting."""
+        compiler = self
+
+        class _Ctx:
+            def __enter__(self):
+                compiler.builder.blocks.append(block)
+                compiler.frame.scopes.append({})
+                compiler.frame.dynamic_depth += 1
+                compiler.depth += 1
+
+            def __exit__(self, *exc):
+                compiler.depth -= 1
+                compiler.frame.dynamic_depth -= 1
+                compiler.frame.scopes.pop()
+                compiler.builder.blocks.pop()
+
+        return _Ctx()
+
+    def visit_While(self, node: ast.While) -> None:
+        if node.orelse:
+            raise SimgradSyntaxError("while ... else is not supported in kernels", self.loc(node))
+        loop = self.builder.emit(Op.WHILE, None, (), nblocks=1)
+        self.loop_stack.append("serial")
+        try:
+            with self.dynamic(loop.blocks[0]):
+                cond = self.eval(node.test)
+                if isinstance(cond, Expr):
+                    stop = self.builder.emit(Op.IF, None, (ops.eq(cond, 0).stmt,), nblocks=2)
+                    with self.builder.inside(stop.blocks[0]):
+                        self.builder.emit(Op.BREAK, None)
+                elif not cond:
+                    self.builder.emit(Op.BREAK, None)
+                self.visit_block(node.body)
+        finally:
+            self.loop_stack.pop()
+
+    def visit_Break(self, node) -> None:
+        self._loop_jump(node, Op.BREAK)
+
+    def visit_Continue(self, node) -> None:
+        self._loop_jump(node, Op.CONTINUE)
+
+    def _loop_jump(self, node, op: Op) -> None:
+        if not self.loop_stack:
+            raise SimgradSyntaxError(f"'{op.name.lower()}' outside a run-time loop (inside ti.static loops it "
+                                     "is not supported)", self.loc(node))
+        if op is Op.BREAK and self.loop_stack[-1] == "parallel":
+            raise SimgradSyntaxError(
+                "'break' is not allowed in the outermost (parallel) for loop; use a serial loop "
+                "(ti.loop_config(serialize=True)) or a flag", self.loc(node))
+        self.builder.emit(op, None)
+
+    def visit_Return(self, node: ast.Return) -> None:
+        frame = self.frame
+        if frame.dynamic_depth:
+            raise SimgradSyntaxError(
+                "return inside run-time if/for/while is not supported; assign the result to a variable "
+                "and return it at the end", self.loc(node))
+        value = self.eval(node.value) if node.value is not None else None
+        if frame.is_kernel:
+            self.emit_kernel_return(value, node)
+        frame.return_value = value
+        frame.has_returned = True
+
+    def emit_kernel_return(self, value, node) -> None:
+        if self.return_types is None:
+            raise SimgradSyntaxError("this kernel returns a value but has no return annotation (-> ti.f32)",
+                                     self.loc(node))
+        values = value.entries if isinstance(value, Matrix) else list(value) \
+            if isinstance(value, (tuple, list)) else [value]
+        if len(values) != len(self.return_types):
+            raise SimgradTypeError(f"kernel returns {len(values)} values but is annotated with "
+                                   f"{len(self.return_types)}", self.loc(node))
+        for slot, (v, t) in enumerate(zip(values, self.return_types)):
+            e = ops.cast_expr(ops.to_expr(v, t), t)
+            self.builder.emit(Op.RET_STORE, None, (e.stmt,), {"slot": slot})
+
+    def visit_Assert(self, node: ast.Assert) -> None:
+        cond = self.eval(node.test)
+        msg = self.eval(node.msg) if node.msg is not None else None
+        text = msg if isinstance(msg, str) else ast.unparse(node.test)
+        if not isinstance(cond, Expr):
+            if not cond:
+                raise SimgradSyntaxError(f"assertion failed at compile time: {text}", self.loc(node))
+            return
+        if self.debug:
+            self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt,), {"message": text})
+
+    def visit_For(self, node: ast.For) -> None:
+        from simgrad.frontend.loops import lower_for
+
+        if node.orelse:
+            raise SimgradSyntaxError("for ... else is not supported in kernels", self.loc(node))
+        lower_for(self, node)
+
+    # -- expressions ----------------------------------------------------------------------------------
+    def eval(self, node: ast.expr):
+        method = getattr(self, "eval_" + type(node).__name__, None)
+        if method is None:
+            raise SimgradSyntaxError(
+                f"the Python expression '{type(node).__name__}' is not supported in kernels", self.loc(node))
+        return method(node)
+
+    def eval_Constant(self, node):
+        return node.value
+
+    def eval_Name(self, node: ast.Name):
+        v = self.lookup(node.id, node)
+        if isinstance(v, (VarRef, MatrixRef)):
+            return v.load()
+        return v
+
+    def eval_Tuple(self, node):
+        return tuple(self.eval(e) for e in node.elts)
+
+    def eval_List(self, node):
+        return [self.eval(e) for e in node.elts]
+
+    def eval_Dict(self, node):
+        return {self.eval(k): self.eval(v) for k, v in zip(node.keys, node.values)}
+
+    def eval_Starred(self, node):
+        return _Starred(self.eval(node.value))
+
+    def eval_BinOp(self, node: ast.BinOp):
+        a, b = self.eval(node.left), self.eval(node.right)
+        return _BINOPS[type(node.op)](a, b)
+
+    def eval_UnaryOp(self, node: ast.UnaryOp):
+        v = self.eval(node.operand)
+        if isinstance(node.op, ast.USub):
+            return ops.neg(v)
+        if isinstance(node.op, ast.UAdd):
+            return v
+        if isinstance(node.op, ast.Invert):
+            return ops.bit_not(v)
+        if isinstance(v, (Expr, Matrix)):
+            return ops.logical_not(v)
+        return not v
+
+    def eval_BoolOp(self, node: ast.BoolOp):
+        is_and = isinstance(node.op, ast.And)
+        result = self.eval(node.values[0])
+        for sub in node.values[1:]:
+            if not isinstance(result, (Expr, Matrix)):  # Python short-circuit on compile-time values
+                if (not result) if is_and else result:
+                    return result
+                result = self.eval(sub)
+                continue
+            other = self.eval(sub)
+            result = ops.logical_and(result, other) if is_and else ops.logical_or(result, other)
+        return result
+
+    def eval_Compare(self, node: ast.Compare):
+        left = self.eval(node.left)
+        result = None
+        for op, right_node in zip(node.ops, node.comparators):
+            right = self.eval(right_node)
+            if type(op) in _PY_CMP:
+                r = _PY_CMP[type(op)](left, right)
+            else:
+                r = _CMPOPS[type(op)](left, right)
+            result = r if result is None else ops.logical_and(result, r)
+            left = right
+        return result
+
+    def eval_IfExp(self, node: ast.IfExp):
+        cond = self.eval(node.test)
+        if not isinstance(cond, (Expr, Matrix)):
+            return self.eval(node.body if cond else node.orelse)
+        return ops.select(cond, self.eval(node.body), self.eval(node.orelse))
+
+    def eval_Attribute(self, node: ast.Attribute):
+        ref = self.ref(node)
+        if ref is not None:
+            return ref.load()
+        value = self.eval(node.value)
+        try:
+            return getattr(value, node.attr)
+        except AttributeError:
+            raise SimgradSyntaxError(f"'{type(value).__name__}' has no attribute '{node.attr}'",
+                                     self.loc(node)) from None
+
+    def eval_Subscript(self, node: ast.Subscript):
+        ref = self.ref(node)
+        if ref is not None:
+            return ref.load()
+        value = self.eval(node.value)
+        index = self.eval_index(node.slice)
+        return value[index]
+
+    def eval_index(self, node):
+        if isinstance(node, ast.Tuple):
+            return tuple(self.eval(e) for e in node.elts)
+        if isinstance(node, ast.Slice):
+            return slice(*(self.eval(p) if p is not None else None for p in (node.lower, node.upper, node.step)))
+        return self.eval(node)
+
+    def eval_JoinedStr(self, node: ast.JoinedStr):
+        from simgrad.frontend.printing import FormattedString
+
+        return FormattedString.from_ast(self, node)
+
+    def eval_ListComp(self, node: ast.ListComp):
+        return self._comprehension(node, list)
+
+    def eval_GeneratorExp(self, node):
+        return self._comprehension(node, list)
+
+    def _comprehension(self, node, kind):
+        out = []
+
+        def rec(gens):
+            if not gens:
+                out.append(self.eval(node.elt))
+                return
+            g = gens[0]
+            iterable = self.eval(g.iter)
+            if isinstance(iterable, (Expr,)):
+                raise SimgradSyntaxError("comprehensions must iterate over compile-time sequences", self.loc(g))
+            for item in iterable:
+                self.frame.scopes.append({})
+                try:
+                    self._bind_target(g.target, item)
+                    if all(bool(self.eval(c)) for c in g.ifs):
+                        rec(gens[1:])
+                finally:
+                    self.frame.scopes.pop()
+
+        rec(node.generators)
+        return kind(out)
+
+    def _bind_target(self, target, value):
+        if isinstance(target, ast.Name):
+            self.bind(target.id, value)
+        else:
+            for t, v in zip(target.elts, value):
+                self._bind_target(t, v)
+
+    def eval_Call(self, node: ast.Call):
+        from simgrad.frontend.calls import call
+
+        return call(self, node)
+
+    def eval_Lambda(self, node):
+        raise SimgradSyntaxError("lambda is not supported in kernels; use a @ti.func", self.loc(node))
+
+    # -- references (assignable places) -------------------------------------------------------------------
+    def ref(self, node: ast.expr):
+        """The Ref for an assignable expression, or None when it is a plain Python object."""
+        if isinstance(node, ast.Name):
+            v = self.lookup(node.id, node)
+            return v if isinstance(v, (VarRef, MatrixRef)) else None
+        if isinstance(node, ast.Subscript):
+            base_ref = self.ref(node.value)
+            if base_ref is not None:
+                return base_ref.index(self.eval_index(node.slice)) if isinstance(base_ref, MatrixRef) else None
+            if not _maybe_global(node.value):
+                return None
+            base = self.eval(node.value)
+            if isinstance(base, (Field,)) or _is_array_arg(base):
+                return global_ref(self, base, self.eval_index(node.slice), node)
+            return None
+        if isinstance(node, ast.Attribute):
+            if not isinstance(node.value, (ast.Name, ast.Subscript, ast.Attribute)):
+                return None
+            base_ref = self.ref(node.value)
+            if isinstance(base_ref, MatrixRef) and _is_swizzle(node.attr):
+                return base_ref.swizzle(node.attr)
+            return None
+        return None
+
+
+def _maybe_global(node) -> bool:
+    return isinstance(node, (ast.Name, ast.Attribute, ast.Subscript, ast.Call))
+
+
+def _is_swizzle(name: str) -> bool:
+    return 0 < len(name) <= 4 and all(c in "xyzwrgba" for c in name)
+
+
+def _is_array_arg(v) -> bool:
+    from simgrad.lang.ndarray import ArrayArg
+
+    return isinstance(v, ArrayArg)
+
+
+def _is_py_matrix_const(v) -> bool:
+    return False
+
+
+class _Starred:
+    def __init__(self, value):
+        self.value = value
+
+
+def global_ref(comp: Compiler, base, index, node):
+    """Ref of `field[index]` / `array[index]`, with indices cast to i32 and shifted by field offsets."""
+    from simgrad.lang.ndarray import ArrayArg
+
+    if index is None:
+        idx = ()
+    elif isinstance(index, tuple):
+        idx = index
+    else:
+        idx = (index,)
+    flat = []
+    for i in idx:
+        if isinstance(i, Matrix):
+            flat.extend(i.entries)
+        else:
+            flat.append(i)
+    ndim = base.ndim
+    if len(flat) != ndim:
+        what = f"field {base.name}" if isinstance(base, Field) else f"ndarray '{base.name}'"
+        raise SimgradIndexError(f"{what} has {ndim} dimension(s) but is indexed with {len(flat)} index(es)"
+                                + (" (use x[None] for a 0-d field)" if ndim == 0 else ""), comp.loc(node))
+    offset = base._components()[0].offset if isinstance(base, Field) else None
+    exprs = []
+    for k, i in enumerate(flat):
+        if isinstance(i, float) or (isinstance(i, Expr) and i.dtype.is_float):
+            raise SimgradTypeError("field indices must be integers (use ti.cast(i, ti.i32) or int(i))",
+                                   comp.loc(node))
+        if offset:
+            i = ops.sub(i, offset[k])
+        e = ops.to_expr(i, dt.i32)
+        if e.dtype is not dt.i32:
+            e = ops.cast_expr(e, dt.i32)
+        exprs.append(e)
+    if isinstance(base, ScalarField):
+        return GlobalRef(base, exprs, base.dtype)
+    if isinstance(base, MatrixField):
+        refs = [GlobalRef(c, exprs, c.dtype) for c in base.comps]
+        return MatrixRef(refs, base.n, base.m)
+    assert isinstance(base, ArrayArg)
+    return base.ref(exprs)
+
+
+def make_frame(func, is_kernel: bool) -> Frame:
+    return Frame(get_source(func), is_kernel)
+
+
+def signature(func):
+    return inspect.signature(func)
+
+
+__all__ = ["Compiler", "RangeSpec", "global_ref", "static", "ndrange", "grouped"]

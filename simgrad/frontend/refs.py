@@ -1,0 +1,159 @@
+"""Assignable places inside a kernel: local variables, field/ndarray elements, and matrices of them.
+
+The lowering visitor turns every target (`a`, `x[i]`, `v.x`, `m[i][j]`) into a Ref, so loads, stores
+and atomic updates are written once, here."""
+
+from __future__ import annotations
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradTypeError
+from simgrad.frontend import context
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.matrix import _SWIZZLE, Matrix
+
+
+class VarRef:
+    """A mutable local (an ALLOCA)."""
+
+    __slots__ = ("alloca",)
+
+    def __init__(self, dtype: dt.DataType):
+        b = context.builder()
+        self.alloca = b.emit(Op.ALLOCA, dtype)
+
+    @property
+    def dtype(self):
+        return self.alloca.type
+
+    def load(self) -> Expr:
+        return Expr(context.builder().emit(Op.LOCAL_LOAD, self.dtype, (self.alloca,)))
+
+    def store(self, value) -> None:
+        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        context.builder().emit(Op.LOCAL_STORE, None, (self.alloca, v.stmt))
+
+    def atomic(self, kind: str, value) -> Expr:
+        if kind in ("add", "sub", "min", "max", "and", "or", "xor"):
+            # an ATOMIC on the local: atomic if a parallel task shares it, a plain update otherwise
+            v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+            if kind == "sub":
+                kind, v = "add", ops.neg(v)
+            return Expr(context.builder().emit(Op.ATOMIC, self.dtype, (self.alloca, v.stmt), {"kind": kind}))
+        old = self.load()
+        self.store(_combine(kind, old, value))
+        return old
+
+
+class GlobalRef:
+    """One scalar element of a field or an ndarray."""
+
+    __slots__ = ("target", "indices", "dtype")
+
+    def __init__(self, target, indices: list[Expr], dtype: dt.DataType):
+        self.target, self.indices, self.dtype = target, indices, dtype
+
+    def ptr(self):
+        b = context.builder()
+        return b.emit(Op.GLOBAL_PTR, self.dtype, tuple(i.stmt for i in self.indices), {"target": self.target})
+
+    def load(self) -> Expr:
+        e = Expr(context.builder().emit(Op.GLOBAL_LOAD, self.dtype, (self.ptr(),)))
+        return ops.cast_expr(e, dt.f32) if self.dtype is dt.f16 else e  # f16 is a storage type
+
+    def store(self, value) -> None:
+        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        context.builder().emit(Op.GLOBAL_STORE, None, (self.ptr(), v.stmt))
+
+    def atomic(self, kind: str, value) -> Expr:
+        if kind in ("mul", "div", "floordiv", "mod", "pow", "shl", "shr"):
+            old = self.load()
+            self.store(_combine(kind, old, value))
+            return old
+        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        if kind == "sub":
+            kind, v = "add", ops.neg(v)
+        if kind in ("and", "or", "xor") and self.dtype.is_float:
+            raise SimgradTypeError(f"atomic bit operation on a float field", context.current_loc())
+        s = context.builder().emit(Op.ATOMIC, self.dtype, (self.ptr(), v.stmt), {"kind": kind})
+        return Expr(s)
+
+
+class MatrixRef:
+    """A matrix (or vector) of scalar refs: a local matrix variable or one element of a matrix field."""
+
+    __slots__ = ("refs", "n", "m")
+
+    def __init__(self, refs: list, n: int, m: int):
+        self.refs, self.n, self.m = refs, n, m
+
+    @property
+    def dtype(self):
+        return self.refs[0].dtype
+
+    def load(self) -> Matrix:
+        return Matrix(n=self.n, m=self.m, _entries=[r.load() for r in self.refs])
+
+    def _values(self, value) -> list:
+        if isinstance(value, Matrix):
+            if len(value.entries) != len(self.refs):
+                raise SimgradTypeError(
+                    f"cannot assign a {value.shape} matrix to a {self.shape_text()} one", context.current_loc()
+                )
+            return value.entries
+        if isinstance(value, (list, tuple)):
+            return Matrix(list(value)).entries
+        return [value] * len(self.refs)
+
+    def shape_text(self) -> str:
+        return f"({self.n},)" if self.m == 0 else f"({self.n}, {self.m})"
+
+    def store(self, value) -> None:
+        for r, v in zip(self.refs, self._values(value)):
+            r.store(v)
+
+    def atomic(self, kind: str, value) -> Matrix:
+        olds = [r.atomic(kind, v) for r, v in zip(self.refs, self._values(value))]
+        return Matrix(n=self.n, m=self.m, _entries=olds)
+
+    def index(self, key):
+        """The ref of `m[key]`: a scalar ref, or a row (MatrixRef) for one index on a matrix."""
+        key = key if isinstance(key, tuple) else (key,)
+        if any(isinstance(k, Expr) for k in key):
+            raise SimgradTypeError(
+                "matrix elements can only be assigned with compile-time indices here (use ti.static or "
+                "a Python int)", context.current_loc()
+            )
+        if self.m == 0:
+            (i,) = key
+            return self.refs[_check(i, self.n)]
+        if len(key) == 1:
+            r = _check(key[0], self.n)
+            return MatrixRef(self.refs[r * self.m : (r + 1) * self.m], self.m, 0)
+        i, j = key
+        return self.refs[_check(i, self.n) * self.m + _check(j, self.m)]
+
+    def swizzle(self, name: str):
+        idx = [_SWIZZLE[c] for c in name]
+        if len(idx) == 1:
+            return self.refs[idx[0]]
+        return MatrixRef([self.refs[i] for i in idx], len(idx), 0)
+
+
+def _check(i, n: int) -> int:
+    i = int(i)
+    if not -n <= i < n:
+        raise IndexError(f"matrix index {i} out of range ({n})")
+    return i % n
+
+
+_COMBINE = {
+    "add": ops.add, "sub": ops.sub, "mul": ops.mul, "div": ops.truediv, "floordiv": ops.floordiv,
+    "mod": ops.mod, "pow": ops.pow, "and": ops.bit_and, "or": ops.bit_or, "xor": ops.bit_xor,
+    "shl": ops.shl, "shr": ops.shr, "min": ops.min, "max": ops.max,
+}
+
+
+def _combine(kind: str, old, value):
+    return _COMBINE[kind](old, value)

@@ -1,0 +1,59 @@
+"""A Python function's source as an AST whose line and column numbers match the user's file."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import textwrap
+from dataclasses import dataclass
+
+from simgrad.errors import Loc, SimgradSyntaxError
+
+
+@dataclass
+class FunctionSource:
+    func: object
+    file: str
+    tree: ast.FunctionDef
+    globals: dict
+    closure: dict
+
+    def loc(self, node: ast.AST) -> Loc:
+        return Loc(self.file, getattr(node, "lineno", self.tree.lineno), getattr(node, "col_offset", 0))
+
+
+_cache: dict = {}
+
+
+def get_source(func) -> FunctionSource:
+    code = func.__code__
+    cached = _cache.get(code)
+    if cached is not None and cached.func is func:
+        return cached
+    file = inspect.getsourcefile(func) or code.co_filename
+    try:
+        lines, start = inspect.getsourcelines(func)
+    except (OSError, TypeError) as e:
+        raise SimgradSyntaxError(f"cannot read the source of {func.__qualname__}: {e}") from None
+    text = "".join(lines)
+    dedented = textwrap.dedent(text)
+    indent = len(lines[0]) - len(lines[0].lstrip()) if dedented != text else 0
+    module = ast.parse(dedented)
+    ast.increment_lineno(module, start - 1)
+    if indent:
+        for node in ast.walk(module):
+            if hasattr(node, "col_offset"):
+                node.col_offset += indent
+    fdef = module.body[0]
+    if not isinstance(fdef, (ast.FunctionDef, ast.AsyncFunctionDef)):
+        raise SimgradSyntaxError(f"{func.__qualname__} is not a plain function definition")
+    closure = {}
+    if func.__closure__:
+        for name, cell in zip(code.co_freevars, func.__closure__):
+            try:
+                closure[name] = cell.cell_contents
+            except ValueError:
+                pass
+    src = FunctionSource(func, file, fdef, func.__globals__, closure)
+    _cache[code] = src
+    return src

@@ -1,0 +1,64 @@
+"""IR statements and blocks: a typed, hierarchical SSA form. A statement's value is the statement."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from simgrad.dtypes import DataType
+from simgrad.errors import Loc
+from simgrad.ir.ops import Op
+
+
+class Block:
+    """An ordered list of statements; control statements own nested blocks."""
+
+    __slots__ = ("stmts", "parent")
+
+    def __init__(self, parent: Stmt | None = None):
+        self.stmts: list[Stmt] = []
+        self.parent = parent
+
+    def __iter__(self) -> Iterator[Stmt]:
+        return iter(self.stmts)
+
+    def __len__(self) -> int:
+        return len(self.stmts)
+
+
+class Stmt:
+    """One IR statement. Created only through `Builder`, which checks operand types."""
+
+    __slots__ = ("op", "type", "operands", "attrs", "loc", "blocks", "id", "block")
+    _counter = 0
+
+    def __init__(self, op: Op, type: DataType | None, operands: tuple, attrs: dict, loc: Loc | None):
+        self.op = op
+        self.type = type
+        self.operands = operands
+        self.attrs = attrs
+        self.loc = loc
+        self.blocks: tuple[Block, ...] = ()
+        self.block: Block | None = None
+        Stmt._counter += 1
+        self.id = Stmt._counter
+
+    def __repr__(self) -> str:
+        return f"%{self.id}:{self.type}={self.op.name.lower()}"
+
+
+def walk(block: Block) -> Iterator[Stmt]:
+    """Every statement in `block`, depth first, in program order."""
+    for s in block.stmts:
+        yield s
+        for b in s.blocks:
+            yield from walk(b)
+
+
+class Kernel:
+    """The IR of one kernel instantiation: a body block plus what the launcher needs to know."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.body = Block()
+        self.args: list = []  # runtime argument descriptors, in slot order (lang.kernel fills these)
+        self.returns: list[DataType] = []

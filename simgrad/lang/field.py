@@ -1,0 +1,276 @@
+"""Fields: global, typed, n-d arrays of scalars or small matrices living in an SNode tree.
+
+Python-scope access goes straight to the tree's memory through numpy views (no kernel launch), so
+`x[i, j]` from Python costs well under a microsecond."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradError, SimgradIndexError
+
+
+def _norm_index(key, ndim: int) -> tuple:
+    if key is None:
+        key = ()
+    elif not isinstance(key, tuple):
+        key = (key,)
+    if len(key) != ndim:
+        raise SimgradIndexError(f"field has {ndim} indices, got {len(key)}")
+    return key
+
+
+class Field:
+    """Common base: shape, dtype, gradient, numpy interop."""
+
+    name: str
+    dtype: dt.DataType
+    grad: Field | None
+    dual: Field | None
+
+    def _components(self) -> list[ScalarField]:
+        raise NotImplementedError
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self._components()[0].shape
+
+    @property
+    def ndim(self) -> int:
+        return len(self.shape)
+
+    def _set_offset(self, offset):
+        offset = (offset,) if isinstance(offset, int) else tuple(offset)
+        for c in self._components():
+            c.offset = offset
+        if self.grad is not None:
+            self.grad._set_offset(offset)
+
+    def snode_tree(self):
+        return self._components()[0].snode.tree
+
+    def _ensure(self) -> None:
+        comps = self._components()
+        for c in comps:
+            if c.snode is None:
+                raise SimgradError(f"field {c.name} is not placed in any SNode tree (call ti.root...place())")
+        for c in comps:
+            if c.view is None and c.gather is None:
+                c.snode.tree.materialize()
+
+    def parent(self, n: int = 1):
+        node = self._components()[0].snode
+        for _ in range(n):
+            node = node.parent
+        return node
+
+    @property
+    def snode(self):
+        return self._components()[0].snode
+
+
+class ScalarField(Field):
+    def __init__(self, dtype, name: str = "field"):
+        self.dtype = dt.from_any(dtype)
+        self.name = name
+        self.snode = None
+        self.grad = None
+        self.dual = None
+        self.offset: tuple[int, ...] | None = None
+        self.view: np.ndarray | None = None  # strided numpy view of the elements, when one exists
+        self.gather: np.ndarray | None = None  # flat element indices, for layouts that are not strided
+        self.flat: np.ndarray | None = None
+        self.layout = None  # (tree id, const offset, access terms, shape)
+        self._shape: tuple[int, ...] | None = None
+        self.is_primal = True
+
+    def _components(self):
+        return [self]
+
+    @property
+    def snode(self):  # type: ignore[override]
+        return self._snode
+
+    @snode.setter
+    def snode(self, node):
+        self._snode = node
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        if self._shape is None:
+            if self._snode is None:
+                raise SimgradError(f"field {self.name} is not placed in any SNode tree")
+            self._shape = self._snode.access_terms()[2]
+        return self._shape
+
+    def _bind(self) -> None:
+        """Called when the tree is materialised: build the numpy view of this field's elements."""
+        node = self._snode
+        const, terms, shape = node.access_terms()
+        tree = node.tree
+        self.layout = (tree.id, const, terms, shape)
+        self._shape = shape
+        buf = tree.buffer
+        isz = self.dtype.nbytes
+        if all(t.divisor == 1 and t.modulus == 0 for t in terms) and len(terms) == len(shape):
+            strides = [0] * len(shape)
+            for t in terms:
+                strides[t.axis] = t.stride
+            self.view = np.ndarray(shape, self.dtype.np, buffer=buf, offset=const, strides=strides)
+        else:
+            offs = np.full(shape, const, dtype=np.int64)
+            idx = np.indices(shape, dtype=np.int64) if shape else []
+            for t in terms:
+                digit = idx[t.axis] // t.divisor
+                if t.modulus:
+                    digit = digit % t.modulus
+                offs = offs + digit * t.stride
+            self.flat = buf.view(self.dtype.np)
+            self.gather = offs // isz
+
+    # -- Python scope ------------------------------------------------------------------------
+    def _shift(self, key):
+        if self.offset:
+            return tuple(k - o for k, o in zip(key, self.offset))
+        return key
+
+    def __getitem__(self, key):
+        if self.view is None:
+            self._ensure()
+        key = self._shift(_norm_index(key, len(self.shape)))
+        _check_bounds(key, self.shape, self.name)
+        if self.view is not None:
+            return self.view[key].item()
+        return self.flat[self.gather[key]].item()
+
+    def __setitem__(self, key, value):
+        if self.view is None:
+            self._ensure()
+        key = self._shift(_norm_index(key, len(self.shape)))
+        _check_bounds(key, self.shape, self.name)
+        if self.view is not None:
+            self.view[key] = value
+        else:
+            self.flat[self.gather[key]] = value
+
+    def to_numpy(self, dtype=None) -> np.ndarray:
+        self._ensure()
+        out = np.array(self.view) if self.view is not None else self.flat[self.gather]
+        return out.astype(dtype) if dtype is not None else out
+
+    def from_numpy(self, arr) -> None:
+        self._ensure()
+        arr = np.asarray(arr)
+        if arr.shape != self.shape:
+            raise ValueError(f"from_numpy: field {self.name} has shape {self.shape}, array has {arr.shape}")
+        if self.view is not None:
+            self.view[...] = arr
+        else:
+            self.flat[self.gather] = arr
+
+    def fill(self, value) -> None:
+        self._ensure()
+        if self.view is not None:
+            self.view[...] = value
+        else:
+            self.flat[self.gather] = value
+
+    def copy_from(self, other: ScalarField) -> None:
+        self.from_numpy(other.to_numpy())
+
+    def to_torch(self, device=None):
+        import torch
+
+        return torch.from_numpy(self.to_numpy()).to(device) if device else torch.from_numpy(self.to_numpy())
+
+    def from_torch(self, t) -> None:
+        self.from_numpy(t.detach().cpu().numpy())
+
+    def __repr__(self) -> str:
+        return f"<ScalarField {self.name} {self.dtype} shape={self.shape if self._snode else '?'}>"
+
+
+def _check_bounds(key, shape, name):
+    for k, n in zip(key, shape):
+        if not -n <= k < n if isinstance(k, int) else False:
+            raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}")
+
+
+class MatrixField(Field):
+    """A field of n x m matrices (m == 0: n-vectors), stored as n*m scalar component fields."""
+
+    def __init__(self, n: int, m: int, dtype, name: str = "field", ndim: int | None = None):
+        self.n, self.m = n, m
+        self.dtype = dt.from_any(dtype)
+        self.name = name
+        self.comps = [ScalarField(self.dtype, f"{name}[{c}]") for c in range(n * max(m, 1))]
+        self.grad = None
+        self.dual = None
+
+    @property
+    def is_vector(self) -> bool:
+        return self.m == 0
+
+    @property
+    def entry_shape(self) -> tuple[int, ...]:
+        return (self.n,) if self.m == 0 else (self.n, self.m)
+
+    def _components(self):
+        return self.comps
+
+    def _stacked(self, arrays: list[np.ndarray]) -> np.ndarray:
+        a = np.stack(arrays, axis=-1)
+        return a.reshape(a.shape[:-1] + self.entry_shape)
+
+    def to_numpy(self, dtype=None, keep_dims=False) -> np.ndarray:
+        out = self._stacked([c.to_numpy() for c in self.comps])
+        return out.astype(dtype) if dtype is not None else out
+
+    def from_numpy(self, arr) -> None:
+        arr = np.asarray(arr)
+        want = self.shape + self.entry_shape
+        if arr.shape != want:
+            raise ValueError(f"from_numpy: field {self.name} has shape {want}, array has {arr.shape}")
+        flat = arr.reshape(self.shape + (-1,))
+        for c, comp in enumerate(self.comps):
+            comp.from_numpy(flat[..., c])
+
+    def fill(self, value) -> None:
+        vals = np.broadcast_to(np.asarray(value, dtype=self.dtype.np), self.entry_shape).reshape(-1)
+        for comp, v in zip(self.comps, vals):
+            comp.fill(v)
+
+    def copy_from(self, other: MatrixField) -> None:
+        self.from_numpy(other.to_numpy())
+
+    def __getitem__(self, key):
+        from simgrad.lang.matrix import Matrix
+
+        vals = [c[key] for c in self.comps]
+        if self.m == 0:
+            return Matrix(vals)
+        return Matrix([vals[r * self.m : (r + 1) * self.m] for r in range(self.n)])
+
+    def __setitem__(self, key, value):
+        vals = np.broadcast_to(np.asarray(_as_array(value), dtype=self.dtype.np), self.entry_shape).reshape(-1)
+        for comp, v in zip(self.comps, vals):
+            comp[key] = v
+
+    def to_torch(self, device=None):
+        import torch
+
+        t = torch.from_numpy(self.to_numpy())
+        return t.to(device) if device else t
+
+    def from_torch(self, t) -> None:
+        self.from_numpy(t.detach().cpu().numpy())
+
+    def __repr__(self) -> str:
+        return f"<MatrixField {self.name} {self.entry_shape} {self.dtype}>"
+
+
+def _as_array(value):
+    if hasattr(value, "to_numpy"):
+        return value.to_numpy()
+    return value

@@ -1,0 +1,287 @@
+"""@ti.kernel and @ti.func: parameter handling, instantiation per template arguments, compilation, launch."""
+
+from __future__ import annotations
+
+import inspect
+import time
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradTypeError
+from simgrad.frontend import context
+from simgrad.frontend.source import get_source
+from simgrad.ir.nodes import Kernel as IRKernel
+from simgrad.ir.ops import Op
+from simgrad.lang.expr import Expr
+from simgrad.lang.matrix import Matrix
+from simgrad.lang.types import MatrixType, NdarrayType, is_template
+from simgrad.runtime.program import Program, get_program
+
+
+class Param:
+    """One kernel parameter as declared by its annotation."""
+
+    def __init__(self, name: str, ann, kernel_name: str):
+        self.name = name
+        self.ann = ann
+        if is_template(ann):
+            self.kind = "template"
+        elif isinstance(ann, NdarrayType) or ann is NdarrayType or ann is np.ndarray:
+            self.kind = "ndarray"
+            self.ann = ann if isinstance(ann, NdarrayType) else NdarrayType()
+        elif isinstance(ann, MatrixType):
+            self.kind = "matrix"
+        elif ann is inspect.Parameter.empty:
+            raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
+                                   "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
+        else:
+            try:
+                dt.from_any(ann)
+            except TypeError:
+                raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' has an unsupported "
+                                       f"annotation {ann!r}") from None
+            self.kind = "scalar"
+
+
+class SlotParam:
+    """A parameter as one instantiation lays it out in the context buffer."""
+
+    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0):
+        self.name, self.kind, self.slot, self.dtype = name, kind, slot, dtype
+        self.count, self.ndim, self.ndim_total = count, ndim, ndim_total
+
+
+def _template_key(v, keep: list):
+    if isinstance(v, (int, float, bool, str, type(None))):
+        return (type(v), v)
+    if isinstance(v, (tuple, list)):
+        return (type(v), tuple(_template_key(x, keep) for x in v))
+    if isinstance(v, np.ndarray) and v.size <= 16:
+        return ("nd", v.dtype.str, v.shape, v.tobytes())
+    keep.append(v)
+    return ("id", id(v))
+
+
+class Instance:
+    def __init__(self, launcher, ir, llvm_text, ret_matrix):
+        self.launcher = launcher
+        self.launch = launcher.launch
+        self.ir = ir
+        self.llvm_text = llvm_text
+        self.ret_matrix = ret_matrix
+
+
+class Kernel:
+    def __init__(self, func):
+        self.func = func
+        self.name = func.__name__
+        self.signature = inspect.signature(func)
+        self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]
+        self._nparams = len(self.params)
+        self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
+        self._instances: dict = {}
+        self._keep: list = []
+        self._generation = -1
+        self._simple_launch = None
+        self.grad = None  # set by the autodiff layer
+        self.__doc__ = func.__doc__
+        self.__wrapped__ = func
+
+    def __call__(self, *args, **kwargs):
+        if kwargs:
+            args = self._bind(args, kwargs)
+        from simgrad.lang import ad_hooks
+
+        if ad_hooks.recorder is not None:
+            ad_hooks.recorder(self, args)
+        prog = get_program()
+        if self._generation != prog.generation:
+            self._reset(prog)
+        launch = self._simple_launch
+        if launch is None or len(args) != self._nparams:
+            launch = self._launch_for(args)
+        if prog.config.kernel_profiler:
+            t0 = time.perf_counter()
+            out = launch(*args)
+            prog.profiler.add(self.name, time.perf_counter() - t0)
+            return out
+        return launch(*args)
+
+    def _bind(self, args, kwargs):
+        try:
+            b = self.signature.bind(*args, **kwargs)
+        except TypeError as e:
+            raise SimgradTypeError(f"kernel {self.name}: {e}") from None
+        b.apply_defaults()
+        return tuple(b.arguments.values())
+
+    def _reset(self, prog: Program) -> None:
+        self._instances.clear()
+        self._keep.clear()
+        self._simple_launch = None
+        self._generation = prog.generation
+
+    def _launch_for(self, args):
+        if len(args) != self._nparams:
+            names = ", ".join(p.name for p in self.params)
+            raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
+                                   f"got {len(args)}")
+        keep: list = []
+        key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
+        inst = self._instances.get(key)
+        if inst is None:
+            inst = self.instantiate(args)
+            self._instances[key] = inst
+            self._keep.extend(keep)
+            if self._simple:
+                self._simple_launch = inst.launch
+        return inst.launch
+
+    def _key_part(self, p: Param, a, keep):
+        if p.kind == "template":
+            return _template_key(a, keep)
+        if p.kind == "ndarray":
+            arr = a if hasattr(a, "dtype") else np.asarray(a)
+            return (str(arr.dtype), len(arr.shape))
+        return None
+
+    # -- compilation -------------------------------------------------------------------------------
+    def instantiate(self, args, transform=None, name_suffix=""):
+        from simgrad.codegen.llvm import KernelCodegen
+        from simgrad.frontend.lower import Compiler
+        from simgrad.passes.manager import run_pipeline
+        from simgrad.runtime.launch import Launcher
+
+        prog = get_program()
+        prog.materialize_all()
+        ir = IRKernel(self.name + name_suffix)
+        comp = Compiler(ir, get_source(self.func), debug=prog.config.debug)
+        slots, ret_matrix = self._bind_params(comp, args)
+        prog.materialize_all()
+        comp.compile_body()
+        prog.materialize_all()
+        ir.ret_slot = slots[1]
+        run_pipeline(ir, transform)
+        symbol = f"sg_{self.name}{name_suffix}_{id(ir):x}"
+        cg = KernelCodegen(ir, symbol, debug=prog.config.debug)
+        text = cg.generate()
+        # the disk cache is keyed by the IR text with the symbol name made stable
+        stable = text.replace(symbol, "sg_kernel")
+        addr = prog.jit.load(stable, ["sg_kernel"])["sg_kernel"]
+        launcher = Launcher(self.name, slots[0], addr, slots[1], ir.returns, cg.error_table, prog)
+        launcher.ret_matrix = ret_matrix
+        if ret_matrix is not None:
+            inner = launcher.launch
+            n, m = ret_matrix
+
+            def launch(*a):
+                vals = inner(*a)
+                return Matrix(list(vals)) if m == 0 else Matrix([list(vals[r * m:(r + 1) * m]) for r in range(n)])
+
+            launcher.launch = launch
+        return Instance(launcher, ir, stable, ret_matrix)
+
+    def _bind_params(self, comp, args):
+        from simgrad.lang.ndarray import ArrayArg
+
+        b = comp.builder
+        slot = 0
+        out = []
+        context.push(comp)
+        try:
+            for p, a in zip(self.params, args):
+                if p.kind == "template":
+                    comp.bind(p.name, a)
+                    out.append(SlotParam(p.name, "template"))
+                elif p.kind == "scalar":
+                    t = dt.from_any(p.ann)
+                    comp.bind(p.name, Expr(b.emit(Op.ARG, t, (), {"slot": slot})))
+                    out.append(SlotParam(p.name, "scalar", slot, t))
+                    slot += 1
+                elif p.kind == "matrix":
+                    mt: MatrixType = p.ann
+                    t = mt.dtype
+                    entries = [Expr(b.emit(Op.ARG, t, (), {"slot": slot + k})) for k in range(mt.num_entries)]
+                    comp.bind(p.name, Matrix(n=mt.n, m=mt.m, _entries=entries))
+                    out.append(SlotParam(p.name, "matrix", slot, t, count=mt.num_entries))
+                    slot += mt.num_entries
+                else:
+                    ann: NdarrayType = p.ann
+                    arr = a if hasattr(a, "dtype") else np.asarray(a)
+                    t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
+                    elem = ()
+                    if isinstance(ann.dtype, MatrixType):
+                        elem = ann.dtype.shape
+                        want = ann.dtype.dtype
+                    else:
+                        want = dt.from_any(ann.dtype) if ann.dtype is not None else None
+                    if want is not None and want is not t:
+                        raise SimgradTypeError(f"kernel {self.name}: ndarray argument '{p.name}' must have "
+                                               f"dtype {want}, got {t}")
+                    total = len(arr.shape)
+                    ndim = total - len(elem)
+                    if ann.ndim is not None and ann.ndim != ndim:
+                        raise SimgradTypeError(f"kernel {self.name}: ndarray argument '{p.name}' must have "
+                                               f"{ann.ndim} dimension(s), got {ndim}")
+                    arg = ArrayArg(p.name, slot, t, ndim, elem)
+                    comp.bind(p.name, arg)
+                    out.append(SlotParam(p.name, "ndarray", slot, t, ndim=ndim, ndim_total=total))
+                    slot += arg.num_slots
+            ret = self.signature.return_annotation
+            ret_matrix = None
+            if ret is not inspect.Signature.empty and ret is not None:
+                if isinstance(ret, MatrixType):
+                    comp.return_types = [ret.dtype] * ret.num_entries
+                    ret_matrix = (ret.n, ret.m)
+                elif isinstance(ret, (tuple, list)):
+                    comp.return_types = [dt.from_any(r) for r in ret]
+                else:
+                    comp.return_types = [dt.from_any(ret)]
+                comp.ir.returns = comp.return_types
+        finally:
+            context.pop()
+        return (out, slot), ret_matrix
+
+
+def _torch_dtype(t):
+    import torch
+
+    m = {torch.float32: dt.f32, torch.float64: dt.f64, torch.int32: dt.i32, torch.int64: dt.i64,
+         torch.int8: dt.i8, torch.int16: dt.i16, torch.uint8: dt.u8, torch.float16: dt.f16}
+    return m[t.dtype]
+
+
+class Func:
+    """@ti.func: inlined into the kernels that call it."""
+
+    def __init__(self, func):
+        self.func = func
+        self.name = func.__name__
+        self.signature = inspect.signature(func)
+        self.__wrapped__ = func
+        self.__doc__ = func.__doc__
+
+    def __call__(self, *args, **kwargs):
+        comp = context.current()
+        if comp is None:
+            raise SimgradTypeError(f"ti.func {self.name} can only be called from a kernel or another ti.func")
+        from simgrad.frontend.calls import inline
+
+        return inline(comp, self, list(args), kwargs, comp.frame.src.tree)
+
+
+def kernel(func=None, **kw):
+    if func is None:
+        return lambda f: Kernel(f)
+    return Kernel(func)
+
+
+def func(fn=None, **kw):
+    if fn is None:
+        return lambda f: Func(f)
+    return Func(fn)
+
+
+def pyfunc(fn):
+    return Func(fn)

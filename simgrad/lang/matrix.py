@@ -1,0 +1,414 @@
+"""Small vectors and matrices (ti.Vector / ti.Matrix), the same class in Python scope and in kernels.
+
+In kernels the entries are `Expr`s and every operation unrolls into scalar IR: matrices are small by
+contract, so unrolling is what makes them free at run time (and differentiable entry by entry)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+
+_SWIZZLE = {"x": 0, "y": 1, "z": 2, "w": 3, "r": 0, "g": 1, "b": 2, "a": 3}
+
+
+class Matrix:
+    """An n-vector (m == 0) or an n x m matrix of scalars (Python numbers or kernel values)."""
+
+    __slots__ = ("entries", "n", "m")
+    _is_matrix = True
+
+    def __init__(self, arr=None, dt=None, n=None, m=None, *, _entries=None):
+        if _entries is not None:
+            self.entries, self.n, self.m = list(_entries), n, m
+        else:
+            if isinstance(arr, Matrix):
+                self.entries, self.n, self.m = list(arr.entries), arr.n, arr.m
+            else:
+                if isinstance(arr, np.ndarray):
+                    arr = arr.tolist()
+                if isinstance(arr, (numbers.Number, Expr)):
+                    arr = [arr]
+                arr = list(arr)
+                if arr and isinstance(arr[0], (list, tuple, np.ndarray, Matrix)):
+                    rows = [list(r.entries) if isinstance(r, Matrix) else list(r) for r in arr]
+                    self.n, self.m = len(rows), len(rows[0])
+                    if any(len(r) != self.m for r in rows):
+                        raise ValueError("matrix rows must have equal lengths")
+                    self.entries = [e for r in rows for e in r]
+                else:
+                    self.entries, self.n, self.m = arr, len(arr), 0
+            if dt is not None:
+                self.entries = [ops.cast(e, dt) for e in self.entries]
+
+    # -- shape -----------------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (self.n,) if self.m == 0 else (self.n, self.m)
+
+    @property
+    def is_vector(self) -> bool:
+        return self.m == 0
+
+    def _like(self, entries) -> Matrix:
+        return Matrix(n=self.n, m=self.m, _entries=entries)
+
+    @staticmethod
+    def _map(fn, *args) -> Matrix:
+        mats = [a for a in args if isinstance(a, Matrix)]
+        shape = mats[0].shape
+        for a in mats[1:]:
+            if a.shape != shape:
+                raise ValueError(f"matrix shapes {shape} and {a.shape} do not match")
+        proto = mats[0]
+        cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
+        return proto._like([fn(*xs) for xs in zip(*cols)])
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self):
+        if self.m == 0:
+            return iter(self.entries)
+        return iter(self._row(r) for r in range(self.n))
+
+    def _row(self, r: int) -> Matrix:
+        return Matrix(self.entries[r * self.m : (r + 1) * self.m])
+
+    def _flat_index(self, key) -> int | None:
+        key = key if isinstance(key, tuple) else (key,)
+        if any(isinstance(k, Expr) for k in key):
+            return None
+        key = tuple(int(k) for k in key)
+        if self.m == 0:
+            if len(key) != 1:
+                raise IndexError(f"a vector takes one index, got {len(key)}")
+            (i,) = key
+            if not -self.n <= i < self.n:
+                raise IndexError(f"index {i} out of range for a {self.n}-vector")
+            return i % self.n
+        if len(key) == 1:
+            return None
+        i, j = key
+        if not (-self.n <= i < self.n and -self.m <= j < self.m):
+            raise IndexError(f"index {key} out of range for a {self.n}x{self.m} matrix")
+        return (i % self.n) * self.m + (j % self.m)
+
+    def __getitem__(self, key):
+        idx = self._flat_index(key)
+        if idx is not None:
+            return self.entries[idx]
+        key = key if isinstance(key, tuple) else (key,)
+        if self.m and len(key) == 1 and not isinstance(key[0], Expr):
+            return self._row(int(key[0]))
+        return self._dynamic_get(key)
+
+    def _dynamic_get(self, key):
+        """Index with kernel values: a chain of selects over the candidates."""
+        if self.m and len(key) == 1:
+            rows = [self._row(r) for r in range(self.n)]
+            out = rows[-1]
+            for r in range(self.n - 2, -1, -1):
+                out = ops.select(ops.eq(key[0], r), rows[r], out)
+            return out
+        flat = ops.mul(key[0], self.m) + key[1] if self.m else key[0]
+        out = self.entries[-1]
+        for c in range(len(self.entries) - 2, -1, -1):
+            out = ops.select(ops.eq(flat, c), self.entries[c], out)
+        return out
+
+    def __setitem__(self, key, value):
+        idx = self._flat_index(key)
+        if idx is None:
+            if self.m and not isinstance(key, tuple):
+                for c, v in enumerate(value):
+                    self.entries[int(key) * self.m + c] = v
+                return
+            raise IndexError("assigning through a kernel-value index is not supported on a temporary matrix")
+        self.entries[idx] = value
+
+    def __getattr__(self, name):
+        if name and all(c in _SWIZZLE for c in name) and len(name) <= 4:
+            if len(name) == 1:
+                return self.entries[_SWIZZLE[name]]
+            return Matrix([self.entries[_SWIZZLE[c]] for c in name])
+        raise AttributeError(name)
+
+    def __setattr__(self, name, value):
+        if name in Matrix.__slots__:
+            object.__setattr__(self, name, value)
+        elif all(c in _SWIZZLE for c in name):
+            vals = [value] if len(name) == 1 else list(value)
+            for c, v in zip(name, vals):
+                self.entries[_SWIZZLE[c]] = v
+        else:
+            raise AttributeError(name)
+
+    # -- arithmetic --------------------------------------------------------------------------------
+    def __add__(self, o):
+        return ops.add(self, o)
+
+    def __radd__(self, o):
+        return ops.add(o, self)
+
+    def __sub__(self, o):
+        return ops.sub(self, o)
+
+    def __rsub__(self, o):
+        return ops.sub(o, self)
+
+    def __mul__(self, o):
+        return ops.mul(self, o)
+
+    def __rmul__(self, o):
+        return ops.mul(o, self)
+
+    def __truediv__(self, o):
+        return ops.truediv(self, o)
+
+    def __rtruediv__(self, o):
+        return ops.truediv(o, self)
+
+    def __floordiv__(self, o):
+        return ops.floordiv(self, o)
+
+    def __mod__(self, o):
+        return ops.mod(self, o)
+
+    def __pow__(self, o):
+        return ops.pow(self, o)
+
+    def __rpow__(self, o):
+        return ops.pow(o, self)
+
+    def __neg__(self):
+        return ops.neg(self)
+
+    def __pos__(self):
+        return self
+
+    def __abs__(self):
+        return ops.abs(self)
+
+    def __lt__(self, o):
+        return ops.lt(self, o)
+
+    def __le__(self, o):
+        return ops.le(self, o)
+
+    def __gt__(self, o):
+        return ops.gt(self, o)
+
+    def __ge__(self, o):
+        return ops.ge(self, o)
+
+    def __eq__(self, o):  # type: ignore[override]
+        return ops.eq(self, o)
+
+    def __ne__(self, o):  # type: ignore[override]
+        return ops.ne(self, o)
+
+    def __and__(self, o):
+        return ops.bit_and(self, o)
+
+    def __or__(self, o):
+        return ops.bit_or(self, o)
+
+    def __xor__(self, o):
+        return ops.bit_xor(self, o)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __matmul__(self, o):
+        o = o if isinstance(o, Matrix) else Matrix(o)
+        if self.m == 0 and o.m == 0:
+            return self.dot(o)
+        a = self if self.m else Matrix([[e] for e in self.entries])
+        b = o if o.m else Matrix([[e] for e in o.entries])
+        if a.m != b.n:
+            raise ValueError(f"matmul of {self.shape} and {o.shape}")
+        rows = [[_sum([ops.mul(a.entries[i * a.m + k], b.entries[k * b.m + j]) for k in range(a.m)])
+                 for j in range(b.m)] for i in range(a.n)]
+        if o.m == 0:
+            return Matrix([r[0] for r in rows])
+        return Matrix(rows)
+
+    def __rmatmul__(self, o):
+        return Matrix(o) @ self
+
+    # -- methods (Taichi's names) -------------------------------------------------------------------
+    def transpose(self) -> Matrix:
+        if self.m == 0:
+            return Matrix([[e for e in self.entries]])
+        return Matrix([[self.entries[i * self.m + j] for i in range(self.n)] for j in range(self.m)])
+
+    @property
+    def T(self) -> Matrix:
+        return self.transpose()
+
+    def sum(self):
+        return _sum(self.entries)
+
+    def max(self):
+        return ops.max(*self.entries) if len(self.entries) > 1 else self.entries[0]
+
+    def min(self):
+        return ops.min(*self.entries) if len(self.entries) > 1 else self.entries[0]
+
+    def any(self):
+        return _reduce(ops.bit_or, [ops.ne(e, 0) for e in self.entries])
+
+    def all(self):
+        return _reduce(ops.bit_and, [ops.ne(e, 0) for e in self.entries])
+
+    def dot(self, o):
+        o = o if isinstance(o, Matrix) else Matrix(o)
+        return _sum([ops.mul(a, b) for a, b in zip(self.entries, o.entries)])
+
+    def norm_sqr(self):
+        return self.dot(self)
+
+    def norm(self, eps=0):
+        s = self.norm_sqr()
+        return ops.sqrt(ops.add(s, eps) if not _is_zero(eps) else s)
+
+    def norm_inv(self, eps=0):
+        return ops.rsqrt(ops.add(self.norm_sqr(), eps))
+
+    def normalized(self, eps=0):
+        inv = ops.truediv(1.0, self.norm(eps)) if _is_zero(eps) else ops.rsqrt(ops.add(self.norm_sqr(), eps))
+        return ops.mul(self, inv)
+
+    def cross(self, o):
+        a, b = self.entries, o.entries
+        if self.n == 2:
+            return ops.sub(ops.mul(a[0], b[1]), ops.mul(a[1], b[0]))
+        return Matrix([
+            ops.sub(ops.mul(a[1], b[2]), ops.mul(a[2], b[1])),
+            ops.sub(ops.mul(a[2], b[0]), ops.mul(a[0], b[2])),
+            ops.sub(ops.mul(a[0], b[1]), ops.mul(a[1], b[0])),
+        ])
+
+    def outer_product(self, o):
+        return Matrix([[ops.mul(x, y) for y in o.entries] for x in self.entries])
+
+    def trace(self):
+        return _sum([self.entries[i * self.m + i] for i in range(min(self.n, self.m))])
+
+    def _e(self, i, j):
+        return self.entries[i * self.m + j]
+
+    def determinant(self):
+        n = self.n
+        if n != self.m:
+            raise ValueError("determinant of a non-square matrix")
+        if n == 1:
+            return self.entries[0]
+        if n == 2:
+            return ops.sub(ops.mul(self._e(0, 0), self._e(1, 1)), ops.mul(self._e(0, 1), self._e(1, 0)))
+        terms = []
+        for j in range(n):
+            minor = Matrix([[self._e(r, c) for c in range(n) if c != j] for r in range(1, n)])
+            t = ops.mul(self._e(0, j), minor.determinant())
+            terms.append(t if j % 2 == 0 else ops.neg(t))
+        return _sum(terms)
+
+    def inverse(self):
+        n = self.n
+        if n == 1:
+            return Matrix([[ops.truediv(1.0, self.entries[0])]])
+        inv_det = ops.truediv(1.0, self.determinant())
+        if n == 2:
+            a, b, c, d = self.entries
+            return Matrix([[ops.mul(d, inv_det), ops.mul(ops.neg(b), inv_det)],
+                           [ops.mul(ops.neg(c), inv_det), ops.mul(a, inv_det)]])
+        cof = []
+        for i in range(n):
+            row = []
+            for j in range(n):
+                minor = Matrix([[self._e(r, c) for c in range(n) if c != i] for r in range(n) if r != j])
+                d = minor.determinant()
+                row.append(ops.mul(d if (i + j) % 2 == 0 else ops.neg(d), inv_det))
+            cof.append(row)
+        return Matrix(cof)
+
+    def cast(self, dtype) -> Matrix:
+        return self._like([ops.cast(e, dtype) for e in self.entries])
+
+    def to_numpy(self, keep_dims=False):
+        return np.array(self.entries).reshape(self.shape)
+
+    def to_list(self):
+        return self.to_numpy().tolist()
+
+    def fill(self, v) -> None:
+        self.entries = [v] * len(self.entries)
+
+    def __repr__(self) -> str:
+        return repr(self.to_numpy()) if not any(isinstance(e, Expr) for e in self.entries) else \
+            f"Matrix({self.shape})"
+
+    def __array__(self, dtype=None, copy=None):
+        a = self.to_numpy()
+        return a.astype(dtype) if dtype is not None else a
+
+    # -- constructors -------------------------------------------------------------------------------
+    @staticmethod
+    def identity(dt_, n):
+        return Matrix([[ops.cast(1 if i == j else 0, dt_) for j in range(n)] for i in range(n)])
+
+    @staticmethod
+    def zero(dt_, n, m=None):
+        if m is None:
+            return Matrix([ops.cast(0, dt_) for _ in range(n)])
+        return Matrix([[ops.cast(0, dt_) for _ in range(m)] for _ in range(n)])
+
+    @staticmethod
+    def diag(dim, val):
+        return Matrix([[val if i == j else 0 * val if isinstance(val, Expr) else 0 for j in range(dim)]
+                       for i in range(dim)])
+
+    @staticmethod
+    def unit(n, i, dt=None):
+        return Matrix([1 if k == i else 0 for k in range(n)], dt=dt)
+
+    @staticmethod
+    def rows(rows):
+        return Matrix([list(r.entries) if isinstance(r, Matrix) else list(r) for r in rows])
+
+    @staticmethod
+    def cols(cols):
+        return Matrix.rows(cols).transpose()
+
+
+class Vector(Matrix):
+    """`ti.Vector([...])`: builds a Matrix; `ti.Vector.field` makes a vector field."""
+
+    def __new__(cls, arr=None, dt=None, **kw):
+        return Matrix(arr, dt=dt)
+
+
+def _is_zero(v) -> bool:
+    return isinstance(v, numbers.Number) and v == 0
+
+
+def _reduce(fn, xs):
+    out = xs[0]
+    for x in xs[1:]:
+        out = fn(out, x)
+    return out
+
+
+def _sum(xs):
+    return _reduce(ops.add, xs)
+
+
+def dtype_of(m: Matrix) -> dt.DataType:
+    for e in m.entries:
+        if isinstance(e, Expr):
+            return e.dtype
+    return dt.Defaults.fp if any(isinstance(e, float) for e in m.entries) else dt.Defaults.ip

@@ -1,0 +1,366 @@
+"""Scalar operations shared by both scopes: Python numbers fold in Python, kernel values emit IR.
+
+Matrices dispatch element-wise to these. Typing follows Taichi: Python literals adopt the type of the
+kernel value they meet (an int literal with a float value becomes that float type), otherwise
+`default_ip`/`default_fp`; mixed kernel values promote (dtypes.promote)."""
+
+from __future__ import annotations
+
+import builtins
+import math
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradTypeError
+from simgrad.frontend import context
+from simgrad.ir.ops import Op
+from simgrad.lang.expr import Expr
+
+_PY_NUM = (int, float, bool)
+
+
+def _np_scalar(x):
+    import numpy as np
+
+    return isinstance(x, np.generic)
+
+
+def is_matrix(x) -> bool:
+    from simgrad.lang.matrix import Matrix
+
+    return isinstance(x, Matrix)
+
+
+def _literal_type(v, like: dt.DataType | None) -> dt.DataType:
+    if _np_scalar(v):
+        return dt.from_numpy(v.dtype)
+    if isinstance(v, float):
+        return like if like is not None and like.is_float else dt.Defaults.fp
+    return like if like is not None else dt.Defaults.ip
+
+
+def to_expr(v, like: dt.DataType | None = None) -> Expr:
+    if isinstance(v, Expr):
+        return v
+    if isinstance(v, _PY_NUM) or _np_scalar(v):
+        t = _literal_type(v, like)
+        value = v.item() if _np_scalar(v) else v
+        return Expr(context.builder().const(value, t))
+    raise SimgradTypeError(f"cannot use a {type(v).__name__} value in a kernel expression", context.current_loc())
+
+
+def cast_expr(e: Expr, t: dt.DataType) -> Expr:
+    return Expr(context.builder().cast(e.stmt, t))
+
+
+def _pair(a, b) -> tuple[Expr, Expr]:
+    if isinstance(a, Expr) and isinstance(b, Expr):
+        t = dt.promote(a.dtype, b.dtype)
+        return cast_expr(a, t), cast_expr(b, t)
+    if isinstance(a, Expr):
+        b = to_expr(b, a.dtype)
+    else:
+        a = to_expr(a, b.dtype)
+    t = dt.promote(a.dtype, b.dtype)
+    return cast_expr(a, t), cast_expr(b, t)
+
+
+def _emit2(op: Op, a: Expr, b: Expr) -> Expr:
+    return Expr(context.builder().binary(op, a.stmt, b.stmt))
+
+
+def _emit1(op: Op, a: Expr) -> Expr:
+    return Expr(context.builder().unary(op, a.stmt))
+
+
+def _elementwise(fn, *args):
+    from simgrad.lang.matrix import Matrix
+
+    return Matrix._map(fn, *args)
+
+
+def _binary(pyfn, irfn):
+    def op(a, b):
+        if is_matrix(a) or is_matrix(b):
+            return _elementwise(op, a, b)
+        if not isinstance(a, Expr) and not isinstance(b, Expr):
+            return pyfn(a, b)
+        return irfn(*_pair(a, b))
+
+    return op
+
+
+def _py_div(a, b):
+    return a / b
+
+
+def _ir_truediv(a: Expr, b: Expr) -> Expr:
+    if not a.dtype.is_float:
+        a, b = cast_expr(a, dt.Defaults.fp), cast_expr(b, dt.Defaults.fp)
+    return _emit2(Op.DIV, a, b)
+
+
+def _ir_floordiv(a: Expr, b: Expr) -> Expr:
+    if a.dtype.is_float:
+        return _emit1(Op.FLOOR, _emit2(Op.DIV, a, b))
+    return _emit2(Op.FLOORDIV, a, b)
+
+
+def _ir_mod(a: Expr, b: Expr) -> Expr:
+    if a.dtype.is_float:
+        return sub(a, mul(_emit1(Op.FLOOR, _emit2(Op.DIV, a, b)), b))
+    return _emit2(Op.MOD, a, b)
+
+
+def _ir_pow(a: Expr, b: Expr) -> Expr:
+    if a.dtype.is_float:
+        return _emit2(Op.POW, a, b)
+    # integer power with a runtime exponent: through f64 (exact for |result| < 2**53)
+    f = _emit2(Op.POW, cast_expr(a, dt.f64), cast_expr(b, dt.f64))
+    return cast_expr(f, a.dtype)
+
+
+def _ipow(base: Expr, n: int) -> Expr:
+    """x ** n for a compile-time integer n: repeated squaring, as exact as multiplication."""
+    if n == 0:
+        return to_expr(1, base.dtype)
+    if n < 0:
+        if not base.dtype.is_float:
+            base = cast_expr(base, dt.Defaults.fp)
+        return truediv(1.0, _ipow(base, -n))
+    result = None
+    p = base
+    while n:
+        if n & 1:
+            result = p if result is None else mul(result, p)
+        n >>= 1
+        if n:
+            p = mul(p, p)
+    return result
+
+
+def pow(a, b):  # noqa: A001
+    if is_matrix(a) or is_matrix(b):
+        return _elementwise(pow, a, b)
+    if not isinstance(a, Expr) and not isinstance(b, Expr):
+        return a**b
+    if isinstance(a, Expr) and isinstance(b, int) and not isinstance(b, bool) and builtins.abs(b) <= 32:
+        return _ipow(a, b)
+    return _ir_pow(*_pair(a, b))
+
+
+def _cmp(pyop, op: Op):
+    return _binary(lambda a, b: int(pyop(a, b)), lambda a, b: _emit2(op, a, b))
+
+
+add = _binary(lambda a, b: a + b, lambda a, b: _emit2(Op.ADD, a, b))
+sub = _binary(lambda a, b: a - b, lambda a, b: _emit2(Op.SUB, a, b))
+mul = _binary(lambda a, b: a * b, lambda a, b: _emit2(Op.MUL, a, b))
+truediv = _binary(_py_div, _ir_truediv)
+floordiv = _binary(lambda a, b: a // b, _ir_floordiv)
+mod = _binary(lambda a, b: a % b, _ir_mod)
+raw_div = _binary(lambda a, b: int(a / b) if isinstance(a, int) and isinstance(b, int) else a / b,
+                  lambda a, b: _emit2(Op.RAW_DIV if not a.dtype.is_float else Op.DIV, a, b))
+raw_mod = _binary(lambda a, b: math.fmod(a, b) if isinstance(a, float) or isinstance(b, float)
+                  else int(math.fmod(a, b)), lambda a, b: _emit2(Op.RAW_MOD, a, b))
+bit_and = _binary(lambda a, b: a & b, lambda a, b: _emit2(Op.BIT_AND, a, b))
+bit_or = _binary(lambda a, b: a | b, lambda a, b: _emit2(Op.BIT_OR, a, b))
+bit_xor = _binary(lambda a, b: a ^ b, lambda a, b: _emit2(Op.BIT_XOR, a, b))
+lt = _cmp(lambda a, b: a < b, Op.LT)
+le = _cmp(lambda a, b: a <= b, Op.LE)
+gt = _cmp(lambda a, b: a > b, Op.GT)
+ge = _cmp(lambda a, b: a >= b, Op.GE)
+eq = _cmp(lambda a, b: a == b, Op.EQ)
+ne = _cmp(lambda a, b: a != b, Op.NE)
+
+
+def _shift(pyfn, op: Op):
+    def f(a, b):
+        if is_matrix(a) or is_matrix(b):
+            return _elementwise(f, a, b)
+        if not isinstance(a, Expr) and not isinstance(b, Expr):
+            return pyfn(a, b)
+        a = to_expr(a, b.dtype if isinstance(b, Expr) else None)
+        b = cast_expr(to_expr(b, a.dtype), a.dtype)
+        return _emit2(op, a, b)
+
+    return f
+
+
+shl = _shift(lambda a, b: a << b, Op.SHL)
+shr = _shift(lambda a, b: a >> b, Op.SHR)
+
+
+def bit_shr(a, b):
+    """Logical right shift (zero fill), Taichi's ti.bit_shr."""
+    if not isinstance(a, Expr):
+        return a >> b
+    u = {dt.i8: dt.u8, dt.i16: dt.u16, dt.i32: dt.u32, dt.i64: dt.u64}.get(a.dtype, a.dtype)
+    r = shr(Expr(context.builder().emit(Op.BITCAST, u, (a.stmt,))) if u is not a.dtype else a, b)
+    return Expr(context.builder().emit(Op.BITCAST, a.dtype, (r.stmt,))) if u is not a.dtype else r
+
+
+def _minmax(pyfn, op: Op):
+    two = _binary(pyfn, lambda a, b: _emit2(op, a, b))
+
+    def f(*args):
+        if len(args) == 1:
+            (only,) = args
+            if is_matrix(only):
+                return only.max() if op is Op.MAX else only.min()
+            args = tuple(only)
+        result = args[0]
+        for a in args[1:]:
+            result = two(result, a)
+        return result
+
+    return f
+
+
+max = _minmax(builtins.max, Op.MAX)  # noqa: A001
+min = _minmax(builtins.min, Op.MIN)  # noqa: A001
+
+
+def neg(a):
+    if is_matrix(a):
+        return _elementwise(neg, a)
+    if not isinstance(a, Expr):
+        return -a
+    return _emit1(Op.NEG, a)
+
+
+def abs(a):  # noqa: A001
+    if is_matrix(a):
+        return _elementwise(abs, a)
+    if not isinstance(a, Expr):
+        return builtins.abs(a)
+    return _emit1(Op.ABS, a)
+
+
+def bit_not(a):
+    if is_matrix(a):
+        return _elementwise(bit_not, a)
+    if not isinstance(a, Expr):
+        return ~a
+    return _emit1(Op.BIT_NOT, a)
+
+
+def logical_not(a):
+    if is_matrix(a):
+        return _elementwise(logical_not, a)
+    if not isinstance(a, Expr):
+        return int(not a)
+    return _emit1(Op.LOGICAL_NOT, a)
+
+
+def logical_and(a, b):
+    return bit_and(ne(a, 0), ne(b, 0))
+
+
+def logical_or(a, b):
+    return bit_or(ne(a, 0), ne(b, 0))
+
+
+def _math(op: Op, pyfn, keep_int: bool = False):
+    def f(x):
+        if is_matrix(x):
+            return _elementwise(f, x)
+        if not isinstance(x, Expr):
+            return pyfn(x)
+        if not x.dtype.is_float and not keep_int:
+            x = cast_expr(x, dt.Defaults.fp)
+        return _emit1(op, x)
+
+    f.__name__ = op.name.lower()
+    return f
+
+
+def _py_round(x):
+    return math.floor(x + 0.5) if isinstance(x, float) else x
+
+
+sqrt = _math(Op.SQRT, math.sqrt)
+sin = _math(Op.SIN, math.sin)
+cos = _math(Op.COS, math.cos)
+tan = _math(Op.TAN, math.tan)
+asin = _math(Op.ASIN, math.asin)
+acos = _math(Op.ACOS, math.acos)
+exp = _math(Op.EXP, math.exp)
+log = _math(Op.LOG, math.log)
+tanh = _math(Op.TANH, math.tanh)
+rsqrt = _math(Op.RSQRT, lambda x: 1.0 / math.sqrt(x))
+
+
+def _rounding(op: Op, pyfn):
+    def f(x, dtype=None):
+        if is_matrix(x):
+            return _elementwise(lambda e: f(e, dtype), x)
+        if not isinstance(x, Expr):
+            r = pyfn(x)
+            return cast(r, dtype) if dtype is not None else (float(r) if isinstance(x, float) else r)
+        if not x.dtype.is_float:
+            return cast(x, dtype) if dtype is not None else x
+        r = _emit1(op, x)
+        return cast(r, dtype) if dtype is not None else r
+
+    f.__name__ = op.name.lower()
+    return f
+
+
+floor = _rounding(Op.FLOOR, math.floor)
+ceil = _rounding(Op.CEIL, math.ceil)
+round = _rounding(Op.ROUND, _py_round)  # noqa: A001
+
+
+def atan2(y, x):
+    if is_matrix(y) or is_matrix(x):
+        return _elementwise(atan2, y, x)
+    if not isinstance(y, Expr) and not isinstance(x, Expr):
+        return math.atan2(y, x)
+    y, x = _pair(y, x)
+    if not y.dtype.is_float:
+        y, x = cast_expr(y, dt.Defaults.fp), cast_expr(x, dt.Defaults.fp)
+    return _emit2(Op.ATAN2, y, x)
+
+
+def select(cond, a, b):
+    if is_matrix(cond) or is_matrix(a) or is_matrix(b):
+        return _elementwise(select, cond, a, b)
+    if not isinstance(cond, Expr) and not isinstance(a, Expr) and not isinstance(b, Expr):
+        return a if cond else b
+    c = to_expr(cond)
+    c = Expr(context.builder().binary(Op.NE, c.stmt, context.builder().const(0, c.dtype)))
+    a, b = _pair(a, b)
+    return Expr(context.builder().select(c.stmt, a.stmt, b.stmt))
+
+
+def cast(x, dtype):
+    if is_matrix(x):
+        return x.cast(dtype)
+    t = dt.from_any(dtype)
+    if not isinstance(x, Expr):
+        if context.in_kernel() and (isinstance(x, _PY_NUM) or _np_scalar(x)):
+            return cast_expr(to_expr(x, t), t)
+        import numpy as np
+
+        return np.array(x).astype(t.np).item()
+    return cast_expr(x, t)
+
+
+def bit_cast(x, dtype):
+    t = dt.from_any(dtype)
+    x = to_expr(x)
+    return Expr(context.builder().emit(Op.BITCAST, t, (x.stmt,)))
+
+
+def random(dtype=float):
+    t = dt.from_any(dtype)
+    return Expr(context.builder().emit(Op.RANDOM, t))
+
+
+def randn(dtype=None):
+    """A standard normal sample (Box-Muller on two uniforms)."""
+    t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
+    u1 = random(t)
+    u2 = random(t)
+    r = sqrt(mul(-2.0, log(sub(1.0, u1))))
+    return mul(r, cos(mul(2.0 * math.pi, u2)))

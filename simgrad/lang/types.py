@@ -1,0 +1,127 @@
+"""Type annotations and constructors: ti.template(), ti.types.ndarray/vector/matrix, ti.math.vec3 ..."""
+
+from __future__ import annotations
+
+from simgrad import dtypes as dt
+
+
+class Template:
+    """`ti.template()`: the argument is a compile-time value (a field, a Python number, a function)."""
+
+    def __init__(self, tensor=None, dim=None):
+        pass
+
+    def __repr__(self):
+        return "template()"
+
+
+template = Template
+
+
+def is_template(ann) -> bool:
+    return isinstance(ann, Template) or ann is Template
+
+
+class MatrixType:
+    """`ti.types.vector(3, ti.f32)` / `ti.types.matrix(2, 2, ti.f64)`; callable to build a value."""
+
+    def __init__(self, n: int, m: int, dtype=None):
+        self.n, self.m = n, m
+        self._dtype = dtype
+
+    @property
+    def dtype(self) -> dt.DataType:
+        return dt.from_any(self._dtype) if self._dtype is not None else dt.Defaults.fp
+
+    @property
+    def num_entries(self) -> int:
+        return self.n * max(self.m, 1)
+
+    @property
+    def shape(self):
+        return (self.n,) if self.m == 0 else (self.n, self.m)
+
+    def make(self, value):
+        from simgrad.lang.matrix import Matrix
+
+        if isinstance(value, Matrix):
+            return value.cast(self.dtype)
+        if isinstance(value, (list, tuple)):
+            return Matrix(list(value), dt=self.dtype)
+        return Matrix(n=self.n, m=self.m, _entries=[value] * self.num_entries).cast(self.dtype)
+
+    def __call__(self, *args):
+        from simgrad.lang.matrix import Matrix
+
+        if len(args) == 1:
+            a = args[0]
+            if isinstance(a, Matrix) or isinstance(a, (list, tuple)):
+                flat = []
+                for x in (a.entries if isinstance(a, Matrix) else a):
+                    flat.extend(x.entries if isinstance(x, Matrix) else list(x) if isinstance(x, (list, tuple))
+                                else [x])
+                args = tuple(flat)
+            elif hasattr(a, "__len__"):
+                args = tuple(a)
+            else:
+                args = (a,) * self.num_entries
+        flat = []
+        for a in args:
+            if isinstance(a, Matrix):
+                flat.extend(a.entries)
+            else:
+                flat.append(a)
+        if len(flat) != self.num_entries:
+            raise ValueError(f"{self} takes {self.num_entries} entries, got {len(flat)}")
+        if self.m == 0:
+            return Matrix(flat, dt=self.dtype)
+        return Matrix([flat[r * self.m:(r + 1) * self.m] for r in range(self.n)], dt=self.dtype)
+
+    def field(self, shape=None, **kw):
+        from simgrad.lang.factories import field
+
+        return field(self, shape=shape, **kw)
+
+    def __repr__(self):
+        return f"vector({self.n}, {self._dtype})" if self.m == 0 else f"matrix({self.n}, {self.m}, {self._dtype})"
+
+
+def vector(n: int, dtype=None) -> MatrixType:
+    return MatrixType(n, 0, dtype)
+
+
+def matrix(n: int, m: int, dtype=None) -> MatrixType:
+    return MatrixType(n, m, dtype)
+
+
+class NdarrayType:
+    """`ti.types.ndarray(dtype=None, ndim=None)`: a numpy array (or CPU torch tensor) passed by reference."""
+
+    def __init__(self, dtype=None, ndim=None, element_dim=None, element_shape=None, field_dim=None,
+                 needs_grad=None, boundary=None):
+        self.dtype = dtype
+        self.ndim = ndim if ndim is not None else field_dim
+
+    def __repr__(self):
+        return f"ndarray(dtype={self.dtype}, ndim={self.ndim})"
+
+
+def ndarray(dtype=None, ndim=None, **kw) -> NdarrayType:
+    return NdarrayType(dtype, ndim, **kw)
+
+
+class _Types:
+    """The `ti.types` namespace."""
+
+    template = staticmethod(template)
+    ndarray = staticmethod(ndarray)
+    vector = staticmethod(vector)
+    matrix = staticmethod(matrix)
+
+    def __getattr__(self, name):
+        return getattr(dt, name)
+
+
+types = _Types()
+for _t in dt.ALL:
+    setattr(_Types, _t.name, _t)

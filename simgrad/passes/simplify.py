@@ -1,0 +1,122 @@
+"""Local simplification: constant folding, algebraic identities, common subexpressions, dead code."""
+
+from __future__ import annotations
+
+import math
+
+from simgrad.ir import ops as O
+from simgrad.ir.builder import _wrap_int
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.ops import Op
+
+_FOLD = {
+    Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
+    Op.MIN: min, Op.MAX: max, Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
+    Op.BIT_XOR: lambda a, b: a ^ b, Op.LT: lambda a, b: int(a < b), Op.LE: lambda a, b: int(a <= b),
+    Op.GT: lambda a, b: int(a > b), Op.GE: lambda a, b: int(a >= b), Op.EQ: lambda a, b: int(a == b),
+    Op.NE: lambda a, b: int(a != b),
+}
+
+
+def simplify(kernel: Kernel) -> bool:
+    changed = False
+    while True:
+        uses = _replace_pass(kernel.body, {}, {})
+        removed = _dce(kernel.body, _use_counts(kernel.body))
+        if not (uses or removed):
+            return changed
+        changed = True
+
+
+def _const(s: Stmt):
+    return s.attrs["value"] if s.op is Op.CONST else None
+
+
+def _fold(s: Stmt):
+    """A folded constant value for `s`, or None."""
+    if s.op in _FOLD and len(s.operands) == 2:
+        a, b = (_const(o) for o in s.operands)
+        if a is None or b is None:
+            return None
+        if s.type.is_float and s.type.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
+            return None  # leave f32 rounding to the hardware
+        v = _FOLD[s.op](a, b)
+        return v if s.type.is_float else _wrap_int(int(v), s.type)
+    return None
+
+
+def _identity(s: Stmt):
+    """x + 0, x * 1, x - 0 -> x (integers, and floats where exact)."""
+    if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
+        a, b = s.operands
+        cb, ca = _const(b), _const(a)
+        if s.op in (Op.ADD, Op.SUB) and cb == 0 and not (s.type.is_float and s.op is Op.ADD and
+                                                          math.copysign(1, cb) < 0):
+            return a
+        if s.op is Op.ADD and ca == 0 and not s.type.is_float:
+            return b
+        if s.op is Op.MUL and cb == 1:
+            return a
+        if s.op is Op.MUL and ca == 1:
+            return b
+    if s.op is Op.CAST and s.operands[0].type is s.type:
+        return s.operands[0]
+    return None
+
+
+def _key(s: Stmt, repl):
+    if s.op not in O.PURE or s.op is Op.ARG:
+        return None
+    attrs = tuple(sorted((k, id(v) if not isinstance(v, (int, float, str, bool)) else v)
+                         for k, v in s.attrs.items()))
+    return (s.op, s.type, tuple(id(o) for o in s.operands), attrs)
+
+
+def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
+    n = 0
+    seen = dict(seen)
+    for s in block.stmts:
+        if any(id(o) in repl for o in s.operands):
+            s.operands = tuple(repl.get(id(o), o) for o in s.operands)
+            n += 1
+        folded = _fold(s)
+        if folded is not None:
+            s.op, s.operands, s.attrs = Op.CONST, (), {"value": folded}
+            n += 1
+        ident = _identity(s)
+        if ident is not None:
+            repl[id(s)] = ident
+            n += 1
+            continue
+        k = _key(s, repl)
+        if k is not None:
+            if k in seen:
+                repl[id(s)] = seen[k]
+                n += 1
+                continue
+            seen[k] = s
+        for b in s.blocks:
+            n += _replace_pass(b, repl, seen)
+    return n
+
+
+def _use_counts(block: Block) -> dict:
+    counts: dict[int, int] = {}
+    for s in walk(block):
+        for o in s.operands:
+            counts[id(o)] = counts.get(id(o), 0) + 1
+    return counts
+
+
+def _dce(block: Block, counts: dict) -> int:
+    removed = 0
+    keep = []
+    for s in block.stmts:
+        for b in s.blocks:
+            removed += _dce(b, counts)
+        if s.op not in O.SIDE_EFFECTS and s.op is not Op.ALLOCA and counts.get(id(s), 0) == 0:
+            removed += 1
+            continue
+        keep.append(s)
+    block.stmts = keep
+    return removed

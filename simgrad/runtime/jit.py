@@ -1,0 +1,122 @@
+"""The one LLVM JIT of the process: target machine, -O3 pipeline, native code, on-disk object cache.
+
+Everything native (kernels, the thread pool) goes through here so that there is one target
+description and one cache policy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+from pathlib import Path
+
+import llvmlite
+import llvmlite.binding as llvm
+
+_COMPILER_VERSION = "simgrad-jit-1"
+
+
+def _debug_level() -> int:
+    try:
+        return int(os.environ.get("SIMGRAD_DEBUG", "0"))
+    except ValueError:
+        return 0
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("SIMGRAD_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "simgrad"
+    )
+    return Path(base)
+
+
+class Jit:
+    """Compiles LLVM IR text to native code inside this process (MCJIT) and caches objects on disk."""
+
+    def __init__(self) -> None:
+        llvm.initialize_native_target()
+        llvm.initialize_native_asmprinter()
+        self.triple = llvm.get_process_triple()
+        target = llvm.Target.from_triple(self.triple)
+        self.cpu = llvm.get_host_cpu_name()
+        self.features = llvm.get_host_cpu_features().flatten()
+        self.target_machine = target.create_target_machine(
+            cpu=self.cpu, features=self.features, opt=3, reloc="default", codemodel="jitdefault", jit=True
+        )
+        self.data_layout = str(self.target_machine.target_data)
+        # An empty module anchors the engine; every compiled object is added to it.
+        anchor = llvm.parse_assembly("")
+        anchor.triple = self.triple
+        self.engine = llvm.create_mcjit_compiler(anchor, self.target_machine)
+        self._lock = threading.Lock()
+        self.cache_enabled = True
+        self.cache_dir = default_cache_dir()
+        self.stats = {"compiled": 0, "cache_hits": 0}
+
+    # -- compilation -------------------------------------------------------------------------
+    def _optimize(self, module: llvm.ModuleRef) -> None:
+        pto = llvm.create_pipeline_tuning_options(speed_level=3)
+        pto.loop_vectorization = True
+        pto.slp_vectorization = True
+        pto.loop_unrolling = True
+        builder = llvm.create_pass_builder(self.target_machine, pto)
+        builder.getModulePassManager().run(module, builder)
+
+    def _cache_key(self, ir_text: str) -> str:
+        h = hashlib.sha256()
+        for part in (_COMPILER_VERSION, llvmlite.__version__, self.triple, self.cpu, self.features, ir_text):
+            h.update(part.encode())
+            h.update(b"\0")
+        return h.hexdigest()[:40]
+
+    def object_for(self, ir_text: str, cache_key: str | None = None) -> bytes:
+        """Native object code for `ir_text`, from the disk cache when present."""
+        key = cache_key or self._cache_key(ir_text)
+        path = self.cache_dir / f"{key}.o"
+        if self.cache_enabled and path.exists():
+            self.stats["cache_hits"] += 1
+            return path.read_bytes()
+        module = llvm.parse_assembly(ir_text)
+        module.triple = self.triple
+        module.data_layout = self.data_layout
+        module.verify()
+        self._optimize(module)
+        level = _debug_level()
+        if level >= 3:
+            print(str(module))
+        if level >= 4:
+            print(self.target_machine.emit_assembly(module))
+        obj = self.target_machine.emit_object(module)
+        self.stats["compiled"] += 1
+        if self.cache_enabled:
+            try:
+                self.cache_dir.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_suffix(f".{os.getpid()}.tmp")
+                tmp.write_bytes(obj)
+                os.replace(tmp, path)
+            except OSError:
+                pass  # a read-only or full disk only costs us the cache
+        return obj
+
+    def load(self, ir_text: str, symbols: list[str], cache_key: str | None = None) -> dict[str, int]:
+        """Compile (or fetch) `ir_text`, link it into the process and return symbol addresses."""
+        obj = self.object_for(ir_text, cache_key)
+        with self._lock:
+            self.engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+            self.engine.finalize_object()
+            addrs = {name: self.engine.get_function_address(name) for name in symbols}
+        missing = [n for n, a in addrs.items() if not a]
+        if missing:
+            raise RuntimeError(f"native symbols not found after linking: {missing}")
+        return addrs
+
+
+_jit: Jit | None = None
+
+
+def get_jit() -> Jit:
+    global _jit
+    if _jit is None:
+        _jit = Jit()
+    return _jit

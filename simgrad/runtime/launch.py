@@ -1,0 +1,114 @@
+"""Per-instantiation launchers: Python source generated once per kernel instantiation that packs the
+arguments into the context buffer and makes one native call. No generic per-argument loop per call."""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.codegen.llvm import CTX_ARGS
+from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
+
+_VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
+
+
+class Launcher:
+    """Holds the context buffer of one kernel instantiation and the generated `launch` function."""
+
+    def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
+                 error_table: list, program):
+        self.kernel_name = kernel_name
+        self.error_table = error_table
+        self.program = program
+        self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
+        self.buf[:CTX_ARGS] = program.context_header()
+        self.ret_slot = CTX_ARGS + nslots
+        self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
+        self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
+        self.launch = self._generate(params, returns)
+
+    def _generate(self, params: list, returns: list):
+        env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
+               "_fail": self.fail, "_array": _array_info, "_bad": _bad_arg}
+        lines = []
+        names = []
+        for p in params:
+            names.append(p.name)
+            if p.kind == "scalar":
+                t = p.dtype
+                scale = 8 // t.nbytes
+                env[f"_v_{t.name}"] = self.views[t.name]
+                lines.append(f"    try: _v_{t.name}[{(CTX_ARGS + p.slot) * scale}] = {p.name}")
+                lines.append(f"    except (TypeError, ValueError): _bad({self.kernel_name!r}, {p.name!r}, {p.name}, "
+                             f"{t.name!r})")
+            elif p.kind == "matrix":
+                t = p.dtype
+                scale = 8 // t.nbytes
+                env[f"_v_{t.name}"] = self.views[t.name]
+                lines.append(f"    _m = _np_flat({p.name}, {p.count}, {self.kernel_name!r}, {p.name!r})")
+                for k in range(p.count):
+                    lines.append(f"    _v_{t.name}[{(CTX_ARGS + p.slot + k) * scale}] = _m[{k}]")
+                env["_np_flat"] = _flat_matrix
+            elif p.kind == "ndarray":
+                lines.append(f"    _p, _s = _array({p.name}, {self.kernel_name!r}, {p.name!r}, {p.ndim_total})")
+                lines.append(f"    _buf[{CTX_ARGS + p.slot}] = _p")
+                for d in range(p.ndim):
+                    lines.append(f"    _buf[{CTX_ARGS + p.slot + 1 + d}] = _s[{d}]")
+        lines.append("    _call(_addr)")
+        lines.append("    if _err[0]: _fail()")
+        if returns:
+            rets = []
+            for k, t in enumerate(returns):
+                scale = 8 // t.nbytes
+                env[f"_v_{t.name}"] = self.views[t.name]
+                rets.append(f"_v_{t.name}[{(self.ret_slot + k) * scale}].item()")
+            if len(returns) == 1 and not getattr(self, "ret_matrix", None):
+                lines.append(f"    return {rets[0]}")
+            else:
+                lines.append(f"    return ({', '.join(rets)},)")
+        src = f"def launch({', '.join(names)}):\n" + "\n".join(lines) + "\n"
+        exec(compile(src, f"<launcher {self.kernel_name}>", "exec"), env)
+        return env["launch"]
+
+    def fail(self):
+        code, value = int(self.program.error[0]), int(self.program.error[1])
+        self.program.error[:] = 0
+        kind, loc, detail = self.error_table[code - 1] if 0 < code <= len(self.error_table) else ("?", None, "")
+        if kind == "index":
+            name, dim, shape = detail
+            raise SimgradIndexError(f"index {value} is out of bounds in dimension {dim} of {name} "
+                                    f"(shape {shape})", loc)
+        if kind == "assert":
+            raise SimgradAssertionError(f"assertion failed: {detail}", loc)
+        if kind == "adstack":
+            raise SimgradRuntimeError(detail, loc)
+        raise SimgradRuntimeError(f"kernel {self.kernel_name} reported error {code}", loc)
+
+
+def _bad_arg(kernel, param, value, type_name):
+    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a {type_name} scalar, got "
+                           f"{type(value).__name__}")
+
+
+def _flat_matrix(value, count, kernel, param):
+    a = np.asarray(value.to_numpy() if hasattr(value, "to_numpy") else value).reshape(-1)
+    if a.size != count:
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects {count} entries, got {a.size}")
+    return a.tolist()
+
+
+def _array_info(a, kernel, param, ndim):
+    if isinstance(a, np.ndarray):
+        if not a.flags.c_contiguous:
+            raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' must be C-contiguous "
+                                   "(use np.ascontiguousarray)")
+        return a.ctypes.data, a.shape
+    if hasattr(a, "data_ptr") and hasattr(a, "is_contiguous"):  # a torch tensor
+        if a.device.type != "cpu" or not a.is_contiguous():
+            raise SimgradTypeError(f"kernel {kernel}: tensor argument '{param}' must be a contiguous CPU tensor")
+        return a.data_ptr(), tuple(a.shape)
+    if hasattr(a, "_ndarray"):
+        return _array_info(a._ndarray, kernel, param, ndim)
+    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")

@@ -1,0 +1,153 @@
+"""The process-wide runtime state that `ti.init` creates: configuration, SNode trees, memory, the thread
+pool, RNG states, the error buffer and the kernel profiler."""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.runtime.memory import Memory
+
+
+class Config:
+    def __init__(self, **kw):
+        self.arch = kw.get("arch")
+        self.debug = bool(kw.get("debug", False))
+        self.default_fp = dt.from_any(kw.get("default_fp") or dt.f32)
+        self.default_ip = dt.from_any(kw.get("default_ip") or dt.i32)
+        self.random_seed = int(kw.get("random_seed", 0))
+        self.kernel_profiler = bool(kw.get("kernel_profiler", False))
+        self.ad_stack_size = int(kw.get("ad_stack_size", 0) or 0)
+        self.offline_cache = bool(kw.get("offline_cache", True))
+        self.offline_cache_file_path = kw.get("offline_cache_file_path")
+        threads = kw.get("cpu_max_num_threads") or int(os.environ.get("SIMGRAD_NUM_THREADS", 0) or 0)
+        self.num_threads = int(threads) if threads else (os.cpu_count() or 1)
+
+
+class Profiler:
+    """Per-kernel launch count and wall time (ti.profiler)."""
+
+    def __init__(self):
+        self.records: dict[str, list[float]] = {}
+
+    def add(self, name: str, seconds: float) -> None:
+        self.records.setdefault(name, []).append(seconds)
+
+    def clear(self) -> None:
+        self.records.clear()
+
+    def report(self) -> str:
+        lines = ["=" * 78, "simgrad kernel profiler (CPU wall time)", "=" * 78,
+                 f"{'[%]':>7} {'total ms':>11} {'count':>8} {'avg ms':>10} {'min ms':>10} {'max ms':>10}  name"]
+        total = sum(sum(v) for v in self.records.values()) or 1.0
+        for name, ts in sorted(self.records.items(), key=lambda kv: -sum(kv[1])):
+            s = sum(ts)
+            lines.append(f"{100 * s / total:6.2f}% {1e3 * s:11.3f} {len(ts):8d} {1e3 * s / len(ts):10.4f} "
+                         f"{1e3 * min(ts):10.4f} {1e3 * max(ts):10.4f}  {name}")
+        lines.append("=" * 78)
+        return "\n".join(lines)
+
+
+class Program:
+    generation = 0
+
+    def __init__(self, **kw):
+        Program.generation += 1
+        self.generation = Program.generation
+        self.config = Config(**kw)
+        dt.Defaults.fp = self.config.default_fp
+        dt.Defaults.ip = self.config.default_ip
+        self.memory = Memory()
+        self.trees: list = []
+        self._open_tree = None
+        self.profiler = Profiler()
+        self.error = np.zeros(4, dtype=np.int64)
+        self._pool = None
+        self._rng = None
+        from simgrad.runtime.jit import get_jit
+
+        self.jit = get_jit()
+        self.jit.cache_enabled = self.config.offline_cache
+        if self.config.offline_cache_file_path:
+            from pathlib import Path
+
+            self.jit.cache_dir = Path(self.config.offline_cache_file_path)
+
+    # -- SNode trees -------------------------------------------------------------------------------
+    def new_tree(self):
+        from simgrad.lang.snode import SNodeTree
+
+        tree = SNodeTree(self, len(self.trees))
+        self.trees.append(tree)
+        return tree
+
+    @property
+    def root_tree(self):
+        """The tree `ti.root` builds into; a fresh one once the previous was materialised."""
+        if self._open_tree is None or self._open_tree.materialized:
+            self._open_tree = self.new_tree()
+        return self._open_tree
+
+    def materialize_all(self) -> None:
+        for t in self.trees:
+            if not t.materialized:
+                t.materialize()
+
+    # -- native services ---------------------------------------------------------------------------
+    @property
+    def pool(self):
+        if self._pool is None:
+            from simgrad.runtime.threadpool import get_pool
+
+            self._pool = get_pool(self.config.num_threads)
+        return self._pool
+
+    @property
+    def rng_states(self) -> np.ndarray:
+        """xorshift128 state per thread, seeded from random_seed."""
+        if self._rng is None:
+            n = max(self.pool.num_threads, 1) + 1
+            gen = np.random.default_rng(self.config.random_seed)
+            self._rng = gen.integers(1, 2**32 - 1, size=(n, 4), dtype=np.uint32)
+        return self._rng
+
+    def context_header(self) -> list[int]:
+        return [self.memory.roots_address, self.error.ctypes.data, self.rng_states.ctypes.data,
+                self.pool.parallel_for_address]
+
+
+_program: Program | None = None
+
+
+def get_program() -> Program:
+    global _program
+    if _program is None:
+        _program = Program()
+    return _program
+
+
+def init(arch=None, **kw) -> Program:
+    global _program
+    from simgrad.lang import archs
+
+    known = {"arch", "debug", "default_fp", "default_ip", "random_seed", "kernel_profiler", "ad_stack_size",
+             "offline_cache", "offline_cache_file_path", "cpu_max_num_threads", "log_level", "device_memory_GB",
+             "device_memory_fraction", "flatten_if", "fast_math", "advanced_optimization", "packed",
+             "dynamic_index", "print_ir", "verbose", "check_out_of_bound", "excepthook", "cfg_optimization",
+             "short_circuit_operators", "real_matrix_scalarize", "debug_info", "opt_level"}
+    unknown = sorted(set(kw) - known)
+    if unknown:
+        warnings.warn(f"ti.init: ignoring unknown arguments {unknown}", stacklevel=3)
+    kw["arch"] = archs.resolve(arch)
+    if kw.get("check_out_of_bound"):
+        kw["debug"] = True
+    _program = Program(**kw)
+    return _program
+
+
+def reset() -> None:
+    global _program
+    _program = None
