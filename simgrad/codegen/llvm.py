@@ -174,6 +174,8 @@ class FunctionText:
         return self.array_shapes[key]
 
     def v(self, s: Stmt) -> str:
+        if s.op is Op.CONST:
+            return const_text(s.attrs["value"], s.type)
         return self.names[s]
 
     def text(self) -> str:

@@ -12,7 +12,7 @@ from simgrad.lang.matrix import Matrix
 def _spec(e: Expr) -> str:
     t = e.dtype
     if t.is_float:
-        return "%f"
+        return "%.12f" if t.bits == 64 else "%f"
     if t.bits == 64:
         return "%lld" if t.is_signed else "%llu"
     return "%d" if t.is_signed else "%u"

@@ -275,7 +275,7 @@ def _math(op: Op, pyfn, keep_int: bool = False):
 
 
 def _py_round(x):
-    return math.floor(x + 0.5) if isinstance(x, float) else x
+    return float(builtins.round(x)) if isinstance(x, float) else x  # half to even, as Taichi
 
 
 sqrt = _math(Op.SQRT, math.sqrt)

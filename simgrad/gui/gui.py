@@ -1,0 +1,363 @@
+"""``ti.GUI``: Taichi's immediate-mode 2D GUI, drawing into a numpy canvas.
+
+Programs written for ``ti.GUI`` run unchanged: they draw circles, lines and images each frame and
+call ``show()`` (optionally with a filename to save a screenshot).  Without a display, or with
+``show_gui=False``, nothing is ever opened: frames are only kept in memory and written on request,
+which is what simulations on servers and in tests need.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+import time
+
+import numpy as np
+
+from . import _tk
+from .canvas import ImageCanvas, _points, cook_image, to_numpy
+from .colors import as_rgb, hex_to_rgb, rgb_to_hex
+
+__all__ = ["GUI", "rgb_to_hex", "hex_to_rgb"]
+
+
+def _colors_arg(color, n):
+    """Validate a ``ti.GUI`` colour argument (int or (n,) array); float RGB is accepted too."""
+    if isinstance(color, np.ndarray) and color.dtype.kind in "iu" and color.shape != (n,):
+        raise ValueError(f"color array must have shape ({n},), got {color.shape}")
+    return as_rgb(color, n)
+
+
+class GUI:
+    """Taichi's ``ti.GUI(name, res, background_color, show_gui, fullscreen, fast_gui)``.
+
+    ``res`` is an int or (width, height).  Radii and widths are in pixels; positions are
+    normalised with (0, 0) at the bottom-left.  ``fullscreen`` and ``fast_gui`` are accepted for
+    compatibility (``fast_gui`` takes any image ``set_image`` takes).
+    """
+
+    class Event:
+        """An input event: ``type`` (PRESS/RELEASE/MOTION), ``key``, ``pos``, ``modifier``, ``delta``."""
+
+        def __init__(self):
+            self.type = None
+            self.modifier = None
+            self.pos = None
+            self.key = None
+            self.delta = None
+
+        def __repr__(self):
+            return f"GUI.Event(type={self.type!r}, key={self.key!r}, pos={self.pos!r})"
+
+    class WidgetValue:
+        """Handle to a slider/label value, read and written through ``.value``."""
+
+        def __init__(self, gui, wid):
+            self.gui = gui
+            self.wid = wid
+
+        @property
+        def value(self):
+            return self.gui._widgets[self.wid]
+
+        @value.setter
+        def value(self, value):
+            self.gui._widgets[self.wid] = value
+
+    class EventFilter:
+        """Matches events by type, key, or (type, key) pairs, as ``get_events`` filters do."""
+
+        def __init__(self, *e_filter):
+            self.filter = {tuple(ent) if isinstance(ent, (list, tuple)) else ent for ent in e_filter}
+
+        def match(self, e):
+            return (e.type, e.key) in self.filter or e.type in self.filter or e.key in self.filter
+
+    # Keys
+    SHIFT = "Shift"
+    ALT = "Alt"
+    CTRL = "Control"
+    ESCAPE = "Escape"
+    RETURN = "Return"
+    TAB = "Tab"
+    BACKSPACE = "BackSpace"
+    SPACE = " "
+    UP = "Up"
+    DOWN = "Down"
+    LEFT = "Left"
+    RIGHT = "Right"
+    CAPSLOCK = "Caps_Lock"
+    LMB = "LMB"
+    MMB = "MMB"
+    RMB = "RMB"
+    EXIT = "WMClose"
+    WHEEL = "Wheel"
+    MOVE = "Motion"
+    # Event types
+    MOTION = _tk.MOTION
+    PRESS = _tk.PRESS
+    RELEASE = _tk.RELEASE
+
+    def __init__(
+        self, name="Taichi", res=512, background_color=0x0, show_gui=True, fullscreen=False, fast_gui=False
+    ):
+        show_gui = self.get_bool_environ("TI_GUI_SHOW", show_gui)
+        self.fullscreen = self.get_bool_environ("TI_GUI_FULLSCREEN", fullscreen)
+        self.fast_gui = self.get_bool_environ("TI_GUI_FAST", fast_gui)
+        self.name = name
+        if isinstance(res, numbers.Number):
+            res = (res, res)
+        self.res = (int(res[0]), int(res[1]))
+        self.background_color = background_color
+        self.canvas = ImageCanvas(self.res, background_color)
+        self.key_pressed = set()
+        self.event = None
+        self.frame = 0
+        self._widgets = []
+        self._should_close = False
+        self._closed = False
+        self._frame_delta_limit = 1.0 / 60
+        self._last_frame_time = time.perf_counter()
+        self._window = _tk.open_window(name, self.res) if show_gui else None
+        self.show_gui = self._window is not None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, e_type, val, tb):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    @staticmethod
+    def get_bool_environ(key, default):
+        """``bool(int(os.environ[key]))`` when set, else ``default`` (Taichi's TI_GUI_* overrides)."""
+        if key not in os.environ:
+            return default
+        return bool(int(os.environ[key]))
+
+    def close(self):
+        """Close the window (if any); ``running`` becomes False."""
+        if getattr(self, "_window", None) is not None:
+            self._window.close()
+            self._window = None
+        self._closed = True
+
+    # -- widgets: values only, nothing is drawn ----------------------------------------------
+    def slider(self, text, minimum, maximum, step=1):
+        """A slider value handle starting at ``minimum``."""
+        self._widgets.append(minimum)
+        return GUI.WidgetValue(self, len(self._widgets) - 1)
+
+    def label(self, text):
+        """A label value handle starting at 0."""
+        self._widgets.append(0)
+        return GUI.WidgetValue(self, len(self._widgets) - 1)
+
+    def button(self, text, event_name=None):
+        """Register a button; returns the key its (never, when headless) press events carry."""
+        return event_name or f"WidgetButton_{text}"
+
+    # -- drawing ----------------------------------------------------------------------------
+    def clear(self, color=None):
+        """Fill the canvas with ``color`` (default: the background colour)."""
+        self.canvas.clear(self.background_color if color is None else color)
+
+    def set_image(self, img):
+        """Show an image of shape (W, H[, C]) matching ``res``: floats in [0, 1] or unsigned ints."""
+        arr = cook_image(img)
+        if arr.shape[:2] != self.res:
+            raise ValueError(f"Image resolution {arr.shape[:2]} does not match GUI resolution {self.res}")
+        self.canvas.img[...] = arr
+
+    def get_image(self):
+        """The canvas as float32 RGBA of shape (W, H, 4), like Taichi's."""
+        rgba = np.ones(self.res + (4,), np.float32)
+        rgba[..., :3] = self.canvas.img
+        return rgba
+
+    def contour(self, scalar_field, normalize=False):
+        """Show a scalar field as a grey image, optionally normalised to [0, 1]."""
+        arr = to_numpy(scalar_field).astype(np.float32)
+        if normalize:
+            arr = (arr - arr.min()) / (arr.max() - arr.min() + 1e-16)
+        self.set_image(arr)
+
+    def circle(self, pos, color=0xFFFFFF, radius=1):
+        """One filled circle; ``radius`` in pixels."""
+        self.canvas.circles(_points(pos)[:1], radius, _colors_arg(color, 1))
+
+    def circles(self, pos, radius=1, color=0xFFFFFF, palette=None, palette_indices=None):
+        """Filled circles at ``pos`` (n, 2); ``radius`` and ``color`` scalar or per circle.
+
+        With ``palette`` (a list of 0xRRGGBB) each circle takes ``palette[palette_indices[i]]``.
+        """
+        pos = _points(pos)
+        n = len(pos)
+        if palette is not None:
+            if palette_indices is None:
+                raise ValueError("palette must be used together with palette_indices")
+            ind = to_numpy(palette_indices)
+            if ind.dtype.kind not in "iu":
+                raise ValueError("palette_indices must be an integer array")
+            ind = ind.reshape(-1).astype(np.int64)
+            if ind.shape != (n,):
+                raise ValueError(f"palette_indices must have shape ({n},), got {ind.shape}")
+            if n and (ind.min() < 0 or ind.max() >= len(palette)):
+                raise ValueError("palette_indices must lie in [0, len(palette))")
+            color = np.asarray(palette, dtype=np.int64)[ind]
+        self.canvas.circles(pos, radius, _colors_arg(color, n))
+
+    def line(self, begin, end, radius=1, color=0xFFFFFF):
+        """One segment; ``radius`` is its half-width in pixels."""
+        self.canvas.lines(_points(begin)[:1], _points(end)[:1], radius, _colors_arg(color, 1))
+
+    def lines(self, begin, end, radius=1, color=0xFFFFFF):
+        """Segments from ``begin[i]`` to ``end[i]``; ``radius`` and ``color`` scalar or per line."""
+        begin = _points(begin)
+        self.canvas.lines(begin, end, radius, _colors_arg(color, len(begin)))
+
+    def triangle(self, a, b, c, color=0xFFFFFF):
+        """One filled triangle."""
+        self.canvas.triangles(_points(a)[:1], _points(b)[:1], _points(c)[:1], _colors_arg(color, 1))
+
+    def triangles(self, a, b, c, color=0xFFFFFF):
+        """Filled triangles (a[i], b[i], c[i]); ``color`` scalar or per triangle."""
+        a = _points(a)
+        self.canvas.triangles(a, b, c, _colors_arg(color, len(a)))
+
+    def rect(self, topleft, bottomright, radius=1, color=0xFFFFFF):
+        """Rectangle outline with sides ``radius`` pixels thick."""
+        self.canvas.rect(topleft, bottomright, radius, _colors_arg(color, 1)[0])
+
+    def arrows(self, orig, direction, radius=1, color=0xFFFFFF, **kwargs):
+        """Arrows from ``orig`` (n, 2) along ``direction``; ``tip_scale``/``angle`` shape the tip."""
+        orig = _points(orig)
+        self.canvas.arrows(orig, direction, radius, _colors_arg(color, len(orig)), **kwargs)
+
+    def arrow(self, orig, direction, radius=1, color=0xFFFFFF, **kwargs):
+        """One arrow."""
+        self.canvas.arrows(_points(orig)[:1], _points(direction)[:1], radius, _colors_arg(color, 1), **kwargs)
+
+    def text(self, content, pos, font_size=15, color=0xFFFFFF):
+        """Text with its top-left corner at ``pos``; ``font_size`` in pixels."""
+        self.canvas.text(content, pos, font_size, _colors_arg(color, 1)[0])
+
+    @staticmethod
+    def _make_field_base(w, h, bound):
+        x = np.linspace(bound / w, 1 - bound / w, w)
+        y = np.linspace(bound / h, 1 - bound / h, h)
+        return np.stack(np.meshgrid(x, y, indexing="ij"), axis=-1).reshape(w * h, 2)
+
+    def point_field(self, radius, color=0xFFFFFF, bound=0.5):
+        """A grid of circles, one per entry of the 2D ``radius`` array."""
+        radius = to_numpy(radius)
+        base = self._make_field_base(radius.shape[0], radius.shape[1], bound)
+        self.circles(base, radius=radius.reshape(-1), color=color)
+
+    def arrow_field(self, direction, radius=1, color=0xFFFFFF, bound=0.5, **kwargs):
+        """A grid of arrows, one per entry of the (w, h, 2) ``direction`` array."""
+        direction = to_numpy(direction)
+        base = self._make_field_base(direction.shape[0], direction.shape[1], bound)
+        self.arrows(base, direction.reshape(-1, 2), radius=radius, color=color, **kwargs)
+
+    def show(self, file=None):
+        """Present the frame, save it to ``file`` if given, then clear to the background colour."""
+        if self._window is not None:
+            self._window.update(self.canvas.to_uint8())
+            if self._frame_delta_limit:
+                wait = self._last_frame_time + self._frame_delta_limit - time.perf_counter()
+                if wait > 0:
+                    time.sleep(wait)
+            self._last_frame_time = time.perf_counter()
+            if self._window.closed:
+                self._should_close = True
+        if file:
+            self.canvas.save(file)
+        self.frame += 1
+        self.clear()
+
+    # -- events -----------------------------------------------------------------------------
+    def has_key_event(self):
+        """Whether an input event is waiting (never, when headless)."""
+        if self._window is None:
+            return False
+        self._window.poll()
+        return bool(self._window.events)
+
+    def get_event(self, *e_filter):
+        """Take the first waiting event matching the filter into ``self.event``; True if found."""
+        for e in self.get_events(*e_filter):
+            self.event = e
+            return True
+        return False
+
+    def get_events(self, *e_filter):
+        """Iterate over waiting events matching the filter (by type, key or (type, key))."""
+        e_filter = GUI.EventFilter(*e_filter) if e_filter else None
+        while self.has_key_event():
+            e = self.get_key_event()
+            if e_filter is None or e_filter.match(e):
+                yield e
+
+    def get_key_event(self):
+        """Wait for and return the next event; headless there are none, so this returns None."""
+        if self._window is None:
+            return None
+        while not self._window.events and not self._window.closed:
+            self._window.poll()
+            time.sleep(0.005)
+        if not self._window.events:
+            return None
+        kind, key, pos, delta = self._window.events.popleft()
+        e = GUI.Event()
+        e.type, e.key, e.pos = kind, key, (float(pos[0]), float(pos[1]))
+        e.delta = delta if key == GUI.WHEEL else (0, 0)
+        e.modifier = [m for m in (GUI.SHIFT, GUI.ALT, GUI.CTRL) if self.is_pressed(m)]
+        if key == GUI.EXIT:
+            self._should_close = True
+        if kind == GUI.PRESS:
+            self.key_pressed.add(key)
+        elif kind == GUI.RELEASE:
+            self.key_pressed.discard(key)
+        return e
+
+    def is_pressed(self, *keys):
+        """Whether any of ``keys`` is held (Shift/Alt/Control match either side)."""
+        for key in keys:
+            if key in (GUI.SHIFT, GUI.ALT, GUI.CTRL) and (
+                key + "_L" in self.key_pressed or key + "_R" in self.key_pressed
+            ):
+                return True
+            if key in self.key_pressed:
+                return True
+        return False
+
+    def get_cursor_pos(self):
+        """Cursor position in [0, 1]^2 with y up; the centre when headless."""
+        if self._window is None:
+            return 0.5, 0.5
+        return tuple(float(v) for v in self._window.cursor)
+
+    # -- state ------------------------------------------------------------------------------
+    @property
+    def running(self):
+        """False once the window was closed, ``close()`` was called, or ``running = False``."""
+        return not (self._should_close or self._closed)
+
+    @running.setter
+    def running(self, value):
+        self._should_close = not value
+
+    @property
+    def fps_limit(self):
+        """Maximum frames per second when a window is shown (None: unlimited)."""
+        return None if self._frame_delta_limit == 0 else 1 / self._frame_delta_limit
+
+    @fps_limit.setter
+    def fps_limit(self, value):
+        self._frame_delta_limit = 0 if value is None else 1 / value

@@ -1,0 +1,247 @@
+"""A minimal ``ti.ui`` (GGUI) ``Window`` and ``Canvas`` on top of the numpy canvas.
+
+GGUI programs draw vertex fields each frame and call ``window.show()``; this module rasterises the
+2D part of that API (circles, lines, triangles, images) into the same numpy canvas ``ti.GUI`` uses,
+so GGUI programs run headless and can save frames.  Sizes follow ``ti.ui``: radii and line widths
+are fractions of the window height, colours are float RGB tuples.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from . import _tk
+from .canvas import ImageCanvas, cook_image, to_numpy
+from .image import imresize
+
+__all__ = ["Window", "Canvas", "Gui"]
+
+PRESS = _tk.PRESS
+RELEASE = _tk.RELEASE
+SHIFT = "Shift"
+ALT = "Alt"
+CTRL = "Control"
+ESCAPE = "Escape"
+RETURN = "Return"
+TAB = "Tab"
+BACKSPACE = "BackSpace"
+SPACE = " "
+UP = "Up"
+DOWN = "Down"
+LEFT = "Left"
+RIGHT = "Right"
+CAPSLOCK = "Caps_Lock"
+LMB = "LMB"
+MMB = "MMB"
+RMB = "RMB"
+
+
+def _vertices(v):
+    arr = to_numpy(v).astype(np.float64)
+    return arr.reshape(-1, arr.shape[-1])[:, :2]
+
+
+def _indices(indices, arity):
+    if indices is None:
+        return None
+    return to_numpy(indices).astype(np.int64).reshape(-1, arity)
+
+
+def _vertex_colors(per_vertex_color):
+    arr = to_numpy(per_vertex_color).astype(np.float64)
+    return arr.reshape(-1, arr.shape[-1])[:, :3]
+
+
+class Canvas:
+    """The 2D canvas of a :class:`Window` (``window.get_canvas()``)."""
+
+    def __init__(self, image_canvas: ImageCanvas):
+        self._canvas = image_canvas
+        self._background = (0.0, 0.0, 0.0)
+
+    def set_background_color(self, color):
+        """Set the clear colour (float RGB) and fill the canvas with it."""
+        self._background = tuple(float(c) for c in color[:3])
+        self._canvas.clear(self._background)
+
+    def set_image(self, img):
+        """Draw an image (W, H[, C]) stretched over the whole canvas."""
+        arr = cook_image(img)
+        if arr.shape[:2] != self._canvas.res:
+            arr = imresize(arr, *self._canvas.res)
+        self._canvas.img[...] = arr
+
+    def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None):
+        """Circles at ``centers`` with ``radius`` a fraction of the window height."""
+        pos = _vertices(centers)
+        colors = _vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color)
+        self._canvas.circles(pos, float(radius) * self._canvas.res[1], colors)
+
+    def lines(self, vertices, width, indices=None, color=(0.5, 0.5, 0.5), per_vertex_color=None):
+        """Segments between vertex pairs (or index pairs); ``width`` a fraction of the height."""
+        v = _vertices(vertices)
+        idx = _indices(indices, 2)
+        if idx is None:
+            idx = np.arange(len(v) - len(v) % 2).reshape(-1, 2)
+        vc = None
+        if per_vertex_color is not None:
+            vc = _vertex_colors(per_vertex_color)[idx]
+        half = 0.5 * float(width) * self._canvas.res[1]
+        self._canvas.lines(v[idx[:, 0]], v[idx[:, 1]], half, _rgb(color), vertex_colors=vc)
+
+    def triangles(self, vertices, color=(0.5, 0.5, 0.5), indices=None, per_vertex_color=None):
+        """Filled triangles from vertex triples (or index triples)."""
+        v = _vertices(vertices)
+        idx = _indices(indices, 3)
+        if idx is None:
+            idx = np.arange(len(v) - len(v) % 3).reshape(-1, 3)
+        vc = None
+        if per_vertex_color is not None:
+            vc = _vertex_colors(per_vertex_color)[idx]
+        self._canvas.triangles(v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]], _rgb(color), vertex_colors=vc)
+
+    def scene(self, scene):
+        raise NotImplementedError("3D scenes are not supported by simgrad's software canvas")
+
+
+def _rgb(color):
+    return np.asarray(color, dtype=np.float64).reshape(-1)[:3]
+
+
+class Gui:
+    """Headless stand-in for ``window.get_gui()``: widgets return their current values."""
+
+    def sub_window(self, name, x, y, width, height):
+        return contextlib.nullcontext(self)
+
+    def begin(self, name, x, y, width, height):
+        return True
+
+    def end(self):
+        pass
+
+    def text(self, text, color=None):
+        pass
+
+    def checkbox(self, text, old_value):
+        return old_value
+
+    def slider_int(self, text, old_value, minimum, maximum):
+        return old_value
+
+    def slider_float(self, text, old_value, minimum, maximum):
+        return old_value
+
+    def color_edit_3(self, text, old_value):
+        return old_value
+
+    def button(self, text):
+        return False
+
+
+class Window:
+    """``ti.ui.Window(name, res, vsync=False, show_window=True)``; headless without a display."""
+
+    def __init__(self, name, res, vsync=False, show_window=True, fps_limit=1000, pos=(100, 100)):
+        self.name = name
+        self.res = (int(res[0]), int(res[1]))
+        self._image = ImageCanvas(self.res)
+        self._canvas = Canvas(self._image)
+        self._gui = Gui()
+        self._running = True
+        self._window = _tk.open_window(name, self.res) if show_window else None
+        self.event = None
+        self.frame = 0
+
+    @property
+    def running(self):
+        """False once closed (window closed, ``destroy()``, or ``running = False``)."""
+        return self._running and not (self._window is not None and self._window.closed)
+
+    @running.setter
+    def running(self, value):
+        self._running = bool(value)
+
+    def get_canvas(self):
+        return self._canvas
+
+    def get_gui(self):
+        return self._gui
+
+    GUI = property(get_gui)
+
+    def get_window_shape(self):
+        return self.res
+
+    def show(self):
+        """Present the frame, then start the next one from the background colour."""
+        if self._window is not None:
+            self._window.update(self._image.to_uint8())
+        self.frame += 1
+        self._image.clear(self._canvas._background)
+
+    def save_image(self, filename):
+        """Write the current frame (call before ``show()``) to an image file."""
+        self._image.save(filename)
+
+    write_image = save_image
+
+    def get_image_buffer_as_numpy(self):
+        """The current frame as float32 RGBA of shape (W, H, 4)."""
+        rgba = np.ones(self.res + (4,), np.float32)
+        rgba[..., :3] = self._image.img
+        return rgba
+
+    def _take_events(self, tag, limit=None):
+        """Pop waiting key/mouse events of type ``tag`` (all types if None), keeping the others."""
+        if self._window is None:
+            return []
+        self._window.poll()
+        taken, kept = [], []
+        while self._window.events:
+            kind, key, pos, delta = item = self._window.events.popleft()
+            if kind == _tk.MOTION:
+                continue
+            if (tag is None or tag == kind) and (limit is None or len(taken) < limit):
+                taken.append(_Event(kind, key))
+            else:
+                kept.append(item)
+        self._window.events.extend(kept)
+        return taken
+
+    def get_events(self, tag=None):
+        """The list of waiting key/mouse events (optionally only PRESS or RELEASE); empty headless."""
+        return self._take_events(tag)
+
+    def get_event(self, tag=None):
+        """Whether an event (matching ``tag``) is waiting; it becomes ``window.event``."""
+        events = self._take_events(tag, limit=1)
+        if events:
+            self.event = events[0]
+        return bool(events)
+
+    def is_pressed(self, *keys):
+        """Whether any of ``keys`` is held; always False headless."""
+        held = set() if self._window is None else self._window.pressed
+        return any(k in held or k + "_L" in held or k + "_R" in held for k in keys)
+
+    def get_cursor_pos(self):
+        """Cursor position in [0, 1]^2 with y up; the centre when headless."""
+        return (0.5, 0.5) if self._window is None else tuple(self._window.cursor)
+
+    def destroy(self):
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+        self._running = False
+
+
+class _Event:
+    def __init__(self, kind, key):
+        self.type = kind
+        self.key = key
+
+    def __repr__(self):
+        return f"Event(type={self.type!r}, key={self.key!r})"
