@@ -1,9 +1,18 @@
 """A native CPU thread pool: workers park in native code, so a parallel loop costs no GIL and no Python.
 
 The pool is a small LLVM module (IR text below) compiled through the process JIT. Its globals hold the
-one current job; workers spin briefly on a generation counter and then sleep on it with a futex.
-Compiled kernels call `simgrad_parallel_for` through a function pointer (`ThreadPool.parallel_for_address`).
-Because the job lives in globals there is exactly one pool per process.
+one current job, so there is exactly one pool per process. Compiled kernels call
+`simgrad_parallel_for(task, closure, begin, end, grain)` through a function pointer
+(`ThreadPool.parallel_for_address`); it runs `task(closure, lo, hi, tid)` over chunks of [begin, end),
+tid 0 being the calling thread.
+
+Workers spin briefly on a generation counter, then sleep on it with a futex. A worker *joins* a job
+through a state word (closed bit + count of workers inside); once the caller has run out of chunks it
+closes the job and waits only for the workers inside it. So a worker that is slow to wake never delays
+the caller, yet no worker can still be inside a job when the next one is published.
+
+A launch that finds the pool busy (another Python thread, or a parallel_for nested in a task) runs
+inline on its calling thread with tid 0.
 """
 
 from __future__ import annotations
@@ -309,8 +318,9 @@ define void @simgrad_pool_set_spin_ns(i64 %ns) {{
 """
 
 
-_PARALLEL_FOR_T = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64,
-                                   ctypes.c_int64)
+_PARALLEL_FOR_T = ctypes.CFUNCTYPE(
+    None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64
+)
 
 
 class _Native:
@@ -322,7 +332,9 @@ class _Native:
         addrs = get_jit().load(pool_ir(_FUTEX_NR.get(machine, -1), machine), _SYMBOLS)
         self.parallel_for_address = addrs["simgrad_parallel_for"]
         self.parallel_for = _PARALLEL_FOR_T(self.parallel_for_address)
-        self.worker_loop = ctypes.CFUNCTYPE(None, ctypes.c_int32, ctypes.c_int32)(addrs["simgrad_worker_loop"])
+        self.worker_loop = ctypes.CFUNCTYPE(None, ctypes.c_int32, ctypes.c_int32)(
+            addrs["simgrad_worker_loop"]
+        )
         self.start = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_int32)(addrs["simgrad_pool_start"])
         self.shutdown = ctypes.CFUNCTYPE(None)(addrs["simgrad_pool_shutdown"])
         self.reset = ctypes.CFUNCTYPE(None)(addrs["simgrad_pool_reset"])
@@ -366,8 +378,9 @@ class ThreadPool:
             gen = native.start(n)  # workers start from this generation, so none can miss the first job
             try:
                 for tid in range(1, n):
-                    t = threading.Thread(target=native.worker_loop, args=(tid, gen), daemon=True,
-                                         name=f"simgrad-worker-{tid}")
+                    t = threading.Thread(
+                        target=native.worker_loop, args=(tid, gen), daemon=True, name=f"simgrad-worker-{tid}"
+                    )
                     t.start()
                     self._threads.append(t)
             except BaseException:
