@@ -2,11 +2,10 @@
 
 The canvas stores float RGB of shape (W, H, 3) in Taichi's convention: the first axis is x (left to
 right), the second is y going *up*, and drawing coordinates are normalised so (0, 0) is the
-bottom-left corner and (1, 1) the top-right.  Primitives are rasterised the way Taichi's C++ canvas
-does it (same coverage formulas, same blend order), but vectorised: every primitive becomes a
-bounding box of pixel samples, a shading function gives each sample a coverage and a colour, and
-samples are blended in primitive order so overlapping shapes composite exactly as they would when
-drawn one after another.
+bottom-left corner and (1, 1) the top-right.  Primitives use the coverage rules of Taichi's C++
+canvas (circles measure from integer pixel coordinates, lines and triangles from pixel centres)
+so pictures match Taichi's; the vectorised sampling and order-exact blending live in
+:mod:`.raster`.
 """
 
 from __future__ import annotations
@@ -17,12 +16,11 @@ import os
 
 import numpy as np
 
+from . import raster
 from .colors import as_rgb
 
 __all__ = ["ImageCanvas", "cook_image", "to_numpy"]
 
-# Pixel samples per compositing pass: bounds memory whatever is drawn.
-_CHUNK = 1 << 22
 # Long segments are split into pieces of at least this many pixels so their bounding boxes stay tight.
 _PIECE = 8.0
 
@@ -85,46 +83,6 @@ def _per_item(value, n, name) -> np.ndarray:
     return arr
 
 
-def _box_samples(owner, x0, y0, x1, y1):
-    """Every integer pixel of each inclusive box, as (owner, i, j) arrays in box order."""
-    h = y1 - y0 + 1
-    count = (x1 - x0 + 1) * h
-    box = np.repeat(np.arange(count.size), count)
-    di, dj = np.divmod(np.arange(box.size) - (np.cumsum(count) - count)[box], h[box])
-    return owner[box], x0[box] + di, y0[box] + dj
-
-
-def _boxes(ok, lo, hi):
-    """Pixel boxes (lo, hi) of shape (n, 2) with invalid primitives made empty."""
-    lo = np.where(ok[:, None], lo, 0.0)
-    return lo, np.where(ok[:, None], hi, -1.0)
-
-
-def _groups(sorted_keys):
-    """(starts, inclusive ends, group id per element) of runs of equal values in a sorted array."""
-    first = np.ones(sorted_keys.size, dtype=bool)
-    first[1:] = sorted_keys[1:] != sorted_keys[:-1]
-    starts = np.flatnonzero(first)
-    ends = np.append(starts[1:], sorted_keys.size) - 1
-    return starts, ends, np.cumsum(first) - 1
-
-
-def _clip_params(A, D, pad, res):
-    """Parameter range [ta, tb] of segments A + t D (t in [0, 1]) inside the padded canvas."""
-    ta = np.zeros(len(A))
-    tb = np.ones(len(A))
-    for axis in range(2):
-        lo, hi, a, d = -pad, res[axis] + pad, A[:, axis], D[:, axis]
-        moving = d != 0
-        safe = np.where(moving, d, 1.0)
-        t_lo, t_hi = (lo - a) / safe, (hi - a) / safe
-        ta = np.where(moving, np.maximum(ta, np.minimum(t_lo, t_hi)), ta)
-        tb = np.where(moving, np.minimum(tb, np.maximum(t_lo, t_hi)), tb)
-        outside = ~moving & ((a < lo) | (a > hi))
-        tb = np.where(outside, -1.0, tb)
-    return ta, tb
-
-
 class ImageCanvas:
     """RGB float image of shape (W, H, 3) with anti-aliased, Taichi-compatible drawing primitives.
 
@@ -157,7 +115,7 @@ class ImageCanvas:
 
     def to_uint8(self) -> np.ndarray:
         """The canvas as uint8 RGB of shape (W, H, 3), rounded like ``ti.tools.imwrite``."""
-        return (np.clip(self.img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+        return (np.clip(np.nan_to_num(self.img), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
     def to_pil(self):
         """The canvas as a Pillow image (rows top to bottom, as image files store them)."""
@@ -184,13 +142,13 @@ class ImageCanvas:
         r = _per_item(radius, n, "radius")
         rgb = as_rgb(color, n)
         ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
-        lo, hi = _boxes(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
+        lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
 
         def shade(o, i, j):
             dist = np.hypot(c[o, 0] - i, c[o, 1] - j)
-            return np.clip(r[o] - dist, 0.0, 1.0), rgb[o]
+            return np.clip(r[o] - dist, 0.0, 1.0), (rgb, o)
 
-        self._rasterize(np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
+        self._draw(np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
 
     def lines(self, begin, end, radius=1.0, color=0xFFFFFF, vertex_colors=None):
         """Segments with round caps; ``radius`` is the half-width in pixels (scalar or (n,)).
@@ -211,7 +169,9 @@ class ImageCanvas:
         L2 = (D**2).sum(axis=1)
         ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
         pad = np.where(ok, r + 1.0, 0.0)
-        ta, tb = _clip_params(np.where(ok[:, None], A, 0.0), np.where(ok[:, None], D, 0.0), pad, self.res)
+        ta, tb = raster.clip_segments(
+            np.where(ok[:, None], A, 0.0), np.where(ok[:, None], D, 0.0), pad, self.res
+        )
         ok &= tb >= ta
         visible = np.where(ok, (tb - ta) * np.sqrt(L2), 0.0)
         piece_len = np.maximum(_PIECE, 2.0 * pad)
@@ -237,21 +197,19 @@ class ImageCanvas:
             p = pieces[o]
             alpha[np.minimum((t * p).astype(np.int64), p - 1) != k[b]] = 0.0
             if vertex_colors is None:
-                return alpha, rgb[o]
+                return alpha, (rgb, o)
             t = (ta[o] + t * span_all[o])[:, None]
             return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
 
-        self._rasterize(
-            owner, np.floor(lo[:, 0]), np.floor(lo[:, 1]), np.ceil(hi[:, 0]), np.ceil(hi[:, 1]), shade
-        )
+        self._draw(owner, np.floor(lo[:, 0]), np.floor(lo[:, 1]), np.ceil(hi[:, 0]), np.ceil(hi[:, 1]), shade)
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
 
         By default a pixel is covered when its centre is inside (edges included), exactly like
-        Taichi, which keeps meshes of adjacent triangles free of seams.  ``antialias=True`` uses
-        edge-distance coverage instead.  ``vertex_colors`` (n, 3, 3) float RGB is interpolated
-        barycentrically.
+        Taichi, which keeps meshes of adjacent triangles free of seams; zero-area triangles draw
+        nothing.  ``antialias=True`` uses edge-distance coverage instead.  ``vertex_colors``
+        (n, 3, 3) float RGB is interpolated barycentrically.
         """
         P = np.stack([_points(a), _points(b), _points(c)], axis=1) * self._scale
         n = len(P)
@@ -259,38 +217,35 @@ class ImageCanvas:
             vc = np.asarray(vertex_colors, dtype=np.float64).reshape(n, 3, 3)
         else:
             rgb = as_rgb(color, n)
-        area2 = (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1]) - (P[:, 1, 1] - P[:, 0, 1]) * (
-            P[:, 2, 0] - P[:, 0, 0]
-        )
+        area2 = raster.triangle_area2(P)
         ok = np.isfinite(P).all(axis=(1, 2))
         if antialias:
             ok &= area2 != 0
-            lo, hi = _boxes(ok, np.floor(P.min(axis=1) - 1), np.ceil(P.max(axis=1) + 1))
-        else:  # Taichi's range: floor(min) <= i < ceil(max)
-            lo, hi = _boxes(ok, np.floor(P.min(axis=1)), np.ceil(P.max(axis=1)) - 1)
+            lo, hi = raster.empty_invalid(ok, np.floor(P.min(axis=1) - 1), np.ceil(P.max(axis=1) + 1))
+            owner, x0, y0, x1, y1 = np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]
+        else:
+            owner, x0, y0, x1 = raster.triangle_spans(P, ok, self.res)
+            y1 = y0
 
-        def shade(o, i, j):
-            px, py = i + 0.5, j + 0.5
-            e = []  # Taichi's edge functions cross(p - u, v - u) for edges ab, bc, ca
-            for u, v in ((0, 1), (1, 2), (2, 0)):
-                U, V = P[o, u], P[o, v]
-                e.append((px - U[:, 0]) * (V[:, 1] - U[:, 1]) - (py - U[:, 1]) * (V[:, 0] - U[:, 0]))
+        def shade(b, i, j):
+            o = owner[b]
+            if antialias or vertex_colors is not None:
+                e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
             if antialias:
                 s = -np.sign(area2[o])
                 dists = [s * e[k] / np.hypot(*(P[o, (k + 1) % 3] - P[o, k]).T) for k in range(3)]
                 alpha = np.clip(0.5 + np.minimum(np.minimum(dists[0], dists[1]), dists[2]), 0.0, 1.0)
-            else:
-                inside = [ek <= 0 for ek in e]
-                alpha = ((inside[0] == inside[1]) & (inside[0] == inside[2])).astype(np.float64)
+            else:  # spans hold exactly the covered pixels
+                alpha = np.ones(o.size)
             if vertex_colors is None:
-                return alpha, rgb[o]
+                return alpha, (rgb, o)
             # Barycentric weight of a vertex is the edge function of the opposite edge over -area2.
-            w = np.stack([e[1], e[2], e[0]], axis=1) / np.where(area2[o] != 0, -area2[o], 1.0)[:, None]
+            w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
             w = np.clip(w, 0.0, 1.0)
             w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
             return alpha, np.einsum("sk,skc->sc", w, vc[o])
 
-        self._rasterize(np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
+        self._draw(owner, x0, y0, x1, y1, shade)
 
     def rect(self, topleft, bottomright, radius=1.0, color=0xFFFFFF):
         """Rectangle outline: the four sides drawn as segments, as Taichi does."""
@@ -331,75 +286,13 @@ class ImageCanvas:
         j = int(round(p[1])) - 1 - rows
         inside = (i >= 0) & (i < self.res[0]) & (j >= 0) & (j < self.res[1])
         rgb = np.broadcast_to(as_rgb(color), (int(inside.sum()), 3))
-        self._composite(i[inside], j[inside], m[rows, cols][inside], rgb)
+        raster.composite(self._pixels(), i[inside], j[inside], m[rows, cols][inside], rgb)
 
-    # -- rasterisation core -----------------------------------------------------------------
-    def _rasterize(self, owner, x0, y0, x1, y1, shade):
-        """Shade and blend the pixels of boxes; ``owner`` (ascending) maps boxes to primitives.
+    # -- rasterisation ----------------------------------------------------------------------
+    def _pixels(self):
+        if not self.img.flags.c_contiguous or self.img.dtype != np.float32:
+            self.img = np.ascontiguousarray(self.img, dtype=np.float32)
+        return self.img
 
-        ``shade(b, i, j)`` returns (alpha, rgb) for samples of box ``b``.  A primitive may own
-        several boxes (pieces of a long segment); its shader must give each pixel to one box only.
-        """
-        W, H = self.res
-        x0 = np.clip(x0, 0, W).astype(np.int64)
-        y0 = np.clip(y0, 0, H).astype(np.int64)
-        x1 = np.clip(x1, -1, W - 1).astype(np.int64)
-        y1 = np.clip(y1, -1, H - 1).astype(np.int64)
-        area = np.maximum(x1 - x0 + 1, 0) * np.maximum(y1 - y0 + 1, 0)
-        box = np.flatnonzero(area > 0)
-        owner, x0, y0, x1, y1 = (np.asarray(v, np.int64)[box] for v in (owner, x0, y0, x1, y1))
-        csum = np.cumsum(area[box])
-        begin = 0
-        while begin < box.size:
-            base = csum[begin - 1] if begin else 0
-            end = max(int(np.searchsorted(csum, base + _CHUNK, side="right")), begin + 1)
-            # Keep each primitive in one pass so passes composite in primitive order.
-            end = int(np.searchsorted(owner, owner[end - 1], side="right"))
-            sl = slice(begin, end)
-            b, i, j = _box_samples(box[sl], x0[sl], y0[sl], x1[sl], y1[sl])
-            alpha, rgb = shade(b, i, j)
-            self._composite(i, j, alpha, rgb)
-            begin = end
-
-    def _composite(self, i, j, alpha, rgb):
-        """Blend samples (given in drawing order) with Taichi's ``dest = lerp(alpha, dest, color)``.
-
-        Samples hidden by a later opaque sample on the same pixel are dropped first.  Blending the
-        remaining samples 1..m of a pixel one after another gives
-        ``dest * prod(1 - a_k) + sum_k a_k c_k prod_{l > k} (1 - a_l)``; after a stable sort by pixel
-        the products are evaluated as sums of logs, so overlapping primitives composite exactly as
-        sequential draws would, without a Python loop.
-        """
-        alpha = np.asarray(alpha, dtype=np.float64)
-        hit = alpha > 0
-        if not hit.any():
-            return
-        if not self.img.flags.c_contiguous:
-            self.img = np.ascontiguousarray(self.img)
-        flat = self.img.reshape(-1, 3)
-        pix = np.asarray(i, np.int64)[hit] * self.res[1] + np.asarray(j, np.int64)[hit]
-        alpha = np.minimum(alpha[hit], 1.0)
-        rgb = np.broadcast_to(rgb, (hit.size, 3))[hit]
-        opaque = alpha >= 1.0
-        if opaque.any():
-            seq = np.arange(pix.size, dtype=np.int32)
-            last_opaque = np.full(flat.shape[0], -1, dtype=np.int32)
-            np.maximum.at(last_opaque, pix[opaque], seq[opaque])
-            keep = seq >= last_opaque[pix]
-            pix, alpha, rgb = pix[keep], alpha[keep], rgb[keep]
-            if opaque.all():  # one sample per pixel is left: the last one drawn
-                flat[pix] = rgb
-                return
-        order = np.argsort(pix, kind="stable")
-        pix, alpha, rgb = pix[order], alpha[order], rgb[order]
-        # Within each pixel's run, an opaque sample can only be the first one.
-        starts, ends, group = _groups(pix)
-        log_t = np.zeros(pix.size)
-        translucent = alpha < 1.0
-        log_t[translucent] = np.maximum(np.log1p(-alpha[translucent]), -80.0)
-        csum = np.cumsum(log_t)
-        weight = alpha * np.exp(csum[ends][group] - csum)
-        dest_weight = np.where(alpha[starts] >= 1.0, 0.0, np.exp(csum[ends] - csum[starts] + log_t[starts]))
-        target = pix[starts]
-        added = np.stack([np.bincount(group, weight * rgb[:, c], minlength=starts.size) for c in range(3)], 1)
-        flat[target] = flat[target] * dest_weight[:, None] + added
+    def _draw(self, owner, x0, y0, x1, y1, shade):
+        raster.rasterize(self._pixels(), owner, x0, y0, x1, y1, shade)

@@ -23,7 +23,7 @@ _MODES = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}
 def _to_uint8(img) -> np.ndarray:
     arr = to_numpy(img)
     if arr.dtype.kind == "f":
-        return (np.clip(arr, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+        return (np.clip(np.nan_to_num(arr), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     if arr.dtype == np.uint8:
         return arr
     if arr.dtype.kind in "ui":

@@ -1,0 +1,110 @@
+"""set_image / imwrite / imread orientation and VideoManager output."""
+
+import importlib.util
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+import simgrad.gui as tg
+
+
+class FakeField:
+    """Duck-typed stand-in for a Taichi field."""
+
+    def __init__(self, arr):
+        self.arr = arr
+
+    def to_numpy(self):
+        return self.arr.copy()
+
+
+def gradient(w, h):
+    x, y = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h), indexing="ij")
+    return np.stack([x, y, np.full_like(x, 0.25)], axis=-1)
+
+
+def test_set_image_gradient_roundtrips_through_png(tmp_path, read_rows):
+    w, h = 40, 30
+    img = gradient(w, h)
+    gui = tg.GUI(res=(w, h), show_gui=False)
+    gui.set_image(img)
+    path = tmp_path / "grad.png"
+    gui.show(str(path))
+    rows = read_rows(path)
+    assert rows.shape == (h, w, 3)
+    expected = np.round(img * 255) / 255  # img[x, y] is PNG row h - 1 - y, column x
+    np.testing.assert_allclose(rows, expected.transpose(1, 0, 2)[::-1], atol=1e-9)
+    assert rows[0, -1, 0] == 1.0 and rows[0, -1, 1] == 1.0  # top-right is x = 1, y = 1
+    assert rows[-1, 0, :2].sum() == 0  # bottom-left is the origin
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda g: g[..., 0],  # greyscale (W, H)
+        lambda g: (g * 255).astype(np.uint8),  # uint8 RGB
+        lambda g: np.concatenate([g, np.ones(g.shape[:2] + (1,))], axis=-1).astype(np.float32),  # RGBA
+        lambda g: FakeField(g.astype(np.float32)),  # anything with to_numpy()
+    ],
+)
+def test_set_image_accepts_taichi_image_kinds(make):
+    g = gradient(12, 10)
+    gui = tg.GUI(res=(12, 10), show_gui=False)
+    gui.set_image(make(g))
+    out = gui.get_image()
+    assert out.shape == (12, 10, 4)
+    assert out[11, 9, 0] == pytest.approx(1.0, abs=1 / 255)
+    assert out[0, 0, 0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_set_image_rejects_wrong_resolution():
+    gui = tg.GUI(res=(12, 10), show_gui=False)
+    with pytest.raises(ValueError, match="resolution"):
+        gui.set_image(np.zeros((10, 12, 3)))
+
+
+def test_imwrite_imread_roundtrip_keeps_layout(tmp_path):
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (17, 11, 3), dtype=np.uint8)
+    tg.imwrite(img, str(tmp_path / "a.png"))
+    back = tg.imread(str(tmp_path / "a.png"))
+    assert back.shape == (17, 11, 3) and back.dtype == np.uint8
+    np.testing.assert_array_equal(back, img)
+    grey = tg.imread(str(tmp_path / "a.png"), channels=1)
+    assert grey.shape == (17, 11, 1)
+    tg.imwrite(FakeField(img[..., 0] / 255.0), str(tmp_path / "g.png"))
+    np.testing.assert_array_equal(tg.imread(str(tmp_path / "g.png"))[..., 0], img[..., 0])
+
+
+def test_imresize_nearest():
+    img = np.arange(12).reshape(4, 3)
+    out = tg.imresize(img, 8, 6)
+    assert out.shape == (8, 6)
+    assert out[0, 0] == img[0, 0] and out[7, 5] == img[3, 2]
+
+
+def test_video_manager_writes_gif_with_all_frames(tmp_path):
+    w, h, n = 24, 16, 5
+    vm = tg.VideoManager(str(tmp_path), video_filename="clip", framerate=10, automatic_build=False)
+    frames = [np.full((w, h, 3), k / (n - 1)) for k in range(n)]
+    vm.write_frames(frames)
+    assert vm.frame_counter == n
+    vm.make_video(mp4=False, gif=True)
+    gif = tmp_path / "clip.gif"
+    assert gif.exists()
+    data = iio.imread(gif, index=None)
+    assert data.shape[0] == n
+    assert data.shape[1:3] == (h, w)
+    assert data[0].mean() < 5 and data[-1][..., :3].mean() > 250
+
+
+def test_video_manager_automatic_build_and_mp4_fallback(tmp_path):
+    vm = tg.VideoManager(str(tmp_path), framerate=24)
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        with pytest.warns(UserWarning, match="MP4"):
+            vm.write_frames([np.random.default_rng(k).random((8, 8, 3)) for k in range(4)])
+    else:
+        vm.write_frames([np.random.default_rng(k).random((8, 8, 3)) for k in range(4)])
+    assert (tmp_path / "video.gif").exists()  # built at the 4-frame checkpoint
+    assert vm.next_video_checkpoint == 8
