@@ -95,7 +95,7 @@ def __getattr__(name):
             return _gui
         return getattr(_gui, name)
     if name in ("ad", "Tape", "clear_all_gradients", "no_grad", "grad_replaced", "grad_for"):
-        from simgrad import autodiff as _ad
+        from simgrad.autodiff import api as _ad
 
-        return getattr(_ad.api, name) if name != "ad" else _ad.api
+        return _ad if name == "ad" else getattr(_ad, name)
     raise AttributeError(f"module 'simgrad' has no attribute '{name}'")

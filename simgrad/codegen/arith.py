@@ -49,6 +49,24 @@ def _safe_divisor(f, b: str, ty: str) -> str:
     return r
 
 
+def _safe_signed_divisor(f, b: str, ty: str) -> tuple[str, str]:
+    """Signed division also traps on INT_MIN / -1: divide by 1 instead and negate the quotient (wraps,
+    as the C result would); the remainder by 1 is the correct 0. Returns (divisor, is_minus_one)."""
+    m1, z, bad, r = f.tmp("m1"), f.tmp("z"), f.tmp("bad"), f.tmp("d")
+    f.emit(f"{m1} = icmp eq {ty} {b}, -1")
+    f.emit(f"{z} = icmp eq {ty} {b}, 0")
+    f.emit(f"{bad} = or i1 {m1}, {z}")
+    f.emit(f"{r} = select i1 {bad}, {ty} 1, {ty} {b}")
+    return r, m1
+
+
+def _negate_if(f, q: str, cond: str, ty: str) -> str:
+    n, r = f.tmp("n"), f.tmp("v")
+    f.emit(f"{n} = sub {ty} 0, {q}")
+    f.emit(f"{r} = select i1 {cond}, {ty} {n}, {ty} {q}")
+    return r
+
+
 def lower_binary(f, s) -> str:
     a, b = s.operands
     t = a.type
@@ -84,13 +102,14 @@ def lower_binary(f, s) -> str:
     if op in (Op.MIN, Op.MAX):
         name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")
         return _intrinsic(f, name, t, [x, y])
-    d = _safe_divisor(f, y, ty)
     if not t.is_signed:
+        d = _safe_divisor(f, y, ty)
         f.emit(f"{r} = {'udiv' if op in (Op.FLOORDIV, Op.RAW_DIV) else 'urem'} {ty} {x}, {d}")
         return r
+    d, minus_one = _safe_signed_divisor(f, y, ty)
     if op is Op.RAW_DIV:
         f.emit(f"{r} = sdiv {ty} {x}, {d}")
-        return r
+        return _negate_if(f, r, minus_one, ty)
     if op is Op.RAW_MOD:
         f.emit(f"{r} = srem {ty} {x}, {d}")
         return r
@@ -108,6 +127,7 @@ def lower_binary(f, s) -> str:
         adj = f.tmp()
         f.emit(f"{adj} = sext i1 {fix} to {ty}")
         f.emit(f"{r} = add {ty} {q}, {adj}")
+        return _negate_if(f, r, minus_one, ty)
     elif op is Op.MOD:
         add = f.tmp()
         f.emit(f"{add} = select i1 {fix}, {ty} {d}, {ty} 0")

@@ -4,7 +4,8 @@ A kernel becomes one entry function `void entry(ptr ctx)`. Each top-level parall
 into a task function `void task(ptr closure, i64 lo, i64 hi, i32 tid)` that the runtime's
 parallel_for splits across threads; the closure carries every value the loop body uses from outside.
 
-Context layout (8-byte slots): 0 roots table, 1 error buffer, 2 RNG states, 3 parallel_for, 4.. args.
+Context layout (8-byte slots): 0 roots table, 1 error buffer, 2 RNG states, 3 parallel_for,
+4 tape of the tasks, 5 tape capacity per thread (entries), 6 tape of the serial part, 7.. arguments.
 """
 
 from __future__ import annotations
@@ -17,18 +18,8 @@ from simgrad import dtypes as dt
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 
-CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_ARGS = 0, 1, 2, 3, 4
+CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, CTX_ARGS = range(8)
 
-_INT_BIN = {Op.ADD: "add", Op.SUB: "sub", Op.MUL: "mul", Op.BIT_AND: "and", Op.BIT_OR: "or",
-            Op.BIT_XOR: "xor", Op.SHL: "shl"}
-_FLT_BIN = {Op.ADD: "fadd", Op.SUB: "fsub", Op.MUL: "fmul", Op.DIV: "fdiv"}
-_ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op.NE: "ne"}
-_UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
-_FCMP = {Op.LT: "olt", Op.LE: "ole", Op.GT: "ogt", Op.GE: "oge", Op.EQ: "oeq", Op.NE: "une"}
-_INTRINSIC1 = {Op.SQRT: "sqrt", Op.SIN: "sin", Op.COS: "cos", Op.EXP: "exp", Op.LOG: "log",
-               Op.FLOOR: "floor", Op.CEIL: "ceil", Op.ROUND: "round", Op.TAN: "tan", Op.ASIN: "asin",
-               Op.ACOS: "acos", Op.TANH: "tanh"}
-_LIBM2 = {Op.ATAN2: "atan2"}
 
 
 def llvm_type(t: dt.DataType) -> str:
@@ -172,6 +163,22 @@ class FunctionText:
         if key not in self.array_shapes:
             self.array_shapes[key] = self.ctx_slot(CTX_ARGS + arg.slot + 1 + dim, "i64")
         return self.array_shapes[key]
+
+    def tape(self) -> tuple[str, str, str]:
+        """(base, top variable, capacity) of this function's tape, set up in the prologue on first use."""
+        if not hasattr(self, "_tape"):
+            cap = self.ctx_slot(CTX_TAPE_CAP, "i64")
+            if self.in_task:
+                all_ = self.ctx_slot(CTX_TAPE, "ptr")
+                t64, off, base = self.tmp("tt"), self.tmp("toff"), self.tmp("tbase")
+                self.prologue += [f"  {t64} = zext i32 %tid to i64", f"  {off} = mul i64 {t64}, {cap}",
+                                  f"  {base} = getelementptr i64, ptr {all_}, i64 {off}"]
+            else:
+                base = self.ctx_slot(CTX_TAPE_SERIAL, "ptr")
+            top = self.tmp("ttop")
+            self.prologue += [f"  {top} = alloca i64", f"  store i64 0, ptr {top}"]
+            self._tape = (base, top, cap)
+        return self._tape
 
     def v(self, s: Stmt) -> str:
         if s.op is Op.CONST:
@@ -448,6 +455,39 @@ class KernelCodegen:
         f.start_block(good)
         if "!1 = " not in "".join(self.module.globals):
             self.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
+
+    def lower_tape_reset(self, f, s):
+        _, top, _ = f.tape()
+        f.emit(f"store i64 0, ptr {top}")
+
+    def lower_tape_push(self, f, s):
+        base, top, cap = f.tape()
+        (v,) = s.operands
+        t, ok, okz, last, idx, p, n = (f.tmp("tp") for _ in range(7))
+        f.emit(f"{t} = load i64, ptr {top}")
+        f.emit(f"{ok} = icmp ult i64 {t}, {cap}")
+        f.emit(f"{okz} = zext i1 {ok} to i32")
+        code = self.error_code("adstack", s.loc, s.attrs.get("message", "adstack overflow"))
+        self._check(f, okz, code, t)
+        f.emit(f"{last} = sub i64 {cap}, 1")
+        f.emit(f"{idx} = select i1 {ok}, i64 {t}, i64 {last}")
+        f.emit(f"{p} = getelementptr i64, ptr {base}, i64 {idx}")
+        f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}")
+        f.emit(f"{n} = add i64 {t}, 1")
+        f.emit(f"store i64 {n}, ptr {top}")
+
+    def lower_tape_pop(self, f, s):
+        base, top, cap = f.tape()
+        t, n, last, idx, p, r = (f.tmp("tq") for _ in range(6))
+        f.emit(f"{t} = load i64, ptr {top}")
+        f.emit(f"{n} = sub i64 {t}, 1")
+        f.emit(f"store i64 {n}, ptr {top}")
+        f.emit(f"{last} = sub i64 {cap}, 1")
+        f.gen.module.declare("declare i64 @llvm.umin.i64(i64, i64)")
+        f.emit(f"{idx} = call i64 @llvm.umin.i64(i64 {n}, i64 {last})")
+        f.emit(f"{p} = getelementptr i64, ptr {base}, i64 {idx}")
+        f.emit(f"{r} = load {llvm_type(s.type)}, ptr {p}")
+        f.names[s] = r
 
     def lower_random(self, f, s):
         from simgrad.codegen.arith import random_value

@@ -40,10 +40,10 @@ def lower_for(comp, node: ast.For) -> None:
         _nd_for(comp, node, it.bounds, grouped_=False)
     elif isinstance(it, grouped):
         t = it.target
-        bounds = t.bounds if isinstance(t, ndrange) else [(0, n) for n in _shape_of(comp, t, node)]
+        bounds = t.bounds if isinstance(t, ndrange) else _bounds_of(comp, t, node)
         _nd_for(comp, node, bounds, grouped_=True)
     elif isinstance(it, Field) or _is_array(it):
-        _nd_for(comp, node, [(0, n) for n in _shape_of(comp, it, node)], grouped_=False)
+        _nd_for(comp, node, _bounds_of(comp, it, node), grouped_=False)
     else:
         raise SimgradSyntaxError(
             f"cannot loop over a {type(it).__name__} at run time; wrap Python sequences in ti.static(...) "
@@ -54,6 +54,13 @@ def _is_array(v) -> bool:
     from simgrad.lang.ndarray import ArrayArg
 
     return isinstance(v, ArrayArg)
+
+
+def _bounds_of(comp, target, node):
+    """(begin, end) per axis of a struct-for: a field with an offset is visited at its offset indices."""
+    shape = _shape_of(comp, target, node)
+    offset = target._components()[0].offset if isinstance(target, Field) else None
+    return [(o, o + n) for o, n in zip(offset, shape)] if offset else [(0, n) for n in shape]
 
 
 def _shape_of(comp, target, node):

@@ -310,9 +310,9 @@ class Compiler:
                 if isinstance(cond, Expr):
                     stop = self.builder.emit(Op.IF, None, (ops.eq(cond, 0).stmt,), nblocks=2)
                     with self.builder.inside(stop.blocks[0]):
-                        self.builder.emit(Op.BREAK, None)
+                        self.builder.emit(Op.BREAK, None, attrs={"header": True})
                 elif not cond:
-                    self.builder.emit(Op.BREAK, None)
+                    self.builder.emit(Op.BREAK, None, attrs={"header": True})
                 self.visit_block(node.body)
         finally:
             self.loop_stack.pop()

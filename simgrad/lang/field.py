@@ -192,8 +192,9 @@ class ScalarField(Field):
 
 
 def _check_bounds(key, shape, name):
+    """Negative indices are out of bounds as in kernels (and with an offset they would silently alias)."""
     for k, n in zip(key, shape):
-        if not -n <= k < n if isinstance(k, int) else False:
+        if not 0 <= k < n if isinstance(k, (int, np.integer)) else False:
             raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}")
 
 

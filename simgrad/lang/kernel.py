@@ -84,7 +84,8 @@ class Kernel:
         self._keep: list = []
         self._generation = -1
         self._simple_launch = None
-        self.grad = None  # set by the autodiff layer
+        self._grad_instances: dict = {}
+        self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
 
@@ -118,24 +119,31 @@ class Kernel:
 
     def _reset(self, prog: Program) -> None:
         self._instances.clear()
+        self._grad_instances.clear()
         self._keep.clear()
         self._simple_launch = None
         self._generation = prog.generation
 
-    def _launch_for(self, args):
+    def _launch_for(self, args, grad: bool = False):
         if len(args) != self._nparams:
             names = ", ".join(p.name for p in self.params)
             raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
                                    f"got {len(args)}")
         keep: list = []
         key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
-        inst = self._instances.get(key)
+        cache = self._grad_instances if grad else self._instances
+        inst = cache.get(key)
         if inst is None:
-            inst = self.instantiate(args)
-            self._instances[key] = inst
+            if grad:
+                from simgrad.autodiff.reverse import make_adjoint
+
+                inst = self.instantiate(args, transform=make_adjoint, name_suffix="_grad")
+            else:
+                inst = self.instantiate(args)
+                if self._simple:
+                    self._simple_launch = inst.launch
+            cache[key] = inst
             self._keep.extend(keep)
-            if self._simple:
-                self._simple_launch = inst.launch
         return inst.launch
 
     def _key_part(self, p: Param, a, keep):
@@ -169,7 +177,9 @@ class Kernel:
         # the disk cache is keyed by the IR text with the symbol name made stable
         stable = text.replace(symbol, "sg_kernel")
         addr = prog.jit.load(stable, ["sg_kernel"])["sg_kernel"]
-        launcher = Launcher(self.name, slots[0], addr, slots[1], ir.returns, cg.error_table, prog)
+        launcher = Launcher(ir.name, slots[0], addr, slots[1], ir.returns, cg.error_table, prog)
+        if getattr(ir, "uses_tape", False):
+            launcher.attach_tape(prog.tape_capacity)
         launcher.ret_matrix = ret_matrix
         if ret_matrix is not None:
             inner = launcher.launch
@@ -250,6 +260,30 @@ def _torch_dtype(t):
     m = {torch.float32: dt.f32, torch.float64: dt.f64, torch.int32: dt.i32, torch.int64: dt.i64,
          torch.int8: dt.i8, torch.int16: dt.i16, torch.uint8: dt.u8, torch.float16: dt.f16}
     return m[t.dtype]
+
+
+class GradKernel:
+    """`kernel.grad(*args)`: launches the adjoint of the kernel (built once per instantiation)."""
+
+    def __init__(self, kernel: Kernel):
+        self.kernel = kernel
+        self.name = kernel.name + ".grad"
+
+    def __call__(self, *args, **kwargs):
+        k = self.kernel
+        if kwargs:
+            args = k._bind(args, kwargs)
+        prog = get_program()
+        if k._generation != prog.generation:
+            k._reset(prog)
+        launch = k._launch_for(args, grad=True)
+        if prog.config.kernel_profiler:
+            t0 = time.perf_counter()
+            launch(*args)
+            prog.profiler.add(self.name, time.perf_counter() - t0)
+            return None
+        launch(*args)
+        return None
 
 
 class Func:

@@ -1,29 +1,236 @@
-"""Small-matrix decompositions (ti.polar_decompose, ti.svd, ti.sym_eig), unrolled into scalar IR."""
+"""Small-matrix decompositions (ti.polar_decompose, ti.svd, ti.sym_eig), unrolled into scalar IR.
+
+Everything here is straight-line code: a fixed number of Jacobi sweeps, branches as `ops.select`, so the
+same code runs on Python floats (Python scope) and on kernel values, and reverse-mode autodiff can
+differentiate it entry by entry.
+
+Method (written from the textbook description of cyclic Jacobi and Givens QR):
+
+* `sym_eig`: cyclic Jacobi rotations on the (symmetrised) matrix, then a select-based sorting network.
+* `svd`: cyclic Jacobi on AᵀA gives V; the columns of B = A V are then orthogonal, and a Givens QR of B
+  (B = U R) gives U, with R diagonal up to rounding: S = diag(R). Sorting V's columns by decreasing
+  σ² first makes R's diagonal decreasing, and because U and V are products of rotations (column swaps
+  negate one column), both are rotations: the sign of det(A) ends up on the last, smallest singular
+  value, Taichi's convention for 3x3 (we use it for 2x2 too, where Taichi lets U be a reflection).
+
+Degenerate inputs (zero matrix, repeated singular values) stay finite in value *and* derivative: the
+input is first scaled by its largest entry, and every sqrt/rsqrt/division whose argument can be zero
+is guarded by a `tiny` (1e-18 in f32, 1e-60 in f64) relative to that scale: tiny enough to change no
+result above rounding level, large enough that tiny**2 is a normal number (derivatives like -a/y**2
+stay finite). Python scope computes in Python floats with the f64 constants.
+"""
 
 from __future__ import annotations
 
+from simgrad import dtypes as dt
 from simgrad.lang import ops
+from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 
+# sweeps of cyclic Jacobi for 3x3: convergence is quadratic, these leave off-diagonals below rounding
+_SWEEPS = {32: 5, 64: 6}
+_TINY = {32: 1e-18, 64: 1e-60}
+_PAIRS = {2: [(0, 1)], 3: [(0, 1), (0, 2), (1, 2)]}
 
-def polar_decompose(A, dt=None):
-    """A = U P with U a rotation and P symmetric; returns (U, P)."""
-    if A.n == 2:
-        a, b, c, d = A.entries
-        x = ops.add(a, d)
-        y = ops.sub(c, b)
-        scale = ops.rsqrt(ops.add(ops.mul(x, x), ops.mul(y, y)))
-        cs, sn = ops.mul(x, scale), ops.mul(y, scale)
-        U = Matrix([[cs, ops.neg(sn)], [sn, cs]])
-        P = U.transpose() @ A
-        return U, P
-    U, S, V = svd(A, dt)
-    return U @ V.transpose(), V @ S @ V.transpose()
+
+class _Work:
+    """The working precision: the kernel dtype (None in Python scope) and its guard constant."""
+
+    def __init__(self, A, dt_):
+        self.A = A if isinstance(A, Matrix) else Matrix(A)
+        if self.A.m != self.A.n or self.A.n not in (2, 3):
+            raise ValueError(f"expected a 2x2 or 3x3 matrix, got shape {self.A.shape}")
+        self.n = self.A.n
+        exprs = [e for e in self.A.entries if isinstance(e, Expr)]
+        if not exprs:
+            self.dtype = None
+            self.bits = 64
+            self.entries = [float(e) for e in self.A.entries]
+        else:
+            if dt_ is not None:
+                t = dt.from_any(dt_)
+            else:
+                floats = [e.dtype for e in exprs if e.dtype.is_float]
+                t = floats[0] if floats else dt.Defaults.fp
+                for f in floats[1:]:
+                    t = dt.promote(t, f)
+            t = dt.f32 if t is dt.f16 else t
+            self.dtype = t
+            self.bits = 64 if t.bits == 64 else 32
+            self.entries = [ops.cast(e, t) for e in self.A.entries]
+        self.tiny = _TINY[self.bits]
+        self.sweeps = _SWEEPS[self.bits] if self.n == 3 else 1
+
+    def rows(self, entries=None):
+        e = self.entries if entries is None else entries
+        return [[e[i * self.n + j] for j in range(self.n)] for i in range(self.n)]
+
+    def scaled(self):
+        """(A / s, s) with s the largest |entry| (floored at tiny): makes the guards scale-free and keeps
+        AᵀA clear of f32 overflow/underflow."""
+        s = ops.max(*[ops.abs(e) for e in self.entries])
+        s = ops.max(s, self.tiny)
+        inv = 1.0 / s
+        return [e * inv for e in self.entries], s
+
+    def zero(self):
+        return 0.0 if self.dtype is None else ops.cast(0.0, self.dtype)
+
+    def one(self):
+        return 1.0 if self.dtype is None else ops.cast(1.0, self.dtype)
+
+    def eye(self):
+        return [[self.one() if i == j else self.zero() for j in range(self.n)] for i in range(self.n)]
+
+
+def _rotation(app, aqq, apq, tiny):
+    """(c, s) of the Jacobi rotation that diagonalises [[app, apq], [apq, aqq]]."""
+    d = aqq - app
+    # t = tan(theta), the smaller root of t^2 + 2 t cot(2 theta) - 1 = 0, in a form with no division by
+    # apq: t = 2 apq / (d + sign(d) sqrt(d^2 + 4 apq^2)); tiny keeps sqrt off 0 when apq = d = 0 (t = 0)
+    r = ops.sqrt(d * d + 4.0 * apq * apq + tiny)
+    t = 2.0 * apq / (d + ops.select(d >= 0.0, r, -r))
+    c = ops.rsqrt(1.0 + t * t)
+    return c, t * c, t
+
+
+def _rotate_cols(M, p, q, c, s):
+    """M <- M J: columns p, q rotated."""
+    for k in range(len(M)):
+        mp, mq = M[k][p], M[k][q]
+        M[k][p] = c * mp - s * mq
+        M[k][q] = s * mp + c * mq
+
+
+def _jacobi(S, V, p, q, tiny):
+    """One two-sided Jacobi rotation in the (p, q) plane: zeroes S[p][q] (S symmetric, updated in place)
+    and accumulates V <- V J, so that the original S = V diag V^T."""
+    c, s, t = _rotation(S[p][p], S[q][q], S[p][q], tiny)
+    to = t * S[p][q]
+    S[p][p] = S[p][p] - to
+    S[q][q] = S[q][q] + to
+    S[p][q] = S[q][p] = 0.0
+    for k in range(len(S)):
+        if k != p and k != q:
+            skp, skq = S[k][p], S[k][q]
+            S[k][p] = S[p][k] = c * skp - s * skq
+            S[k][q] = S[q][k] = s * skp + c * skq
+    _rotate_cols(V, p, q, c, s)
+
+
+def _col_dot(B, i, j):
+    return sum_([B[k][i] * B[k][j] for k in range(len(B))])
+
+
+def _one_sided(w: _Work, B):
+    """One-sided (Hestenes) Jacobi: rotate B's columns (B <- B J, V <- V J) until they are orthogonal.
+    The same rotations as two-sided Jacobi on BᵀB, but recomputing the inner products from the current
+    columns keeps small singular values accurate (BᵀB itself would square the condition number)."""
+    V = w.eye()
+    for _ in range(w.sweeps):
+        for p, q in _PAIRS[w.n]:
+            c, s, _t = _rotation(_col_dot(B, p, p), _col_dot(B, q, q), _col_dot(B, p, q), w.tiny)
+            _rotate_cols(B, p, q, c, s)
+            _rotate_cols(V, p, q, c, s)
+    return V
+
+
+def _eig_sym(w: _Work, S):
+    """Jacobi eigen-decomposition of a symmetric S (lists of rows): (eigenvalues, V with columns as
+    eigenvectors), unsorted."""
+    V = w.eye()
+    for _ in range(w.sweeps):
+        for p, q in _PAIRS[w.n]:
+            _jacobi(S, V, p, q, w.tiny)
+    return [S[i][i] for i in range(w.n)], V
+
+
+def _sort(vals, V, descending: bool, keep_det: bool):
+    """Sort `vals` (with V's columns) by a fixed compare-swap network; with keep_det a swap negates one
+    column so det(V) is unchanged."""
+    n = len(vals)
+    for i, j in _PAIRS[n]:
+        a, b = vals[i], vals[j]
+        swap = ops.lt(a, b) if descending else ops.gt(a, b)
+        vals[i], vals[j] = ops.select(swap, b, a), ops.select(swap, a, b)
+        for k in range(n):
+            x, y = V[k][i], V[k][j]
+            V[k][i] = ops.select(swap, y, x)
+            V[k][j] = ops.select(swap, -x if keep_det else x, y)
+
+
+def _givens_qr(w: _Work, B):
+    """B = U R by Givens rotations (U a rotation, R upper triangular, in place in B); returns U. A pair
+    that is already ~zero is left alone (identity rotation) instead of normalising a zero vector."""
+    U = w.eye()
+    steps = [(0, 1, 0)] if w.n == 2 else [(0, 1, 0), (0, 2, 0), (1, 2, 1)]
+    for p, q, col in steps:
+        a, b = B[p][col], B[q][col]
+        r2 = a * a + b * b
+        ok = r2 > w.tiny
+        inv = ops.rsqrt(ops.max(r2, w.tiny))
+        c = ops.select(ok, a * inv, 1.0)
+        s = ops.select(ok, b * inv, 0.0)
+        for j in range(w.n):
+            bp, bq = B[p][j], B[q][j]
+            B[p][j] = c * bp + s * bq
+            B[q][j] = c * bq - s * bp
+        for k in range(w.n):
+            up, uq = U[k][p], U[k][q]
+            U[k][p] = c * up + s * uq
+            U[k][q] = c * uq - s * up
+    return U
 
 
 def svd(A, dt=None):
-    raise NotImplementedError("ti.svd is not implemented yet")
+    """A = U @ S @ V.transpose() for 2x2/3x3 A: returns (U, S, V), U and V rotations, S diagonal with
+    |S| decreasing; the last entry of S carries the sign of det(A) (Taichi's convention)."""
+    w = _Work(A, dt)
+    a, scale = w.scaled()
+    B = w.rows(a)
+    V = _one_sided(w, B)
+    norms = [_col_dot(B, i, i) for i in range(w.n)]
+    _sort(norms, V, descending=True, keep_det=True)
+    B = w.rows(a)
+    B = [[sum_([B[i][k] * V[k][j] for k in range(w.n)]) for j in range(w.n)] for i in range(w.n)]
+    U = _givens_qr(w, B)
+    S = [[B[i][i] * scale if i == j else w.zero() for j in range(w.n)] for i in range(w.n)]
+    return Matrix(U), Matrix(S), Matrix(V)
 
 
 def sym_eig(A, dt=None):
-    raise NotImplementedError("ti.sym_eig is not implemented yet")
+    """Eigen-decomposition of a symmetric 2x2/3x3 A: (eigenvalues vector, matrix with the unit
+    eigenvectors as columns). Order follows Taichi: decreasing for 2x2, increasing for 3x3. Only the
+    symmetric part of A is used."""
+    w = _Work(A, dt)
+    a, scale = w.scaled()
+    R = w.rows(a)
+    S = [[R[i][i] if i == j else 0.5 * (R[i][j] + R[j][i]) for j in range(w.n)] for i in range(w.n)]
+    lam, V = _eig_sym(w, S)
+    _sort(lam, V, descending=w.n == 2, keep_det=False)
+    return Matrix([x * scale for x in lam]), Matrix(V)
+
+
+def polar_decompose(A, dt=None):
+    """A = U @ P with U a rotation and P symmetric; returns (U, P). 2x2 in closed form (the rotation
+    closest to A), 3x3 through the SVD: U = U_svd V^T, P = V S V^T."""
+    w = _Work(A, dt)
+    if w.n == 2:
+        a, b, c, d = w.entries
+        x, y = a + d, c - b
+        r2 = x * x + y * y
+        # r2 == 0 only for A = [[p, q], [q, -p]], where every rotation is equally close: take I
+        ok = r2 > w.tiny * (a * a + b * b + c * c + d * d)
+        inv = ops.rsqrt(ops.select(ok, r2, 1.0))
+        cs, sn = ops.select(ok, x * inv, 1.0), ops.select(ok, y * inv, 0.0)
+        U = Matrix([[cs, -sn], [sn, cs]])
+        return U, U.transpose() @ Matrix(w.rows())
+    U, S, V = svd(Matrix(w.rows()), w.dtype)
+    return U @ V.transpose(), V @ S @ V.transpose()
+
+
+def sum_(xs):
+    out = xs[0]
+    for x in xs[1:]:
+        out = out + x
+    return out

@@ -329,6 +329,8 @@ def select(cond, a, b):
         return a if cond else b
     c = to_expr(cond)
     c = Expr(context.builder().binary(Op.NE, c.stmt, context.builder().const(0, c.dtype)))
+    if not isinstance(a, Expr) and not isinstance(b, Expr):  # two literals: type them like a + b
+        a = to_expr(a, dt.Defaults.fp if isinstance(b, float) else None)
     a, b = _pair(a, b)
     return Expr(context.builder().select(c.stmt, a.stmt, b.stmt))
 

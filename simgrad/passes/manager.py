@@ -24,7 +24,8 @@ def run_pipeline(kernel: Kernel, transform=None) -> None:
         ("simplify", simplify.simplify),  # constant folding, algebraic identities, CSE, DCE
     ]
     if transform is not None:
-        steps += [("transform", transform), ("verify", verify.verify), ("simplify", simplify.simplify)]
+        steps += [(getattr(transform, "__name__", "transform"), transform), ("verify", verify.verify),
+                  ("simplify", simplify.simplify)]
     steps.append(("verify", verify.verify))
     for name, fn in steps:
         if level >= 1:

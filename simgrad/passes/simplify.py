@@ -95,8 +95,13 @@ def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
                 n += 1
                 continue
             seen[k] = s
+        inner = seen
+        if s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
+            # a parallel loop becomes a task that captures outside values by value: an address must be
+            # recomputed inside it, not shared
+            inner = {k: v for k, v in seen.items() if v.op is not Op.GLOBAL_PTR}
         for b in s.blocks:
-            n += _replace_pass(b, repl, seen)
+            n += _replace_pass(b, repl, inner)
     return n
 
 

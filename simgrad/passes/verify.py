@@ -21,7 +21,7 @@ def _block(block: Block, visible: set) -> None:
     local = set(visible)
     for s in block.stmts:
         for o in s.operands:
-            if id(o) not in local:
+            if id(o) not in local and o.op is not Op.CONST:  # constants have no scope
                 raise IRVerifyError(f"internal: {s!r} uses {o!r} outside its scope", s.loc)
         if s.op in O.BINARY_ARITH or s.op in O.COMPARE:
             a, b = s.operands

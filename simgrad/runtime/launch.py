@@ -8,7 +8,7 @@ import ctypes
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.codegen.llvm import CTX_ARGS
+from simgrad.codegen.llvm import CTX_ARGS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
 from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
 
 _VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
@@ -23,11 +23,20 @@ class Launcher:
         self.error_table = error_table
         self.program = program
         self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
-        self.buf[:CTX_ARGS] = program.context_header()
+        self.buf[:4] = program.context_header()
+        self.tape = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
         self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
         self.launch = self._generate(params, returns)
+
+    def attach_tape(self, entries: int) -> None:
+        """A private tape for this adjoint kernel: one region per thread plus one for the serial part."""
+        regions = self.program.pool.num_threads + 1
+        self.tape = np.zeros(regions * entries, dtype=np.int64)
+        self.buf[CTX_TAPE] = self.tape.ctypes.data
+        self.buf[CTX_TAPE_CAP] = entries
+        self.buf[CTX_TAPE_SERIAL] = self.tape.ctypes.data + 8 * entries * (regions - 1)
 
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,

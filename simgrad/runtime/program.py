@@ -12,6 +12,9 @@ from simgrad import dtypes as dt
 from simgrad.runtime.memory import Memory
 
 
+DEFAULT_TAPE_ENTRIES = 1 << 16
+
+
 class Config:
     def __init__(self, **kw):
         self.arch = kw.get("arch")
@@ -115,8 +118,13 @@ class Program:
         return self._rng
 
     def context_header(self) -> list[int]:
+        """Slots 0-3 of every kernel context (the tape slots 4-6 belong to each launcher)."""
         return [self.memory.roots_address, self.error.ctypes.data, self.rng_states.ctypes.data,
                 self.pool.parallel_for_address]
+
+    @property
+    def tape_capacity(self) -> int:
+        return self.config.ad_stack_size or DEFAULT_TAPE_ENTRIES
 
 
 _program: Program | None = None

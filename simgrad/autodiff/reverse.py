@@ -1,0 +1,465 @@
+"""Reverse mode: the adjoint of a kernel, built as an IR-to-IR transform (source transformation).
+
+For each top-level parallel loop the adjoint is a parallel loop over the same range whose body first
+replays the forward body (without its global writes) and then walks it backwards, accumulating adjoints
+in local variables and atomically into `.grad` fields. Top-level serial statements are replayed once and
+reversed at the end, in reverse task order.
+
+Values that the backward walk needs but that live in nested blocks (inside if/for/while) are saved on a
+per-thread LIFO tape (the adstack): each statement pushes the operand values its derivative needs right
+after it runs, and the backward walk pops them in exactly the reverse order. Control decisions go on the
+same tape: if-conditions, serial loop bounds, and while-loop trip counts, so serial loops run reversed and
+while loops (which Taichi cannot differentiate) replay the recorded number of iterations.
+"""
+
+from __future__ import annotations
+
+from simgrad import dtypes as dt
+from simgrad.autodiff.rules import NEEDS_VALUES, REVERSE, ZERO_GRADIENT
+from simgrad.autodiff.structurize import structurize
+from simgrad.errors import GradientError
+from simgrad.frontend import context
+from simgrad.ir.builder import Builder
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.field import ScalarField
+
+_DROPPED = (Op.PRINT, Op.ASSERT, Op.RET_STORE)
+# statements whose own adjoint is nothing (a local's adjoint belongs to its loads and stores)
+_NO_ADJOINT = (Op.ALLOCA, Op.CONST, Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.BREAK, Op.CONTINUE, Op.TAPE_RESET,
+               Op.TAPE_PUSH, Op.TAPE_POP, Op.RANDOM) + _DROPPED
+
+
+class _Task:
+    """Where adjoint variables of one task live: declared at the top of its block, zeroed per iteration."""
+
+    def __init__(self, block: Block):
+        self.block = block
+        self.decls: list[Stmt] = []
+
+
+class _Shim:
+    """Lets lang.ops emit into our builder (they look for `context.current().builder`)."""
+
+    def __init__(self, builder):
+        self.builder = builder
+
+
+def _grad_of(target):
+    """The gradient field of a field element target, or None when it has no placed gradient."""
+    if isinstance(target, ScalarField) and target.grad is not None and target.grad.snode is not None:
+        return target.grad
+    return None
+
+
+def _is_global_ptr(s: Stmt) -> bool:
+    return s.op is Op.GLOBAL_PTR
+
+
+class Reverse:
+    def __init__(self, kernel: Kernel):
+        self.kernel = kernel
+        self.body = Block()
+        self.b = Builder(self.body)
+        self.fmap: dict[int, Stmt] = {}  # old statement -> its value in the forward replay
+        self.bmap: dict[int, Stmt] = {}  # old statement -> its value in the backward walk (loop indices)
+        self.depth: dict[int, int] = {}
+        self.owner: dict[int, _Task] = {}
+        self.adj: dict[int, Stmt] = {}  # old statement -> adjoint local (ALLOCA)
+        self.anchors: list[tuple[int, Block, Stmt | None]] = []
+        self.push: dict[int, list[Stmt]] = {}  # old statement -> forward values to push after it
+        self.uses = {}
+        for s in walk(kernel.body):
+            for o in s.operands:
+                self.uses[id(o)] = self.uses.get(id(o), 0) + 1
+        self.task = _Task(self.body)
+        self.used_tape = False
+
+    # -- entry -------------------------------------------------------------------------------------
+    def run(self) -> Block:
+        context.push(_Shim(self.b))
+        try:
+            top = self.kernel.body.stmts
+            kernel_task = self.task
+            for s in top:
+                if not self._parallel(s):
+                    self.clone(s, 0)
+            for s in reversed(top):
+                if self._parallel(s):
+                    self.adjoint_loop(s)
+                else:
+                    self.backward(s)
+            self._declare(kernel_task)
+            self._insert_pushes()
+        finally:
+            context.pop()
+        return self.body
+
+    @staticmethod
+    def _parallel(s: Stmt) -> bool:
+        return s.op is Op.RANGE_FOR and s.attrs.get("parallel", False)
+
+    def adjoint_loop(self, loop: Stmt) -> None:
+        begin, end = (self.fmap[id(o)] if o.op is not Op.CONST else o for o in loop.operands)
+        new = self.b.emit(Op.RANGE_FOR, loop.type, (begin, end), dict(loop.attrs), nblocks=1)
+        self.fmap[id(loop)] = new
+        self.depth[id(loop)] = 0
+        saved = self.task
+        self.task = _Task(new.blocks[0])
+        with self.b.inside(new.blocks[0]):
+            reset = self.b.emit(Op.TAPE_RESET, None)
+            for s in loop.blocks[0].stmts:
+                self.clone(s, 0)
+            for s in reversed(loop.blocks[0].stmts):
+                self.backward(s)
+        if not any(x.op is Op.TAPE_PUSH for x in walk(new.blocks[0])) and not self.push_pending(loop):
+            new.blocks[0].stmts.remove(reset)
+        self._declare(self.task)
+        self.task = saved
+
+    def push_pending(self, loop: Stmt) -> bool:
+        return any(self.push.get(id(s)) for s in walk(loop.blocks[0]))
+
+    def _declare(self, task: _Task) -> None:
+        """Adjoint locals at the top of their task, set to zero at every entry (every iteration)."""
+        decls = []
+        for a in task.decls:
+            zero = Stmt(Op.CONST, a.type, (), {"value": 0.0 if a.type.is_float else 0}, a.loc)
+            st = Stmt(Op.LOCAL_STORE, None, (a, zero), {}, a.loc)
+            for x in (a, zero, st):
+                x.block = task.block
+            decls += [a, zero, st]
+        task.block.stmts[0:0] = decls
+
+    # -- forward replay -----------------------------------------------------------------------------
+    def v(self, o: Stmt) -> Stmt:
+        return o if o.op is Op.CONST else self.fmap[id(o)]
+
+    def _anchor(self, s: Stmt, new: Stmt | None) -> None:
+        if new is None:
+            blk = self.b.block
+            new = blk.stmts[-1] if blk.stmts else None
+        self.anchors.append((id(s), self.b.block, new))
+
+    def clone(self, s: Stmt, depth: int) -> None:
+        self.b.loc = s.loc
+        self.depth[id(s)] = depth
+        self.owner[id(s)] = self.task
+        op = s.op
+        if op is Op.IF:
+            new = self.b.emit(Op.IF, None, (self.v(s.operands[0]),), nblocks=2)
+            for ob, nb in zip(s.blocks, new.blocks):
+                with self.b.inside(nb):
+                    for x in ob.stmts:
+                        self.clone(x, depth + 1)
+            self.fmap[id(s)] = new
+            self._anchor(s, new)
+        elif op is Op.RANGE_FOR:
+            attrs = dict(s.attrs, parallel=False)
+            new = self.b.emit(Op.RANGE_FOR, s.type, tuple(self.v(o) for o in s.operands), attrs, nblocks=1)
+            self.fmap[id(s)] = new
+            with self.b.inside(new.blocks[0]):
+                for x in s.blocks[0].stmts:
+                    self.clone(x, depth + 1)
+            self._anchor(s, new)
+        elif op is Op.WHILE:
+            self._clone_while(s, depth)
+        elif op is Op.GLOBAL_STORE or (op is Op.ATOMIC and _is_global_ptr(s.operands[0])):
+            if op is Op.ATOMIC and self.uses.get(id(s)):
+                raise GradientError(
+                    "the value returned by an atomic operation on a field cannot be replayed by the "
+                    "adjoint kernel (it would apply the update twice); compute it in a separate kernel",
+                    s.loc)
+            self._anchor(s, None)
+        elif op in _DROPPED:
+            pass
+        elif op is Op.RANDOM:
+            raise GradientError("ti.random() inside a kernel that is differentiated: the adjoint would replay "
+                                "different random numbers. Draw them in a separate kernel into a field.", s.loc)
+        elif op is Op.CONTINUE or (op is Op.BREAK and not s.attrs.get("header")):
+            raise GradientError("internal: jump left after structurize", s.loc)
+        else:
+            new = self.b.emit(op, s.type, tuple(self.v(o) for o in s.operands), dict(s.attrs))
+            self.fmap[id(s)] = new
+            self._anchor(s, new)
+
+    def _clone_while(self, s: Stmt, depth: int) -> None:
+        count = self.b.emit(Op.ALLOCA, dt.i32)
+        self.b.emit(Op.LOCAL_STORE, None, (count, self.b.const(0, dt.i32)))
+        new = self.b.emit(Op.WHILE, None, nblocks=1)
+        head, rest = _split_header(s.blocks[0])
+        with self.b.inside(new.blocks[0]):
+            for x in head:
+                self.clone(x, depth + 1)
+            c = self.b.emit(Op.LOCAL_LOAD, dt.i32, (count,))
+            self.b.emit(Op.LOCAL_STORE, None, (count, self.b.binary(Op.ADD, c, self.b.const(1, dt.i32))))
+            for x in rest:
+                self.clone(x, depth + 1)
+        n = self.b.emit(Op.LOCAL_LOAD, dt.i32, (count,))
+        self.fmap[id(s)] = n
+        self._anchor(s, n)
+
+    # -- adjoint variables ----------------------------------------------------------------------------
+    def _adj_var(self, s: Stmt) -> Stmt:
+        a = self.adj.get(id(s))
+        if a is None:
+            task = self.owner.get(id(s), self.task)
+            a = Stmt(Op.ALLOCA, s.type, (), {}, s.loc)
+            task.decls.append(a)
+            self.adj[id(s)] = a
+        return a
+
+    def has_adj(self, s: Stmt) -> bool:
+        return id(s) in self.adj
+
+    def acc(self, s: Stmt, contribution) -> None:
+        """adj(s) += contribution (an atomic on a local shared by parallel iterations)."""
+        if s.op is Op.CONST or s.type is None or not s.type.is_float:
+            return
+        a = self._adj_var(s)
+        c = ops.cast_expr(ops.to_expr(contribution, s.type), s.type)
+        self.b.emit(Op.ATOMIC, s.type, (a, c.stmt), {"kind": "add"})
+
+    def take(self, s: Stmt) -> Expr:
+        """Read adj(s) and reset it, as the definition of s is reversed."""
+        a = self.adj[id(s)]
+        g = self.b.emit(Op.LOCAL_LOAD, a.type, (a,))
+        if self.owner.get(id(s)) is self.task:
+            self.b.emit(Op.LOCAL_STORE, None, (a, self.b.const(0, a.type)))
+        return Expr(g)
+
+    # -- values in the backward walk ---------------------------------------------------------------------
+    def values(self, s: Stmt, olds: list[Stmt]) -> list[Stmt]:
+        """Values of `olds` where the derivative of `s` is computed: direct when in scope, else popped."""
+        saved = [o for o in olds if o.op is not Op.CONST and id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
+        uniq = list(dict.fromkeys(id(o) for o in saved))
+        by_id = {id(o): o for o in saved}
+        popped = {}
+        if uniq:
+            self.push.setdefault(id(s), []).extend(self.fmap[i] for i in uniq)
+            self.used_tape = True
+            for i in reversed(uniq):
+                popped[i] = self.b.emit(Op.TAPE_POP, by_id[i].type, (), {"message": self._overflow_text(s)})
+        out = []
+        for o in olds:
+            if o.op is Op.CONST:
+                out.append(o)
+            elif id(o) in self.bmap:
+                out.append(self.bmap[id(o)])
+            elif id(o) in popped:
+                out.append(popped[id(o)])
+            else:
+                out.append(self.fmap[id(o)])
+        return out
+
+    def _overflow_text(self, s: Stmt) -> str:
+        return (f"the adjoint of kernel {self.kernel.name} needs more tape (adstack) entries per thread than "
+                f"the capacity; raise it with ti.init(ad_stack_size=N)")
+
+    # -- backward walk --------------------------------------------------------------------------------------
+    def backward_block(self, stmts: list[Stmt]) -> None:
+        for s in reversed(stmts):
+            self.backward(s)
+
+    def backward(self, s: Stmt) -> None:
+        self.b.loc = s.loc
+        op = s.op
+        if op in _NO_ADJOINT:
+            return
+        if op is Op.IF:
+            self._backward_if(s)
+        elif op is Op.RANGE_FOR:
+            self._backward_loop(s, s.operands)
+        elif op is Op.WHILE:
+            self._backward_loop(s, None)
+        elif op is Op.LOCAL_LOAD:
+            if self.has_adj(s) and s.type.is_float:
+                self.acc(s.operands[0], self.take(s))
+        elif op is Op.LOCAL_STORE:
+            a, w = s.operands
+            if self.has_adj(a) and a.type.is_float:
+                g = self.b.emit(Op.LOCAL_LOAD, a.type, (self.adj[id(a)],))
+                if self.owner.get(id(a)) is self.task:
+                    self.b.emit(Op.LOCAL_STORE, None, (self.adj[id(a)], self.b.const(0, a.type)))
+                self.acc(w, Expr(g))
+        elif op is Op.ATOMIC:
+            self._backward_atomic(s)
+        elif op is Op.GLOBAL_LOAD:
+            self._backward_global_load(s)
+        elif op is Op.GLOBAL_STORE:
+            self._backward_global_store(s)
+        elif op is Op.CAST:
+            if self.has_adj(s):
+                g = self.take(s)
+                src = s.operands[0]
+                if src.type.is_float and s.type.is_float:
+                    self.acc(src, ops.cast_expr(g, src.type))
+        elif op in REVERSE and s.type is not None and s.type.is_float:
+            if self.has_adj(s):
+                g = self.take(s)
+                needed = list(s.operands) if op in NEEDS_VALUES else [o for o in s.operands if not o.type.is_float]
+                vals = dict(zip((id(o) for o in needed), self.values(s, needed)))
+                args = [Expr(vals[id(o)]) if id(o) in vals else None for o in s.operands]
+                if op is Op.SELECT:
+                    args[0] = Expr(vals[id(s.operands[0])])
+                contribs = REVERSE[op](g, *args)
+                for o, c in zip(s.operands, contribs):
+                    if c is not None:
+                        self.acc(o, c)
+        elif self.has_adj(s):
+            if op in ZERO_GRADIENT or not s.type.is_float:
+                self.take(s)
+            else:
+                raise GradientError(f"no derivative rule for the operation '{op.name.lower()}' on {s.type}",
+                                    s.loc)
+
+    def _sub_block(self, stmts: list[Stmt], prefix=None) -> Block:
+        """Backward of `stmts` built in a detached block (to learn whether it is empty)."""
+        blk = Block()
+        with self.b.inside(blk):
+            if prefix is not None:
+                prefix()
+            self.backward_block(stmts)
+        return blk
+
+    def _attach(self, parent: Stmt, blocks: list[Block]) -> None:
+        parent.blocks = tuple(blocks)
+        for b in blocks:
+            b.parent = parent
+            for x in b.stmts:
+                x.block = b
+
+    def _backward_if(self, s: Stmt) -> None:
+        then_b = self._sub_block(s.blocks[0].stmts)
+        else_b = self._sub_block(s.blocks[1].stmts)
+        if not then_b.stmts and not else_b.stmts:
+            return
+        (cond,) = self.values(s, [s.operands[0]])
+        new = self.b.emit(Op.IF, None, (cond,))
+        self._attach(new, [then_b, else_b])
+
+    def _backward_loop(self, s: Stmt, bounds) -> None:
+        index_var = Stmt(Op.ALLOCA, s.type or dt.i32, (), {}, s.loc)
+        body_old = s.blocks[0].stmts if s.op is Op.RANGE_FOR else _split_header(s.blocks[0])[1]
+
+        def bind_index():
+            if s.op is Op.RANGE_FOR:
+                self.bmap[id(s)] = self.b.emit(Op.LOCAL_LOAD, index_var.type, (index_var,))
+
+        body = self._sub_block(body_old, bind_index)
+        if len(body.stmts) <= (1 if s.op is Op.RANGE_FOR else 0):
+            return
+        self.task.decls.append(index_var)
+        if s.op is Op.RANGE_FOR:
+            begin, end = self.values(s, list(s.operands))
+            n = self.b.binary(Op.SUB, end, begin)
+        else:
+            (n,) = self.values(s, [s])
+        t = n.type
+        loop = self.b.emit(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False}, nblocks=1)
+        with self.b.inside(loop.blocks[0]):
+            if s.op is Op.RANGE_FOR:
+                last = self.b.binary(Op.SUB, n, self.b.const(1, t))
+                k = self.b.binary(Op.SUB, last, loop)
+                self.b.emit(Op.LOCAL_STORE, None, (index_var, self.b.binary(Op.ADD, begin, k)))
+        loop.blocks[0].stmts += body.stmts
+        for x in body.stmts:
+            x.block = loop.blocks[0]
+
+    def _grad_ptr(self, s: Stmt, ptr: Stmt, extra: list[Stmt] = ()):
+        """(pointer to the gradient element, values of `extra`) for a field access, or (None, ...)."""
+        target = ptr.attrs["target"]
+        grad = _grad_of(target)
+        if grad is None:
+            return None, None, []
+        vals = self.values(s, list(ptr.operands) + list(extra))
+        idx, rest = vals[: len(ptr.operands)], vals[len(ptr.operands):]
+        gp = self.b.emit(Op.GLOBAL_PTR, grad.dtype, tuple(idx), {"target": grad})
+        return gp, idx, rest
+
+    def _backward_global_load(self, s: Stmt) -> None:
+        if not self.has_adj(s) or not s.type.is_float:
+            return
+        g = self.take(s)
+        gp, _, _ = self._grad_ptr(s, s.operands[0])
+        if gp is not None:
+            self.b.emit(Op.ATOMIC, gp.type, (gp, ops.cast_expr(g, gp.type).stmt), {"kind": "add"})
+
+    def _backward_global_store(self, s: Stmt) -> None:
+        ptr, w = s.operands
+        if not w.type.is_float:
+            return
+        gp, _, _ = self._grad_ptr(s, ptr)
+        if gp is not None:
+            self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
+
+    def _backward_atomic(self, s: Stmt) -> None:
+        ptr, w = s.operands
+        kind = s.attrs["kind"]
+        if not w.type.is_float:
+            return
+        if self.has_adj(s):
+            raise GradientError("the old value returned by an atomic operation is not differentiable", s.loc)
+        if ptr.op is Op.ALLOCA:
+            if kind != "add":
+                raise GradientError(f"atomic_{kind} on a local variable is not differentiable; use ti.min/ti.max",
+                                    s.loc)
+            if self.has_adj(ptr):
+                self.acc(w, Expr(self.b.emit(Op.LOCAL_LOAD, ptr.type, (self.adj[id(ptr)],))))
+            return
+        if kind == "add":
+            gp, _, _ = self._grad_ptr(s, ptr)
+            if gp is not None:
+                self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
+        elif kind in ("min", "max"):
+            # subgradient: the gradient of the final value flows to the operand(s) equal to it
+            gp, idx, (wv,) = self._grad_ptr(s, ptr, [w])
+            if gp is not None:
+                xp = self.b.emit(Op.GLOBAL_PTR, ptr.type, tuple(idx), {"target": ptr.attrs["target"]})
+                final = Expr(self.b.emit(Op.GLOBAL_LOAD, ptr.type, (xp,)))
+                g = Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,)))
+                self.acc(w, ops.select(ops.eq(final, Expr(wv)), g, 0.0))
+        else:
+            raise GradientError(f"atomic_{kind} on floats has no derivative", s.loc)
+
+    # -- pushes ---------------------------------------------------------------------------------------
+    def _insert_pushes(self) -> None:
+        last_at: dict[tuple, Stmt | None] = {}
+        for sid, block, anchor in self.anchors:
+            values = self.push.get(sid)
+            if not values:
+                continue
+            key = (id(block), id(anchor) if anchor is not None else None)
+            after = last_at.get(key, anchor)
+            pos = block.stmts.index(after) + 1 if after is not None else 0
+            new = []
+            for v in values:
+                p = Stmt(Op.TAPE_PUSH, None, (v,), {"message": self._overflow_text(v)}, v.loc)
+                p.block = block
+                new.append(p)
+            block.stmts[pos:pos] = new
+            last_at[key] = new[-1]
+
+
+def _split_header(body: Block) -> tuple[list[Stmt], list[Stmt]]:
+    """A while body as (header: statements up to the last exit test, rest). The header only computes
+    the loop condition, so the adjoint replays it but never reverses it."""
+    last = -1
+    for k, s in enumerate(body.stmts):
+        if s.op is Op.IF and len(s.blocks[0].stmts) == 1 and s.blocks[0].stmts[0].attrs.get("header"):
+            last = k
+        elif s.op in (Op.IF, Op.RANGE_FOR, Op.WHILE, Op.GLOBAL_STORE, Op.ATOMIC):
+            break
+    return body.stmts[: last + 1], body.stmts[last + 1:]
+
+
+def make_adjoint(kernel: Kernel) -> bool:
+    """The pipeline step: replace the kernel body with its adjoint."""
+    structurize(kernel.body)
+    r = Reverse(kernel)
+    kernel.body = r.run()
+    kernel.uses_tape = r.used_tape or any(s.op is Op.TAPE_PUSH for s in walk(kernel.body))
+    kernel.returns = []
+    return True

@@ -1,0 +1,122 @@
+"""ti.ad.Tape and friends: record kernel launches, then run their adjoints in reverse order.
+
+Kernels decorated with @ti.ad.no_grad run forward and are skipped backward. A function decorated with
+@ti.ad.grad_replaced is recorded as one unit; backward runs the function registered for it with
+@ti.ad.grad_for (custom gradients, e.g. recomputation for checkpointing).
+"""
+
+from __future__ import annotations
+
+import functools
+
+from simgrad.errors import SimgradError
+from simgrad.lang import ad_hooks
+from simgrad.lang.field import Field, ScalarField
+
+
+class Tape:
+    """`with ti.ad.Tape(loss=loss): forward()` computes d loss / d (every field with a gradient)."""
+
+    def __init__(self, loss=None, clear_gradients: bool = True, validation: bool = False, grad_check=None):
+        if loss is not None:
+            if not isinstance(loss, Field):
+                raise SimgradError(f"Tape(loss=...) expects a scalar field, got {type(loss).__name__}")
+            if not isinstance(loss, ScalarField) or loss.shape != ():
+                raise SimgradError(f"the loss must be a 0-d scalar field (ti.field(dtype, shape=())), got "
+                                   f"shape {loss.shape}")
+            if loss.grad is None or loss.grad.snode is None:
+                raise SimgradError(f"the loss field {loss.name} has no gradient: create it with needs_grad=True "
+                                   "(or place it before ti.root.lazy_grad())")
+        self.loss = loss
+        self.clear_gradients = clear_gradients
+        self.validation = validation
+        self.entries: list = []
+        self.gradient_evaluated = False
+        self._outer = None
+
+    def __enter__(self):
+        if self.loss is not None:
+            self.loss.fill(0)
+        if self.clear_gradients:
+            clear_all_gradients()
+        self._outer = ad_hooks.recorder
+        ad_hooks.recorder = self._record
+        return self
+
+    def _record(self, kernel, args) -> None:
+        if not getattr(kernel, "_no_grad", False):
+            self.entries.append((kernel, args))
+
+    def __exit__(self, exc_type, exc, tb):
+        ad_hooks.recorder = self._outer
+        if exc_type is not None:
+            return False
+        if self.loss is not None:
+            self.loss.grad.fill(1)
+            self.grad()
+        return False
+
+    def insert(self, fn, args) -> None:
+        self.entries.append((fn, args))
+
+    def grad(self) -> None:
+        """Run the recorded adjoints in reverse order."""
+        if self.gradient_evaluated:
+            raise SimgradError("this Tape's gradients were already computed")
+        for fn, args in reversed(self.entries):
+            fn.grad(*args)
+        self.gradient_evaluated = True
+
+
+def clear_all_gradients(gradient_type=None) -> None:
+    """Zero every placed gradient field of the program."""
+    from simgrad.runtime.program import get_program
+
+    prog = get_program()
+    prog.materialize_all()
+    for tree in prog.trees:
+        for node in tree.root._walk():
+            if node.kind == "place" and not node.field.is_primal and node.field.view is not None:
+                node.field.view[...] = 0
+            elif node.kind == "place" and not node.field.is_primal:
+                node.field.fill(0)
+
+
+def no_grad(kernel):
+    """The kernel runs in forward; a Tape skips it in backward."""
+    kernel._no_grad = True
+    return kernel
+
+
+class _Replaced:
+    """A Python function recorded as one unit on the Tape; its gradient is the grad_for function."""
+
+    def __init__(self, fn):
+        self.fn = fn
+        self.grad = None
+        functools.update_wrapper(self, fn)
+
+    def __call__(self, *args, **kwargs):
+        outer = ad_hooks.recorder
+        tape = getattr(outer, "__self__", None)
+        if tape is not None:
+            tape.insert(self, args)
+        ad_hooks.recorder = None  # the kernels inside are not recorded one by one
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            ad_hooks.recorder = outer
+
+
+def grad_replaced(fn):
+    return _Replaced(fn)
+
+
+def grad_for(primal):
+    def register(fn):
+        if not isinstance(primal, _Replaced):
+            raise SimgradError("ti.ad.grad_for expects a function decorated with @ti.ad.grad_replaced")
+        primal.grad = fn
+        return fn
+
+    return register
