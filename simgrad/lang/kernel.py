@@ -77,6 +77,7 @@ class Kernel:
         self.func = func
         self.name = func.__name__
         self.signature = inspect.signature(func)
+        self.signature = _resolved_signature(func)
         self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]
         self._nparams = len(self.params)
         self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
@@ -286,13 +287,39 @@ class GradKernel:
         return None
 
 
+def _resolved_signature(func) -> inspect.Signature:
+    """The signature with string annotations (`from __future__ import annotations`) evaluated."""
+    sig = inspect.signature(func)
+    if not any(isinstance(p.annotation, str) for p in sig.parameters.values()) and \
+            not isinstance(sig.return_annotation, str):
+        return sig
+    scope = dict(func.__globals__)
+    if func.__closure__:
+        for name, cell in zip(func.__code__.co_freevars, func.__closure__):
+            try:
+                scope[name] = cell.cell_contents
+            except ValueError:
+                pass
+
+    def ev(a):
+        if isinstance(a, str):
+            try:
+                return eval(a, scope)  # noqa: S307 - the user's own annotation text
+            except Exception as e:
+                raise SimgradTypeError(f"{func.__name__}: cannot evaluate annotation {a!r}: {e}") from None
+        return a
+
+    params = [p.replace(annotation=ev(p.annotation)) for p in sig.parameters.values()]
+    return sig.replace(parameters=params, return_annotation=ev(sig.return_annotation))
+
+
 class Func:
     """@ti.func: inlined into the kernels that call it."""
 
     def __init__(self, func):
         self.func = func
         self.name = func.__name__
-        self.signature = inspect.signature(func)
+        self.signature = _resolved_signature(func)
         self.__wrapped__ = func
         self.__doc__ = func.__doc__
 
