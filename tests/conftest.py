@@ -5,6 +5,7 @@ import pytest
 
 # compiled objects of the test session go to a private cache, so runs never depend on ~/.cache
 os.environ.setdefault("SIMGRAD_CACHE_DIR", tempfile.mkdtemp(prefix="simgrad-test-cache-"))
+os.environ.setdefault("SIMGRAD_VERIFY", "1")  # the IR verifier runs after every pass in tests
 
 import simgrad as ti  # noqa: E402
 

@@ -15,18 +15,20 @@ def _debug() -> int:
         return 0
 
 
+def _verify_enabled() -> bool:
+    """The verifier runs between passes in tests and debug runs (SIMGRAD_VERIFY=1 or SIMGRAD_DEBUG)."""
+    return os.environ.get("SIMGRAD_VERIFY", "0") not in ("", "0") or _debug() > 0
+
+
 def run_pipeline(kernel: Kernel, transform=None) -> None:
     from simgrad.passes import simplify, verify
 
     level = _debug()
-    steps = [
-        ("verify", verify.verify),  # structural and type invariants of the frontend's output
-        ("simplify", simplify.simplify),  # constant folding, algebraic identities, CSE, DCE
-    ]
-    if transform is not None:
-        steps += [(getattr(transform, "__name__", "transform"), transform), ("verify", verify.verify),
-                  ("simplify", simplify.simplify)]
-    steps.append(("verify", verify.verify))
+    steps = [("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
+    if transform is not None:  # e.g. the reverse-mode adjoint, then a clean-up of what it produced
+        steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
+    if _verify_enabled():  # structural and type invariants before and after every pass
+        steps = [("verify", verify.verify)] + [x for st in steps for x in (st, ("verify", verify.verify))]
     for name, fn in steps:
         if level >= 1:
             print(f"[simgrad] {kernel.name}: {name}")

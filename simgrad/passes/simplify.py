@@ -65,11 +65,12 @@ def _identity(s: Stmt):
 
 
 def _key(s: Stmt, repl):
+    """A hashable identity of a pure statement's value (None: not a CSE candidate)."""
     if s.op not in O.PURE or s.op is Op.ARG:
         return None
-    attrs = tuple(sorted((k, id(v) if not isinstance(v, (int, float, str, bool)) else v)
-                         for k, v in s.attrs.items()))
-    return (s.op, s.type, tuple(id(o) for o in s.operands), attrs)
+    if s.op is Op.CONST:
+        return (Op.CONST, s.type, repr(s.attrs["value"]))  # repr keeps -0.0 apart from 0.0
+    return (s.op, s.type, tuple(id(o) for o in s.operands), tuple(s.attrs.items()))
 
 
 def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
