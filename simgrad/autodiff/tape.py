@@ -31,6 +31,7 @@ class Tape:
         self.clear_gradients = clear_gradients
         self.validation = validation
         self.entries: list = []
+        self.snapshots: dict = {}
         self.gradient_evaluated = False
         self._outer = None
 
@@ -46,6 +47,15 @@ class Tape:
     def _record(self, kernel, args) -> None:
         if not getattr(kernel, "_no_grad", False):
             self.entries.append((kernel, args))
+            if self._validating():
+                from simgrad.autodiff.validate import Snapshot
+
+                self.snapshots[len(self.entries) - 1] = Snapshot(kernel, args)
+
+    def _validating(self) -> bool:
+        from simgrad.runtime.program import get_program
+
+        return self.validation or get_program().config.debug
 
     def __exit__(self, exc_type, exc, tb):
         ad_hooks.recorder = self._outer
@@ -63,7 +73,11 @@ class Tape:
         """Run the recorded adjoints in reverse order."""
         if self.gradient_evaluated:
             raise SimgradError("this Tape's gradients were already computed")
-        for fn, args in reversed(self.entries):
+        for k in range(len(self.entries) - 1, -1, -1):
+            fn, args = self.entries[k]
+            snap = self.snapshots.get(k)
+            if snap is not None:
+                snap.check()
             fn.grad(*args)
         self.gradient_evaluated = True
 

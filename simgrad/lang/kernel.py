@@ -136,9 +136,9 @@ class Kernel:
         inst = cache.get(key)
         if inst is None:
             if grad:
-                from simgrad.autodiff.reverse import make_adjoint
+                from simgrad.autodiff.validate import check_and_adjoint
 
-                inst = self.instantiate(args, transform=make_adjoint, name_suffix="_grad")
+                inst = self.instantiate(args, transform=check_and_adjoint, name_suffix="_grad")
             else:
                 inst = self.instantiate(args)
                 if self._simple:
@@ -146,6 +146,13 @@ class Kernel:
             cache[key] = inst
             self._keep.extend(keep)
         return inst.launch
+
+    def instance(self, args) -> Instance:
+        """The (compiled) forward instance these arguments launch."""
+        self._launch_for(args)
+        keep: list = []
+        key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
+        return self._instances[key]
 
     def _key_part(self, p: Param, a, keep):
         if p.kind == "template":
