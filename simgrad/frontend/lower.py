@@ -391,6 +391,8 @@ class Compiler:
         v = self.lookup(node.id, node)
         if isinstance(v, (VarRef, MatrixRef)):
             return v.load()
+        if isinstance(v, Field) and v._auto_name:
+            v.adopt_name(node.id)
         return v
 
     def eval_Tuple(self, node):

@@ -62,6 +62,7 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     t = dt.from_any(dtype)
     base = _name(name)
     f = _with_grad(lambda suffix: ScalarField(t, base + suffix), needs_grad, needs_dual)
+    f._auto_name = not name
     return _place_new(f, shape, offset, needs_grad)
 
 
@@ -69,6 +70,7 @@ def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
     base = _name(name)
     f = _with_grad(lambda suffix: MatrixField(n, m, t, base + suffix), needs_grad, needs_dual)
+    f._auto_name = not name
     return _place_new(f, shape, offset, needs_grad)
 
 

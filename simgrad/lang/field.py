@@ -40,6 +40,24 @@ class Field:
     def ndim(self) -> int:
         return len(self.shape)
 
+    _auto_name = False
+
+    def adopt_name(self, name: str) -> None:
+        """Give an unnamed field the name of the variable the user refers to it by (for messages)."""
+        if not self._auto_name:
+            return
+        self._auto_name = False
+        self.name = name
+        comps = self._components()
+        if len(comps) > 1:
+            for k, c in enumerate(comps):
+                c.name = f"{name}[{k}]"
+        elif comps[0] is not self:
+            comps[0].name = name
+        if self.grad is not None:
+            self.grad._auto_name = True
+            self.grad.adopt_name(name + ".grad")
+
     def _set_offset(self, offset):
         offset = (offset,) if isinstance(offset, int) else tuple(offset)
         for c in self._components():
