@@ -281,6 +281,12 @@ class KernelCodegen:
         self.ntasks += 1
         tname = f"{self.symbol}_task{self.ntasks}"
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
+        t.loop = s
+        t.inside = {id(x) for x in walk(s.blocks[0])}
+        # fields some iteration writes at an element it does not own keep every update atomic
+        t.shared_targets = {id(x.operands[0].attrs["target"]) for x in walk(s.blocks[0])
+                            if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
+                            and not _injective_in(s, x.operands[0], t.inside)}
         t.prologue.append("  %ctx = load ptr, ptr %clo")
         clo = f.tmp("clo")
         f.prologue.append(f"  {clo} = alloca [{len(captured) + 1} x i64], align 8")
@@ -375,7 +381,7 @@ class KernelCodegen:
             op = {"add": "add", "and": "and", "or": "or", "xor": "xor",
                   "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
         r = f.tmp("old")
-        private = p.op is Op.ALLOCA and p not in f.shared
+        private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p)
         if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
             f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
             n = f.tmp("new")
@@ -510,6 +516,28 @@ for _op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.
 for _op in (Op.NEG, Op.BIT_NOT, Op.LOGICAL_NOT, Op.SQRT, Op.RSQRT, Op.SIN, Op.COS, Op.TAN, Op.ASIN,
             Op.ACOS, Op.EXP, Op.LOG, Op.TANH, Op.FLOOR, Op.CEIL, Op.ROUND, Op.ABS):
     setattr(KernelCodegen, "lower_" + _op.name.lower(), KernelCodegen._un)
+
+
+def _owned_by_iteration(f: FunctionText, ptr: Stmt) -> bool:
+    """True when no other iteration of this task's parallel loop can touch the element `ptr` addresses:
+    its indices are an injective function of the loop index (the index itself, or the div/mod pair of
+    a flattened struct-for) plus loop-invariant values. Then an atomic update needs no atomic instruction."""
+    loop = getattr(f, "loop", None)
+    if loop is None or ptr.op is not Op.GLOBAL_PTR or id(ptr.attrs["target"]) in f.shared_targets:
+        return False
+    return _injective_in(loop, ptr, f.inside)
+
+
+def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
+    divs, mods, direct = set(), set(), False
+    for o in ptr.operands:
+        if o is loop:
+            direct = True
+        elif o.op in (Op.RAW_DIV, Op.RAW_MOD) and o.operands[0] is loop and o.operands[1].op is Op.CONST:
+            (divs if o.op is Op.RAW_DIV else mods).add(o.operands[1].attrs["value"])
+        elif o.op is not Op.CONST and id(o) in inside:
+            return False
+    return direct or bool(divs & mods)
 
 
 def _free_values(loop: Stmt) -> list[Stmt]:

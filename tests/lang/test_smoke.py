@@ -32,3 +32,24 @@ def test_kernel_scope_local_reduction_is_atomic():
         return s
 
     assert total() == n
+
+
+def test_owned_updates_are_plain_but_shared_targets_stay_atomic():
+    """x[i] += 1 alone needs no atomic; mixed with x[i + 1] += 1 every update must stay atomic."""
+    n = 300_000
+    own = ti.field(ti.i32, shape=n)
+    mixed = ti.field(ti.i32, shape=n + 1)
+
+    @ti.kernel
+    def run():
+        for i in range(n):
+            own[i] += 1
+            mixed[i] += 1
+            mixed[i + 1] += 1
+
+    for _ in range(3):
+        run()
+    expect = np.full(n + 1, 6)
+    expect[0] = expect[-1] = 3
+    np.testing.assert_array_equal(own.to_numpy(), np.full(n, 3))
+    np.testing.assert_array_equal(mixed.to_numpy(), expect)
