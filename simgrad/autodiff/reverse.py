@@ -28,8 +28,8 @@ from simgrad.lang.field import ScalarField
 
 _DROPPED = (Op.PRINT, Op.ASSERT, Op.RET_STORE)
 # statements whose own adjoint is nothing (a local's adjoint belongs to its loads and stores)
-_NO_ADJOINT = (Op.ALLOCA, Op.CONST, Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.BREAK, Op.CONTINUE, Op.TAPE_RESET,
-               Op.TAPE_PUSH, Op.TAPE_POP, Op.RANDOM) + _DROPPED
+_NO_ADJOINT = (Op.ALLOCA, Op.CONST, Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.BREAK, Op.CONTINUE,
+               Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP, Op.RANDOM) + _DROPPED
 
 
 class _Task:
@@ -176,8 +176,9 @@ class Reverse:
         elif op in _DROPPED:
             pass
         elif op is Op.RANDOM:
-            raise GradientError("ti.random() inside a kernel that is differentiated: the adjoint would replay "
-                                "different random numbers. Draw them in a separate kernel into a field.", s.loc)
+            raise GradientError("ti.random() inside a kernel that is differentiated: the adjoint would "
+                                "replay different random numbers. Draw them in a separate kernel into a "
+                                "field.", s.loc)
         elif op is Op.CONTINUE or (op is Op.BREAK and not s.attrs.get("header")):
             raise GradientError("internal: jump left after structurize", s.loc)
         else:
@@ -233,15 +234,17 @@ class Reverse:
     # -- values in the backward walk ---------------------------------------------------------------------
     def values(self, s: Stmt, olds: list[Stmt]) -> list[Stmt]:
         """Values of `olds` where the derivative of `s` is computed: direct when in scope, else popped."""
-        saved = [o for o in olds if o.op is not Op.CONST and id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
+        saved = [o for o in olds
+                 if o.op is not Op.CONST and id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
         uniq = list(dict.fromkeys(id(o) for o in saved))
-        by_id = {id(o): o for o in saved}
         popped = {}
         if uniq:
             self.push.setdefault(id(s), []).extend(self.fmap[i] for i in uniq)
             self.used_tape = True
             for i in reversed(uniq):
-                popped[i] = self.b.emit(Op.TAPE_POP, by_id[i].type, (), {"message": self._overflow_text(s)})
+                # typed as the pushed value: a WHILE has no type, its replay value is the i32 trip count
+                popped[i] = self.b.emit(Op.TAPE_POP, self.fmap[i].type, (),
+                                        {"message": self._overflow_text(s)})
         out = []
         for o in olds:
             if o.op is Op.CONST:
@@ -299,7 +302,8 @@ class Reverse:
         elif op in REVERSE and s.type is not None and s.type.is_float:
             if self.has_adj(s):
                 g = self.take(s)
-                needed = list(s.operands) if op in NEEDS_VALUES else [o for o in s.operands if not o.type.is_float]
+                needed = (list(s.operands) if op in NEEDS_VALUES
+                          else [o for o in s.operands if not o.type.is_float])
                 vals = dict(zip((id(o) for o in needed), self.values(s, needed)))
                 args = [Expr(vals[id(o)]) if id(o) in vals else None for o in s.operands]
                 if op is Op.SELECT:
@@ -404,8 +408,8 @@ class Reverse:
             raise GradientError("the old value returned by an atomic operation is not differentiable", s.loc)
         if ptr.op is Op.ALLOCA:
             if kind != "add":
-                raise GradientError(f"atomic_{kind} on a local variable is not differentiable; use ti.min/ti.max",
-                                    s.loc)
+                raise GradientError(f"atomic_{kind} on a local variable is not differentiable; "
+                                    "use ti.min/ti.max", s.loc)
             if self.has_adj(ptr):
                 self.acc(w, Expr(self.b.emit(Op.LOCAL_LOAD, ptr.type, (self.adj[id(ptr)],))))
             return
@@ -414,13 +418,18 @@ class Reverse:
             if gp is not None:
                 self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
         elif kind in ("min", "max"):
-            # subgradient: the gradient of the final value flows to the operand(s) equal to it
+            # subgradient: the gradient of the final value goes to exactly one operand equal to it (the
+            # first whose adjoint runs takes it with an atomic exchange); the value that was in the
+            # destination before keeps it only when no operand won
             gp, idx, (wv,) = self._grad_ptr(s, ptr, [w])
             if gp is not None:
                 xp = self.b.emit(Op.GLOBAL_PTR, ptr.type, tuple(idx), {"target": ptr.attrs["target"]})
                 final = Expr(self.b.emit(Op.GLOBAL_LOAD, ptr.type, (xp,)))
-                g = Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,)))
-                self.acc(w, ops.select(ops.eq(final, Expr(wv)), g, 0.0))
+                won = self.b.emit(Op.IF, None, (ops.eq(final, Expr(wv)).stmt,), nblocks=2)
+                with self.b.inside(won.blocks[0]):
+                    zero = self.b.const(0.0, gp.type)
+                    taken = self.b.emit(Op.ATOMIC, gp.type, (gp, zero), {"kind": "xchg"})
+                    self.acc(w, Expr(taken))
         else:
             raise GradientError(f"atomic_{kind} on floats has no derivative", s.loc)
 

@@ -4,6 +4,8 @@ A jump becomes a store to a flag, and every statement that could follow the jump
 `if flag == 0`. Afterwards the only jump left in a loop is the header test of a while loop (the first
 statements of its body), so the adjoint can replay a loop as "n iterations, each one complete", with n
 recorded on the tape. This is what lets us differentiate while/break/continue, which Taichi refuses.
+A serial range-for that can break is first turned into a while loop over a counter, so that it too runs
+(and its adjoint replays) only the iterations before the break.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ def _new(op, type_, operands, block, loc, attrs=None, nblocks=0) -> Stmt:
     return s
 
 
-def _const(v, block, loc) -> Stmt:
-    return _new(Op.CONST, dt.i32, (), block, loc, {"value": v})
+def _const(v, block, loc, type_=dt.i32) -> Stmt:
+    return _new(Op.CONST, type_, (), block, loc, {"value": v})
 
 
 def structurize(block: Block) -> None:
@@ -31,26 +33,63 @@ def structurize(block: Block) -> None:
         for b in s.blocks:
             structurize(b)
         if s.op in (Op.RANGE_FOR, Op.WHILE) and _has_jump(s.blocks[0]):
+            if s.op is Op.RANGE_FOR and _has_jump(s.blocks[0], (Op.BREAK,)) and not s.attrs.get("parallel"):
+                s = _range_to_while(s)
             _rewrite_loop(s)
 
 
-def _has_jump(block: Block) -> bool:
+def _has_jump(block: Block, kinds=(Op.BREAK, Op.CONTINUE)) -> bool:
     for s in block.stmts:
-        if s.op in (Op.BREAK, Op.CONTINUE) and not s.attrs.get("header"):
+        if s.op in kinds and not s.attrs.get("header"):
             return True
-        if s.op is Op.IF and any(_has_jump(b) for b in s.blocks):
+        if s.op is Op.IF and any(_has_jump(b, kinds) for b in s.blocks):
             return True
     return False
 
 
+def _range_to_while(loop: Stmt) -> Stmt:
+    """`for i in range(a, b)` that can break becomes `i = a; while i < b: (i += 1 first) body`.
+
+    Guarding the body alone would leave the statements before the jump running in every iteration after
+    the break; as a while loop, the adjoint replays exactly the iterations that ran (its trip count is on
+    the tape) and the tape holds nothing for the skipped ones."""
+    outer, loc, t = loop.block, loop.loc, loop.type
+    begin, end = loop.operands
+    idx = _new(Op.ALLOCA, t, (), outer, loc)
+    init = _new(Op.LOCAL_STORE, None, (idx, begin), outer, loc)
+    w = _new(Op.WHILE, None, (), outer, loc, nblocks=1)
+    body = w.blocks[0]
+    i = _new(Op.LOCAL_LOAD, t, (idx,), body, loc)
+    done = _new(Op.GE, dt.i32, (i, end), body, loc)
+    stop = _new(Op.IF, None, (done,), body, loc, nblocks=2)
+    stop.blocks[0].stmts.append(_new(Op.BREAK, None, (), stop.blocks[0], loc, {"header": True}))
+    nxt = _new(Op.ADD, t, (i, _const(1, body, loc, t)), body, loc)
+    step = _new(Op.LOCAL_STORE, None, (idx, nxt), body, loc)
+    old = loop.blocks[0].stmts
+    for x in old:
+        x.block = body
+    _replace_uses(old, loop, i)
+    body.stmts = [i, done, stop, nxt, step] + old
+    k = outer.stmts.index(loop)
+    outer.stmts[k:k + 1] = [idx, init, w]
+    return w
+
+
+def _replace_uses(stmts: list[Stmt], old: Stmt, new: Stmt) -> None:
+    for s in stmts:
+        if any(o is old for o in s.operands):
+            s.operands = tuple(new if o is old else o for o in s.operands)
+        for b in s.blocks:
+            _replace_uses(b.stmts, old, new)
+
+
 def _rewrite_loop(loop: Stmt) -> None:
-    outer = loop.block
     loc = loop.loc
-    i = outer.stmts.index(loop)
+    body = loop.blocks[0]
+    # a parallel loop (continue only) gets a flag per iteration; one outside would be shared by threads
+    outer = body if loop.attrs.get("parallel") else loop.block
     flag = _new(Op.ALLOCA, dt.i32, (), outer, loc)
     init = _new(Op.LOCAL_STORE, None, (flag, _const(0, outer, loc)), outer, loc)
-    outer.stmts[i:i] = [flag, init]
-    body = loop.blocks[0]
     _replace_jumps(body, flag)
     head = []
     if loop.op is Op.WHILE:
@@ -75,6 +114,8 @@ def _rewrite_loop(loop: Stmt) -> None:
     body.stmts = [ld, keep, reset] + stop + head
     guard = _guarded(rest, flag, body, loc)
     body.stmts += guard
+    i = 0 if outer is body else outer.stmts.index(loop)
+    outer.stmts[i:i] = [flag, init]
 
 
 def _is_header_exit(s: Stmt) -> bool:

@@ -25,8 +25,8 @@ class Tape:
                 raise SimgradError(f"the loss must be a 0-d scalar field (ti.field(dtype, shape=())), got "
                                    f"shape {loss.shape}")
             if loss.grad is None or loss.grad.snode is None:
-                raise SimgradError(f"the loss field {loss.name} has no gradient: create it with needs_grad=True "
-                                   "(or place it before ti.root.lazy_grad())")
+                raise SimgradError(f"the loss field {loss.name} has no gradient: create it with "
+                                   "needs_grad=True (or place it before ti.root.lazy_grad())")
         self.loss = loss
         self.clear_gradients = clear_gradients
         self.validation = validation

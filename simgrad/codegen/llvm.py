@@ -376,9 +376,9 @@ class KernelCodegen:
         ty = llvm_type(t)
         kind = s.attrs["kind"]
         if t.is_float:
-            op = {"add": "fadd", "min": "fmin", "max": "fmax"}[kind]
+            op = {"add": "fadd", "min": "fmin", "max": "fmax", "xchg": "xchg"}[kind]
         else:
-            op = {"add": "add", "and": "and", "or": "or", "xor": "xor",
+            op = {"add": "add", "and": "and", "or": "or", "xor": "xor", "xchg": "xchg",
                   "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
         r = f.tmp("old")
         private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p)
@@ -502,6 +502,8 @@ class KernelCodegen:
 
 
 def _combine_text(dst, op, ty, a, b, t) -> str:
+    if op == "xchg":
+        return f"{dst} = select i1 true, {ty} {b}, {ty} {b}"
     if op in ("fadd", "add", "and", "or", "xor"):
         return f"{dst} = {op} {ty} {a}, {b}"
     intr = {"fmin": "minnum", "fmax": "maxnum", "min": "smin", "max": "smax", "umin": "umin", "umax": "umax"}[op]

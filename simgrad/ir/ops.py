@@ -103,4 +103,4 @@ SIDE_EFFECTS = {
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = BINARY_ARITH | COMPARE | UNARY_MATH | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG,
                                               Op.ARRAY_SHAPE, Op.GLOBAL_PTR}
-ATOMIC_KINDS = ("add", "sub", "min", "max", "and", "or", "xor")
+ATOMIC_KINDS = ("add", "sub", "min", "max", "and", "or", "xor", "xchg")
