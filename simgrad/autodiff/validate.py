@@ -43,8 +43,9 @@ def check_access_rules(kernel: Kernel) -> None:
             read.setdefault(key, s.loc)
         elif key in read:
             where = read[key]
+            name = kernel.name.removesuffix("_grad")
             raise GradientError(
-                f"kernel {kernel.name.removesuffix('_grad')} overwrites an element of field '{_user_name(target)}' that it read "
+                f"kernel {name} overwrites an element of field '{_user_name(target)}' that it read "
                 f"(at line {where.line if where else '?'}); its adjoint would replay the read with the new "
                 "value and give a wrong gradient. Write the result to another field or time step "
                 "(e.g. x[t + 1] = f(x[t])).", s.loc)
