@@ -470,5 +470,37 @@ def make_adjoint(kernel: Kernel) -> bool:
     r = Reverse(kernel)
     kernel.body = r.run()
     kernel.uses_tape = r.used_tape or any(s.op is Op.TAPE_PUSH for s in walk(kernel.body))
+    kernel.tape_bound = tape_bound(kernel.body) if kernel.uses_tape else 0
     kernel.returns = []
     return True
+
+
+def tape_bound(block: Block) -> int | None:
+    """Most tape entries one thread holds at once, when loop bounds are compile-time constants (None:
+    unknown, e.g. a while loop or a run-time bound). A parallel loop's body resets the tape every
+    iteration, so it counts once."""
+    total = 0
+    for s in block.stmts:
+        if s.op is Op.TAPE_PUSH:
+            total += 1
+            continue
+        if not s.blocks:
+            continue
+        inner = [tape_bound(b) for b in s.blocks]
+        if any(n is None for n in inner):
+            return None
+        n = max(inner)
+        if n == 0:
+            continue
+        if s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
+            total = max(total, n)
+        elif s.op is Op.RANGE_FOR:
+            b, e = s.operands
+            if b.op is not Op.CONST or e.op is not Op.CONST:
+                return None
+            total += max(e.attrs["value"] - b.attrs["value"], 0) * n
+        elif s.op is Op.WHILE:
+            return None
+        else:
+            total += n
+    return total

@@ -187,7 +187,9 @@ class Kernel:
         addr = prog.jit.load(stable, ["sg_kernel"])["sg_kernel"]
         launcher = Launcher(ir.name, slots[0], addr, slots[1], ir.returns, cg.error_table, prog)
         if getattr(ir, "uses_tape", False):
-            launcher.attach_tape(prog.tape_capacity)
+            # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
+            bound = getattr(ir, "tape_bound", None)
+            launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
         launcher.ret_matrix = ret_matrix
         if ret_matrix is not None:
             inner = launcher.launch

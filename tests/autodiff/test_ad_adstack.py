@@ -68,3 +68,33 @@ def test_large_ad_stack_size_works():
     f(m2)
     f.grad(m2)
     assert x.grad[1] == pytest.approx(_expected_grad(0.4, m2), rel=1e-12)
+
+
+def test_tape_size_is_inferred_from_static_bounds_beyond_the_default():
+    """A static 200000-iteration loop needs more than the default capacity; inference sizes it exactly."""
+    ti.init(arch=ti.cpu, default_fp=ti.f64, ad_stack_size=16)
+    x = ti.field(ti.f64, shape=2, needs_grad=True)
+    y = ti.field(ti.f64, shape=2, needs_grad=True)
+
+    @ti.kernel
+    def run():
+        for i in x:
+            s = x[i]
+            for k in range(200_000):
+                s = s + 1e-4 * ti.sin(s)
+            y[i] = s
+
+    x.from_numpy(np.array([0.3, 0.7]))
+    run()
+    y.grad.fill(1.0)
+    run.grad()
+    # d/dx of the fixed-point iteration by finite differences
+    h = 1e-6
+    for i, x0 in enumerate([0.3, 0.7]):
+        def f(v):
+            for _ in range(200_000):
+                v = v + 1e-4 * math.sin(v)
+            return v
+        fd = (f(x0 + h) - f(x0 - h)) / (2 * h)
+        assert abs(fd - 1.0) > 0.1  # the derivative is far from trivial
+        assert abs(x.grad[i] - fd) <= 1e-6 + 1e-5 * abs(fd)
