@@ -15,8 +15,9 @@ def _i64(f, idx_name: str, t: dt.DataType) -> str:
     return r
 
 
-def _bounds_check(gen, f, s, k: int, idx: str, extent: str, shape_text: str) -> str:
-    """Debug mode: record an IndexError for this source line and use index 0 instead of a wild access."""
+def _bounds_check(gen, f, s, k: int, idx: str, extent: str, shape_text: str, offset: int = 0) -> str:
+    """Debug mode: record an IndexError for this source line and use index 0 instead of a wild access.
+    The reported index is the user's (field offsets added back)."""
     target = s.attrs["target"]
     name = target.name
     code = gen.error_code("index", s.loc, (name, k, shape_text))
@@ -24,7 +25,11 @@ def _bounds_check(gen, f, s, k: int, idx: str, extent: str, shape_text: str) -> 
     f.emit(f"{ok} = icmp ult i64 {idx}, {extent}")
     oki = f.tmp("inbi")
     f.emit(f"{oki} = zext i1 {ok} to i32")
-    gen._check(f, oki, code, idx)
+    shown = idx
+    if offset:
+        shown = f.tmp("uix")
+        f.emit(f"{shown} = add i64 {idx}, {offset}")
+    gen._check(f, oki, code, shown)
     safe = f.tmp("ixs")
     f.emit(f"{safe} = select i1 {ok}, i64 {idx}, i64 0")
     return safe
@@ -36,7 +41,9 @@ def lower_global_ptr(gen, f, s) -> str:
     if isinstance(target, ScalarField):
         tree_id, const, terms, shape = target.layout
         if gen.debug:
-            idx = [_bounds_check(gen, f, s, k, i, str(shape[k]), str(shape)) for k, i in enumerate(idx)]
+            offset = target.offset or (0,) * len(shape)
+            text = str(shape) + (f" with offset {tuple(offset)}" if any(offset) else "")
+            idx = [_bounds_check(gen, f, s, k, i, str(shape[k]), text, offset[k]) for k, i in enumerate(idx)]
         off = str(const)
         for t in terms:
             d = idx[t.axis]

@@ -44,6 +44,9 @@ def lower_for(comp, node: ast.For) -> None:
         _nd_for(comp, node, bounds, grouped_=True)
     elif isinstance(it, Field) or _is_array(it):
         _nd_for(comp, node, _bounds_of(comp, it, node), grouped_=False)
+    elif isinstance(it, Expr):
+        raise SimgradSyntaxError(f"cannot loop over a run-time {it.dtype} value; use range() over it",
+                                 comp.loc(node.iter))
     else:
         raise SimgradSyntaxError(
             f"cannot loop over a {type(it).__name__} at run time; wrap Python sequences in ti.static(...) "

@@ -20,10 +20,11 @@ from simgrad.errors import (
     SimgradTypeError,
 )
 from simgrad.frontend import context
-from simgrad.frontend.refs import GlobalRef, MatrixRef, VarRef
+from simgrad.frontend.refs import DynamicElementRef, GlobalRef, MatrixRef, VarRef
 from simgrad.frontend.source import FunctionSource, get_source
+from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
-from simgrad.ir.nodes import Kernel
+from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -211,6 +212,11 @@ class Compiler:
             if isinstance(current, (VarRef, MatrixRef)):
                 current.store(value)
             elif isinstance(current, Expr):  # an argument or loop index: a new local shadows it
+                if name not in self.frame.scopes[-1]:  # only in its own scope: else outer reads miss it
+                    raise SimgradSyntaxError(
+                        f"'{name}' is a kernel argument or loop index of an enclosing scope and cannot be "
+                        f"assigned here (arguments are immutable in Taichi); copy it into a local first "
+                        f"({name}_ = {name})", self.loc(target))
                 self.bind(name, self.new_var(value))
             elif isinstance(value, (Expr, Matrix, int, float, bool)) and not _is_py_matrix_const(value):
                 self.bind(name, self.new_var(value))
@@ -424,6 +430,8 @@ class Compiler:
         return not v
 
     def eval_BoolOp(self, node: ast.BoolOp):
+        """Python's `and`/`or`, as in Taichi: the value is `b if a else a` / `a if a else b`, and `b` is
+        evaluated only when needed, so `i < n and x[i] > 0` never reads x[n]."""
         is_and = isinstance(node.op, ast.And)
         result = self.eval(node.values[0])
         for sub in node.values[1:]:
@@ -432,8 +440,12 @@ class Compiler:
                     return result
                 result = self.eval(sub)
                 continue
-            other = self.eval(sub)
-            result = ops.logical_and(result, other) if is_and else ops.logical_or(result, other)
+            if isinstance(result, Matrix):  # element-wise on matrices: both sides, 1/0 entries
+                other = self.eval(sub)
+                result = ops.logical_and(result, other) if is_and else ops.logical_or(result, other)
+                continue
+            left, right = (lambda a=result: a), (lambda n=sub: self.eval(n))
+            result = self.choose(result, right, left) if is_and else self.choose(result, left, right)
         return result
 
     def eval_Compare(self, node: ast.Compare):
@@ -453,7 +465,44 @@ class Compiler:
         cond = self.eval(node.test)
         if not isinstance(cond, (Expr, Matrix)):
             return self.eval(node.body if cond else node.orelse)
-        return ops.select(cond, self.eval(node.body), self.eval(node.orelse))
+        if isinstance(cond, Matrix):
+            return ops.select(cond, self.eval(node.body), self.eval(node.orelse))
+        return self.choose(cond, lambda: self.eval(node.body), lambda: self.eval(node.orelse))
+
+    def choose(self, cond: Expr, then_fn, else_fn):
+        """A value chosen at run time (ternary, and/or), each side evaluated in its own branch. Sides
+        without memory reads or effects are hoisted and picked by a select (one differentiable op); a
+        side that reads memory stays guarded, as in Taichi (`x[i] if i < n else 0` never reads x[n])."""
+        parent = self.builder.block
+        c = ops.ne(cond, 0)
+        stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
+        values = []
+        for block, fn in zip(stmt.blocks, (then_fn, else_fn)):
+            with self.dynamic(block):
+                values.append(fn())
+        at = parent.stmts.index(stmt)
+        if all(x.op in _SPECULATABLE for block in stmt.blocks for x in walk(block)):
+            hoisted = [x for block in stmt.blocks for x in block.stmts]
+            for x in hoisted:
+                x.block = parent
+            parent.stmts[at:at + 1] = hoisted
+            return ops.select(c, *values)
+        a, b = values
+        if isinstance(a, Matrix) or isinstance(b, Matrix):
+            if not (isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape == b.shape):
+                raise SimgradTypeError("both sides of a run-time choice must be matrices of one shape",
+                                       self.builder.loc)
+            t = dt.promote(dtype_of(a), dtype_of(b))
+            ref = MatrixRef([VarRef(t) for _ in a.entries], a.n, a.m)
+        else:
+            ref = VarRef(_choice_type(a, b))
+        new = parent.stmts[at + 1:]  # the result's ALLOCAs go before the IF
+        del parent.stmts[at + 1:]
+        parent.stmts[at:at] = new
+        for block, v in zip(stmt.blocks, values):
+            with self.builder.inside(block):
+                ref.store(v)
+        return ref.load()
 
     def eval_Attribute(self, node: ast.Attribute):
         ref = self.ref(node)
@@ -539,7 +588,13 @@ class Compiler:
         if isinstance(node, ast.Subscript):
             base_ref = self.ref(node.value)
             if base_ref is not None:
-                return base_ref.index(self.eval_index(node.slice)) if isinstance(base_ref, MatrixRef) else None
+                if not isinstance(base_ref, MatrixRef):
+                    return None
+                key = self.eval_index(node.slice)
+                key = key if isinstance(key, tuple) else (key,)
+                if any(isinstance(k, Expr) for k in key):
+                    return DynamicElementRef(base_ref, key)
+                return base_ref.index(key if len(key) > 1 else key[0])
             if not _maybe_global(node.value):
                 return None
             base = self.eval(node.value)
@@ -554,6 +609,19 @@ class Compiler:
                 return base_ref.swizzle(node.attr)
             return None
         return None
+
+
+_SPECULATABLE = O.PURE | {Op.LOCAL_LOAD}
+
+
+def _choice_type(a, b) -> dt.DataType:
+    """The type of `a if c else b` for scalars: as `a + b` would promote them."""
+    if isinstance(a, Expr) and isinstance(b, Expr):
+        return dt.promote(a.dtype, b.dtype)
+    if isinstance(a, Expr) or isinstance(b, Expr):
+        e, lit = (a, b) if isinstance(a, Expr) else (b, a)
+        return dt.promote(e.dtype, ops._literal_type(lit, e.dtype))
+    return dt.promote(ops._literal_type(a, None), ops._literal_type(b, None))
 
 
 def _maybe_global(node) -> bool:

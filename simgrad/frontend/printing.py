@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import ast
+import re
 
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
@@ -16,6 +19,33 @@ def _spec(e: Expr) -> str:
     if t.bits == 64:
         return "%lld" if t.is_signed else "%llu"
     return "%d" if t.is_signed else "%u"
+
+
+_PY_SPEC = re.compile(r"^(?:.?[<>^=])?([+\- ]?)(#?)(0?)(\d*)(?:\.(\d+))?([dxXoeEfFgG]?)$")
+
+
+def _printf_spec(e: Expr, spec: str) -> tuple[str, Expr]:
+    """A Python format spec (`{x:8.3f}`) as a printf conversion for one kernel value: printf needs the
+    `ll` length for 64-bit ints and a double for float conversions of ints."""
+    from simgrad.lang import ops
+
+    m = _PY_SPEC.match(spec)
+    if m is None:
+        raise SimgradSyntaxError(f"format spec ':{spec}' is not supported in kernel print (use e.g. "
+                                 "':8.3f', ':d', ':x')")
+    sign, alt, zero, width, prec, kind = m.groups()
+    flags = ("-" if re.match(r"^.?<", spec) else "") + sign.replace("-", "") + alt + zero
+    t = e.dtype
+    if t.is_float and kind in "dxXo" and kind:
+        raise SimgradTypeError(f"format code '{kind}' needs an integer value, got {t}")
+    if kind in ("", "d") and not t.is_float:
+        kind = "d" if t.is_signed else "u"
+    elif kind == "":
+        kind = "g"
+    if kind in "eEfFgG" and not t.is_float:
+        e = ops.cast(e, dt.f64)
+    length = "ll" if not e.dtype.is_float and e.dtype.bits == 64 else ""
+    return "%" + flags + width + ("." + prec if prec else "") + length + kind, e
 
 
 class FormattedString:
@@ -47,7 +77,8 @@ def _format(v, spec: str = "") -> tuple[str, list]:
         return v.fmt, v.values
     if isinstance(v, Expr):
         if spec:
-            return "%" + spec.lstrip(":"), [v]
+            f, v = _printf_spec(v, spec.lstrip(":"))
+            return f, [v]
         return _spec(v), [v]
     if isinstance(v, Matrix):
         if v.m == 0:

@@ -5,6 +5,8 @@ and atomic updates are written once, here."""
 
 from __future__ import annotations
 
+import itertools
+
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
 from simgrad.frontend import context
@@ -139,6 +141,44 @@ class MatrixRef:
         if len(idx) == 1:
             return self.refs[idx[0]]
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)
+
+
+class DynamicElementRef:
+    """`v[i]` of a matrix ref with a run-time index (`for i in range(3): v[i] += 1`). Loads select among
+    the entries; stores and updates go to each candidate entry under `i == k` (matrices are small)."""
+
+    __slots__ = ("base", "key")
+
+    def __init__(self, base: MatrixRef, key: tuple):
+        self.base, self.key = base, key
+
+    def load(self):
+        return self.base.load()[self.key if len(self.key) > 1 else self.key[0]]
+
+    def _each(self, update) -> None:
+        dims = (self.base.n,) if self.base.m == 0 else (self.base.n, self.base.m)
+        if len(self.key) > len(dims):
+            raise SimgradTypeError(f"{len(self.key)} indices for a matrix of shape {dims}",
+                                   context.current_loc())
+        choices = [range(d) if isinstance(k, Expr) else [int(k)] for k, d in zip(self.key, dims)]
+        b = context.builder()
+        for combo in itertools.product(*choices):
+            cond = None
+            for k, c in zip(self.key, combo):
+                if isinstance(k, Expr):
+                    hit = ops.eq(k, c)
+                    cond = hit if cond is None else ops.bit_and(cond, hit)
+            stmt = b.emit(Op.IF, None, (cond.stmt,), nblocks=2)
+            with b.inside(stmt.blocks[0]):
+                update(self.base.index(combo))
+
+    def store(self, value) -> None:
+        self._each(lambda r: r.store(value))
+
+    def atomic(self, kind: str, value):
+        old = self.load()
+        self._each(lambda r: r.atomic(kind, value))
+        return old
 
 
 def _check(i, n: int) -> int:

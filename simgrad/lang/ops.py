@@ -31,11 +31,16 @@ def is_matrix(x) -> bool:
 
 
 def _literal_type(v, like: dt.DataType | None) -> dt.DataType:
+    """A float literal adopts a float `like` (x_f64 * 0.1 stays exact); an int literal adopts a float
+    `like`, and with an int `like` is default_ip promoted with it, as in Taichi: u8 * 10000 is an i32,
+    not a u8 that wraps (and an i64 value keeps i64 literals)."""
     if _np_scalar(v):
         return dt.from_numpy(v.dtype)
     if isinstance(v, float):
         return like if like is not None and like.is_float else dt.Defaults.fp
-    return like if like is not None else dt.Defaults.ip
+    if like is None:
+        return dt.Defaults.ip
+    return like if like.is_float else dt.promote(like, dt.Defaults.ip)
 
 
 def to_expr(v, like: dt.DataType | None = None) -> Expr:
@@ -122,7 +127,7 @@ def _ir_pow(a: Expr, b: Expr) -> Expr:
 def _ipow(base: Expr, n: int) -> Expr:
     """x ** n for a compile-time integer n: repeated squaring, as exact as multiplication."""
     if n == 0:
-        return to_expr(1, base.dtype)
+        return cast_expr(to_expr(1, base.dtype), base.dtype)
     if n < 0:
         if not base.dtype.is_float:
             base = cast_expr(base, dt.Defaults.fp)

@@ -1,0 +1,1 @@
+"""Language tests (a package, so module names cannot clash with tests/autodiff)."""
