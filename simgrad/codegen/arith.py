@@ -12,7 +12,7 @@ _ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op
 _UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
 _FCMP = {Op.LT: "olt", Op.LE: "ole", Op.GT: "ogt", Op.GE: "oge", Op.EQ: "oeq", Op.NE: "une"}
 _FLOAT_INTRINSIC = {Op.SQRT: "sqrt", Op.SIN: "sin", Op.COS: "cos", Op.EXP: "exp", Op.LOG: "log",
-                    Op.FLOOR: "floor", Op.CEIL: "ceil", Op.ROUND: "roundeven", Op.ABS: "fabs"}
+                    Op.FLOOR: "floor", Op.CEIL: "ceil", Op.ROUND: "round", Op.ABS: "fabs"}
 _LIBM = {Op.TAN: "tan", Op.ASIN: "asin", Op.ACOS: "acos", Op.TANH: "tanh", Op.ATAN2: "atan2"}
 
 

@@ -294,7 +294,8 @@ class KernelCodegen:
         stored = {id(x.operands[0]) for x in walk(s.blocks[0]) if x.op in (Op.LOCAL_STORE, Op.ATOMIC)}
         for k, v in enumerate(captured, start=1):
             by_value = v.op is Op.ALLOCA and id(v) not in stored  # read-only local: a private copy
-            ty = "ptr" if v.op is Op.ALLOCA and not by_value else llvm_type(v.type)
+            is_ptr = v.op is Op.GLOBAL_PTR or (v.op is Op.ALLOCA and not by_value)
+            ty = "ptr" if is_ptr else llvm_type(v.type)
             src = f.v(v)
             if by_value:
                 src = f.tmp("ld")

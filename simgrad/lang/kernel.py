@@ -81,6 +81,8 @@ class Kernel:
         self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]
         self._nparams = len(self.params)
         self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
+        self._has_defaults = any(p.default is not inspect.Parameter.empty
+                                 for p in self.signature.parameters.values())
         self._instances: dict = {}
         self._keep: list = []
         self._generation = -1
@@ -91,7 +93,7 @@ class Kernel:
         self.__wrapped__ = func
 
     def __call__(self, *args, **kwargs):
-        if kwargs:
+        if kwargs or (self._has_defaults and len(args) != self._nparams):
             args = self._bind(args, kwargs)
         from simgrad.lang import ad_hooks
 
@@ -158,8 +160,10 @@ class Kernel:
         if p.kind == "template":
             return _template_key(a, keep)
         if p.kind == "ndarray":
-            arr = a if hasattr(a, "dtype") else np.asarray(a)
-            return (str(arr.dtype), len(arr.shape))
+            if not hasattr(a, "dtype") or not hasattr(a, "shape"):
+                raise SimgradTypeError(f"kernel {self.name}: argument '{p.name}' expects an ndarray, got "
+                                       f"{type(a).__name__}")
+            return (str(a.dtype), len(a.shape))
         return None
 
     # -- compilation -------------------------------------------------------------------------------
@@ -281,7 +285,7 @@ class GradKernel:
 
     def __call__(self, *args, **kwargs):
         k = self.kernel
-        if kwargs:
+        if kwargs or (k._has_defaults and len(args) != k._nparams):
             args = k._bind(args, kwargs)
         prog = get_program()
         if k._generation != prog.generation:

@@ -280,7 +280,10 @@ def _math(op: Op, pyfn, keep_int: bool = False):
 
 
 def _py_round(x):
-    return float(builtins.round(x)) if isinstance(x, float) else x  # half to even, as Taichi
+    """Half away from zero, as Taichi rounds run-time values (and LLVM's llvm.round)."""
+    if not isinstance(x, float):
+        return x
+    return float(math.copysign(math.floor(abs(x) + 0.5), x))
 
 
 sqrt = _math(Op.SQRT, math.sqrt)

@@ -49,9 +49,12 @@ class Launcher:
                 t = p.dtype
                 scale = 8 // t.nbytes
                 env[f"_v_{t.name}"] = self.views[t.name]
+                if not t.is_float:  # Taichi refuses a float for an integer parameter rather than truncating
+                    lines.append(f"    if {p.name}.__class__ is float: _bad({self.kernel_name!r}, {p.name!r}, "
+                                 f"{p.name}, {t.name!r})")
                 lines.append(f"    try: _v_{t.name}[{(CTX_ARGS + p.slot) * scale}] = {p.name}")
-                lines.append(f"    except (TypeError, ValueError): _bad({self.kernel_name!r}, {p.name!r}, {p.name}, "
-                             f"{t.name!r})")
+                lines.append(f"    except (TypeError, ValueError, OverflowError): _bad({self.kernel_name!r}, "
+                             f"{p.name!r}, {p.name}, {t.name!r})")
             elif p.kind == "matrix":
                 t = p.dtype
                 scale = 8 // t.nbytes
@@ -59,7 +62,7 @@ class Launcher:
                 lines.append(f"    _m = _np_flat({p.name}, {p.count}, {self.kernel_name!r}, {p.name!r})")
                 for k in range(p.count):
                     lines.append(f"    _v_{t.name}[{(CTX_ARGS + p.slot + k) * scale}] = _m[{k}]")
-                env["_np_flat"] = _flat_matrix
+                env["_np_flat"] = _flat_matrix_int if not t.is_float else _flat_matrix
             elif p.kind == "ndarray":
                 lines.append(f"    _p, _s = _array({p.name}, {self.kernel_name!r}, {p.name!r}, {p.ndim_total})")
                 lines.append(f"    _buf[{CTX_ARGS + p.slot}] = _p")
@@ -97,6 +100,8 @@ class Launcher:
 
 
 def _bad_arg(kernel, param, value, type_name):
+    if isinstance(value, int):
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' = {value} is out of range for {type_name}")
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a {type_name} scalar, got "
                            f"{type(value).__name__}")
 
@@ -106,6 +111,13 @@ def _flat_matrix(value, count, kernel, param):
     if a.size != count:
         raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects {count} entries, got {a.size}")
     return a.tolist()
+
+
+def _flat_matrix_int(value, count, kernel, param):
+    vals = _flat_matrix(value, count, kernel, param)
+    if any(isinstance(v, float) for v in vals):
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects integer entries, got floats")
+    return vals
 
 
 def _array_info(a, kernel, param, ndim):

@@ -35,8 +35,6 @@ def test_wrong_argument_type_names_kernel_and_parameter():
         scale(1.0, [1.0, 2.0], [1.0, 2.0])
 
 
-@pytest.mark.xfail(strict=True, reason="lang/kernel.py _bind_params: np.asarray('...') has a '<U' dtype and "
-                   "dt.from_numpy raises a bare KeyError before the launcher's type check")
 def test_string_for_ndarray_parameter_names_kernel_and_parameter():
     @ti.kernel
     def scale(arr: ti.types.ndarray()):

@@ -296,8 +296,6 @@ def test_kernel_sees_python_globals_at_compile_time():
     assert out[None] == 5.0
 
 
-@pytest.mark.xfail(strict=True, reason="runtime/launch.py stores the argument through a numpy view, which "
-                   "truncates floats silently; needs an isinstance check in the generated launcher")
 def test_float_argument_to_integer_parameter():
     """Passing 2.7 to an ti.i32 parameter silently truncates; Taichi raises a type error instead."""
 
@@ -309,8 +307,6 @@ def test_float_argument_to_integer_parameter():
         k(2.7)
 
 
-@pytest.mark.xfail(strict=True, reason="runtime/launch.py catches only TypeError/ValueError around the "
-                   "argument store: numpy's OverflowError escapes without the kernel or parameter name")
 def test_out_of_range_integer_argument_names_the_parameter():
     @ti.kernel
     def k(a: ti.u8) -> ti.i32:

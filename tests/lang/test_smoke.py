@@ -53,3 +53,13 @@ def test_owned_updates_are_plain_but_shared_targets_stay_atomic():
     expect[0] = expect[-1] = 3
     np.testing.assert_array_equal(own.to_numpy(), np.full(n, 3))
     np.testing.assert_array_equal(mixed.to_numpy(), expect)
+
+
+def test_default_parameter_values_apply_to_positional_calls():
+    @ti.kernel
+    def k(a: ti.i32, b: ti.i32 = 7) -> ti.i32:
+        return a * 10 + b
+
+    assert k(1) == 17
+    assert k(1, 2) == 12
+    assert k(a=3) == 37
