@@ -7,29 +7,40 @@ differentiate it entry by entry.
 Method (written from the textbook description of cyclic Jacobi and Givens QR):
 
 * `sym_eig`: cyclic Jacobi rotations on the (symmetrised) matrix, then a select-based sorting network.
-* `svd`: cyclic Jacobi on AᵀA gives V; the columns of B = A V are then orthogonal, and a Givens QR of B
-  (B = U R) gives U, with R diagonal up to rounding: S = diag(R). Sorting V's columns by decreasing
-  σ² first makes R's diagonal decreasing, and because U and V are products of rotations (column swaps
-  negate one column), both are rotations: the sign of det(A) ends up on the last, smallest singular
-  value, Taichi's convention for 3x3 (we use it for 2x2 too, where Taichi lets U be a reflection).
+* `svd`: one-sided (Hestenes) cyclic Jacobi rotates the columns of B = A V until they are orthogonal
+  (the rotations of Jacobi on AᵀA, without forming AᵀA); a Givens QR of B (B = U R) then gives U, with
+  R diagonal up to rounding: S = diag(R). Sorting V's columns by decreasing σ² first makes R's diagonal
+  decreasing, and because U and V are products of rotations (column swaps negate one column), both are
+  rotations: the sign of det(A) ends up on the last, smallest singular value, Taichi's convention for
+  3x3 (we use it for 2x2 too, where Taichi lets U be a reflection).
 
 Degenerate inputs (zero matrix, repeated singular values) stay finite in value *and* derivative: the
-input is first scaled by its largest entry, and every sqrt/rsqrt/division whose argument can be zero
-is guarded by a `tiny` (1e-18 in f32, 1e-60 in f64) relative to that scale: tiny enough to change no
-result above rounding level, large enough that tiny**2 is a normal number (derivatives like -a/y**2
-stay finite). Python scope computes in Python floats with the f64 constants.
+input is first scaled by a power of two to a largest entry in [1, 2), and every sqrt/rsqrt/division
+whose argument can be zero is guarded by a `tiny` (1e-18 in f32, 1e-60 in f64) relative to that
+scale: tiny enough to change no result above rounding level, large enough that tiny**2 is a normal
+number (derivatives like -a/y**2 stay finite). Python scope computes in Python floats with the f64
+constants.
 """
 
 from __future__ import annotations
+
+import math
 
 from simgrad import dtypes as dt
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 
-# sweeps of cyclic Jacobi for 3x3: convergence is quadratic, these leave off-diagonals below rounding
-_SWEEPS = {32: 5, 64: 6}
+# sweeps of cyclic Jacobi for 3x3 (one rotation is exact for 2x2): convergence is quadratic; 4 sweeps
+# already reach rounding level on clustered and ill-conditioned inputs, the last one is margin
+_SWEEPS = {32: 4, 64: 5}
 _TINY = {32: 1e-18, 64: 1e-60}
+# 2x2 polar: ((below, scale up), (above, scale down), floor of r2); f32: every normal |x| lands in
+# [2^-40, 2^50], so r2 in [2^-80, 2^101] and r2^-1.5 < 2^120 (finite); f64 has room to spare
+_POLAR_RANGE = {
+    32: ((2.0**-40, 2.0**90), (2.0**40, 2.0**-80), 2.0**-100),
+    64: ((2.0**-300, 2.0**700), (2.0**300, 2.0**-600), 2.0**-660),
+}
 _PAIRS = {2: [(0, 1)], 3: [(0, 1), (0, 2), (1, 2)]}
 
 
@@ -66,21 +77,23 @@ class _Work:
         return [[e[i * self.n + j] for j in range(self.n)] for i in range(self.n)]
 
     def scaled(self):
-        """(A / s, s) with s the largest |entry| (floored at tiny): makes the guards scale-free and keeps
-        AᵀA clear of f32 overflow/underflow."""
+        """(A * 2**-e, 2**e) with 2**e ~ the largest |entry|: makes the guards scale-free and keeps AᵀA
+        clear of overflow/underflow. A power of two scales exactly, and e is piecewise constant (floor),
+        so no derivative flows through it: the result is exactly differentiable as f(A 2**-e) 2**e."""
+        lo, hi = (-126, 126) if self.bits == 32 else (-1022, 1022)
         s = ops.max(*[ops.abs(e) for e in self.entries])
-        s = ops.max(s, self.tiny)
-        inv = 1.0 / s
-        return [e * inv for e in self.entries], s
+        e = ops.floor(ops.log(ops.max(s, 2.0**lo)) / math.log(2.0))
+        e = ops.min(ops.max(e, float(lo)), float(hi))
+        inv = ops.pow(2.0, -e)
+        return [x * inv for x in self.entries], ops.pow(2.0, e)
 
-    def zero(self):
-        return 0.0 if self.dtype is None else ops.cast(0.0, self.dtype)
-
-    def one(self):
-        return 1.0 if self.dtype is None else ops.cast(1.0, self.dtype)
+    def const(self, v: float):
+        """A constant of the working type (two bare literals in a select would get default_fp)."""
+        return v if self.dtype is None else ops.cast(v, self.dtype)
 
     def eye(self):
-        return [[self.one() if i == j else self.zero() for j in range(self.n)] for i in range(self.n)]
+        """Python floats, also in kernels: the first rotations applied to them fold at trace time."""
+        return [[1.0 if i == j else 0.0 for j in range(self.n)] for i in range(self.n)]
 
 
 def _rotation(app, aqq, apq, tiny):
@@ -119,17 +132,22 @@ def _jacobi(S, V, p, q, tiny):
 
 
 def _col_dot(B, i, j):
-    return sum_([B[k][i] * B[k][j] for k in range(len(B))])
+    return _sum([B[k][i] * B[k][j] for k in range(len(B))])
 
 
 def _one_sided(w: _Work, B):
-    """One-sided (Hestenes) Jacobi: rotate B's columns (B <- B J, V <- V J) until they are orthogonal.
-    The same rotations as two-sided Jacobi on BᵀB, but recomputing the inner products from the current
-    columns keeps small singular values accurate (BᵀB itself would square the condition number)."""
+    """One-sided (Hestenes) Jacobi: rotate B's columns (B <- B J, V <- V J) until they are orthogonal;
+    returns V. The same rotations as two-sided Jacobi on BᵀB, but the
+    off-diagonal inner product is recomputed from the current columns each time, which keeps small
+    singular values accurate (BᵀB itself would square the condition number); the squared norms follow
+    the rotations by the exact 2x2 update (they only steer the angles)."""
     V = w.eye()
+    nrm = [_col_dot(B, i, i) for i in range(w.n)]
     for _ in range(w.sweeps):
         for p, q in _PAIRS[w.n]:
-            c, s, _t = _rotation(_col_dot(B, p, p), _col_dot(B, q, q), _col_dot(B, p, q), w.tiny)
+            g = _col_dot(B, p, q)
+            c, s, t = _rotation(nrm[p], nrm[q], g, w.tiny)
+            nrm[p], nrm[q] = nrm[p] - t * g, nrm[q] + t * g
             _rotate_cols(B, p, q, c, s)
             _rotate_cols(V, p, q, c, s)
     return V
@@ -145,18 +163,19 @@ def _eig_sym(w: _Work, S):
     return [S[i][i] for i in range(w.n)], V
 
 
-def _sort(vals, V, descending: bool, keep_det: bool):
-    """Sort `vals` (with V's columns) by a fixed compare-swap network; with keep_det a swap negates one
-    column so det(V) is unchanged."""
+def _sort(vals, mats, descending: bool, keep_det: bool):
+    """Sort `vals`, permuting the columns of each matrix in `mats` alike, by a fixed compare-swap network;
+    with keep_det a swap also negates one column so determinants are unchanged."""
     n = len(vals)
     for i, j in _PAIRS[n]:
         a, b = vals[i], vals[j]
         swap = ops.lt(a, b) if descending else ops.gt(a, b)
         vals[i], vals[j] = ops.select(swap, b, a), ops.select(swap, a, b)
-        for k in range(n):
-            x, y = V[k][i], V[k][j]
-            V[k][i] = ops.select(swap, y, x)
-            V[k][j] = ops.select(swap, -x if keep_det else x, y)
+        for M in mats:
+            for k in range(n):
+                x, y = M[k][i], M[k][j]
+                M[k][i] = ops.select(swap, y, x)
+                M[k][j] = ops.select(swap, -x if keep_det else x, y)
 
 
 def _givens_qr(w: _Work, B):
@@ -190,11 +209,9 @@ def svd(A, dt=None):
     B = w.rows(a)
     V = _one_sided(w, B)
     norms = [_col_dot(B, i, i) for i in range(w.n)]
-    _sort(norms, V, descending=True, keep_det=True)
-    B = w.rows(a)
-    B = [[sum_([B[i][k] * V[k][j] for k in range(w.n)]) for j in range(w.n)] for i in range(w.n)]
+    _sort(norms, [B, V], descending=True, keep_det=True)
     U = _givens_qr(w, B)
-    S = [[B[i][i] * scale if i == j else w.zero() for j in range(w.n)] for i in range(w.n)]
+    S = [[B[i][i] * scale if i == j else 0.0 for j in range(w.n)] for i in range(w.n)]
     return Matrix(U), Matrix(S), Matrix(V)
 
 
@@ -207,7 +224,7 @@ def sym_eig(A, dt=None):
     R = w.rows(a)
     S = [[R[i][i] if i == j else 0.5 * (R[i][j] + R[j][i]) for j in range(w.n)] for i in range(w.n)]
     lam, V = _eig_sym(w, S)
-    _sort(lam, V, descending=w.n == 2, keep_det=False)
+    _sort(lam, [V], descending=w.n == 2, keep_det=False)
     return Matrix([x * scale for x in lam]), Matrix(V)
 
 
@@ -218,9 +235,18 @@ def polar_decompose(A, dt=None):
     if w.n == 2:
         a, b, c, d = w.entries
         x, y = a + d, c - b
+        # The rotation is (x, y) normalised. This runs per particle in MPM codes, so instead of svd's
+        # log/pow scaling, (x, y) is brought into a safe range by a select between constant powers of two
+        # (exact, and piecewise constant: no derivative through it). Then x^2 + y^2 neither overflows
+        # nor underflows, and rsqrt(r2)**3 in the derivative stays finite; r2 <= floor means x = y = 0
+        # (A = [[p, q], [q, -p]]: every rotation is equally close, take I) or a subnormal A.
+        m = ops.max(ops.abs(x), ops.abs(y))
+        (lo, up), (hi, down), floor = _POLAR_RANGE[w.bits]
+        one = w.const(1.0)
+        k = ops.select(m < lo, w.const(up), one) * ops.select(m > hi, w.const(down), one)
+        x, y = x * k, y * k
         r2 = x * x + y * y
-        # r2 == 0 only for A = [[p, q], [q, -p]], where every rotation is equally close: take I
-        ok = r2 > w.tiny * (a * a + b * b + c * c + d * d)
+        ok = r2 > floor
         inv = ops.rsqrt(ops.select(ok, r2, 1.0))
         cs, sn = ops.select(ok, x * inv, 1.0), ops.select(ok, y * inv, 0.0)
         U = Matrix([[cs, -sn], [sn, cs]])
@@ -229,7 +255,7 @@ def polar_decompose(A, dt=None):
     return U @ V.transpose(), V @ S @ V.transpose()
 
 
-def sum_(xs):
+def _sum(xs):
     out = xs[0]
     for x in xs[1:]:
         out = out + x

@@ -1,10 +1,16 @@
-"""`ti.math`: GLSL-style helpers over scalars and small vectors (both scopes)."""
+"""`ti.math`: GLSL-style helpers over scalars and small vectors (both scopes).
+
+Formulas follow Taichi's documented semantics (e.g. sign(0) == 0, step(e, e) == 1, refract returns 0
+under total internal reflection, the transform helpers give 4x4 homogeneous matrices); unlike Taichi,
+they also work in Python scope. Results keep the precision of their inputs."""
 
 from __future__ import annotations
 
 import math as _m
 
+from simgrad import dtypes as _dt
 from simgrad.lang import ops
+from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.types import matrix as _matrix
 from simgrad.lang.types import vector as _vector
@@ -41,7 +47,7 @@ def distance(a, b):
 
 
 def normalize(v):
-    return v.normalized()
+    return v / v.norm()
 
 
 def clamp(x, lo, hi):
@@ -57,7 +63,7 @@ def sign(x):
 
 
 def step(edge, x):
-    return ops.select(ops.lt(x, edge), 0.0, 1.0)
+    return ops.select(ops.ge(x, edge), 1.0, 0.0)
 
 
 def smoothstep(e0, e1, x):
@@ -74,7 +80,7 @@ def mod(x, y):
 
 
 def log2(x):
-    return ops.log(x) * (1.0 / _m.log(2.0))
+    return ops.log(x) / _m.log(2.0)
 
 
 def exp2(x):
@@ -137,8 +143,146 @@ def cdiv(a, b):
     return Matrix([(a[0] * b[0] + a[1] * b[1]) / d, (a[1] * b[0] - a[0] * b[1]) / d])
 
 
+def cinv(z):
+    return cconj(z) / z.dot(z)
+
+
+def _polar(z):
+    """(z != 0, |z|^2, arg z), with z == 0 replaced by 1 inside so that neither the value nor the
+    derivative of the untaken branch is infinite (pow(0, -k), atan2(0, 0)'s 0/0)."""
+    nz = ops.bit_or(ops.ne(z[0], 0), ops.ne(z[1], 0))
+    x, y = ops.select(nz, z[0], 1.0), ops.select(nz, z[1], 0.0)
+    return nz, x * x + y * y, ops.atan2(y, x)
+
+
 def cpow(z, n):
-    r = z
-    for _ in range(n - 1):
-        r = cmul(r, z)
-    return r
+    """z**n for a real (not only integer) exponent, in polar form; 0 for z == 0, as Taichi."""
+    nz, r2, a = _polar(z)
+    r = ops.pow(r2, n / 2.0)
+    return Matrix([ops.select(nz, r * ops.cos(a * n), 0.0), ops.select(nz, r * ops.sin(a * n), 0.0)])
+
+
+def csqrt(z):
+    """The principal square root (non-negative real part); csqrt(0) == 0."""
+    nz, r2, a = _polar(z)
+    r = ops.sqrt(ops.sqrt(r2))
+    return Matrix([ops.select(nz, r * ops.cos(a / 2.0), 0.0), ops.select(nz, r * ops.sin(a / 2.0), 0.0)])
+
+
+def cexp(z):
+    r = ops.exp(z[0])
+    return Matrix([r * ops.cos(z[1]), r * ops.sin(z[1])])
+
+
+def clog(z):
+    """The principal logarithm: argument in (-pi, pi]."""
+    return Matrix([ops.log(z.dot(z)) / 2.0, ops.atan2(z[1], z[0])])
+
+
+def vdir(ang):
+    """The unit 2D vector at angle `ang`."""
+    return Matrix([ops.cos(ang), ops.sin(ang)])
+
+
+# -- 4x4 homogeneous transforms --------------------------------------------------------------------------
+def _homogeneous(r3):
+    return Matrix([[*r3[0], 0.0], [*r3[1], 0.0], [*r3[2], 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+def translate(dx, dy, dz):
+    return Matrix([[1.0, 0.0, 0.0, dx], [0.0, 1.0, 0.0, dy], [0.0, 0.0, 1.0, dz], [0.0, 0.0, 0.0, 1.0]])
+
+
+def scale(sx, sy, sz):
+    return Matrix([[sx, 0.0, 0.0, 0.0], [0.0, sy, 0.0, 0.0], [0.0, 0.0, sz, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+def rot_by_axis(axis, ang):
+    """Rotation about `axis` (normalised here) by `ang`, with Taichi's orientation: the transpose of the
+    right-handed Rodrigues matrix, i.e. c I + (1 - c) a a^T - s [a]x."""
+    a = axis / axis.norm()
+    c, s = ops.cos(ang), ops.sin(ang)
+    x, y, z = a[0], a[1], a[2]
+    k = 1.0 - c
+    return _homogeneous([
+        [c + k * x * x, k * x * y + s * z, k * x * z - s * y],
+        [k * x * y - s * z, c + k * y * y, k * y * z + s * x],
+        [k * x * z + s * y, k * y * z - s * x, c + k * z * z],
+    ])
+
+
+def _rx(a):
+    c, s = ops.cos(a), ops.sin(a)
+    return Matrix([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a):
+    c, s = ops.cos(a), ops.sin(a)
+    return Matrix([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(a):
+    c, s = ops.cos(a), ops.sin(a)
+    return Matrix([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rot_yaw_pitch_roll(yaw, pitch, roll):
+    """Euler rotation, Taichi's convention: (Ry(yaw) Rx(pitch) Rz(roll))^T as a 4x4 matrix."""
+    r = (_ry(yaw) @ _rx(pitch) @ _rz(roll)).transpose()
+    return _homogeneous([[r[i, j] for j in range(3)] for i in range(3)])
+
+
+def rotation3d(ang_x, ang_y, ang_z):
+    """Taichi's rotation3d: rot_yaw_pitch_roll(ang_z, ang_x, ang_y)."""
+    return rot_yaw_pitch_roll(ang_z, ang_x, ang_y)
+
+
+# -- bit counting -----------------------------------------------------------------------------------------
+_UNSIGNED = {_dt.i8: _dt.u8, _dt.i16: _dt.u16, _dt.i32: _dt.u32, _dt.i64: _dt.u64}
+
+
+def _popcnt_bits(x, bits):
+    """SWAR population count of an unsigned kernel value of `bits` (32 or 64) bits."""
+    m1, m2, m4 = (0x5555555555555555, 0x3333333333333333, 0x0F0F0F0F0F0F0F0F)
+    mask = (1 << bits) - 1
+    x = x - ops.bit_and(ops.shr(x, 1), m1 & mask)
+    x = ops.bit_and(x, m2 & mask) + ops.bit_and(ops.shr(x, 2), m2 & mask)
+    x = ops.bit_and(x + ops.shr(x, 4), m4 & mask)
+    return ops.shr(x * (0x0101010101010101 & mask), bits - 8)
+
+
+def _bits_of(x):
+    if isinstance(x, Expr):
+        if x.dtype.is_float or x.dtype.bits not in (32, 64):
+            raise TypeError(f"popcnt/clz take a 32- or 64-bit integer, got {x.dtype}")
+        return x.dtype.bits
+    return _dt.Defaults.ip.bits
+
+
+def popcnt(x):
+    """Number of set bits (of the two's complement pattern), in x's type."""
+    if isinstance(x, Matrix):
+        return x._like([popcnt(e) for e in x.entries])
+    bits = _bits_of(x)
+    if not isinstance(x, Expr):
+        return bin(int(x) & ((1 << bits) - 1)).count("1")
+    return _as(_popcnt_bits(_as(x, _UNSIGNED.get(x.dtype, x.dtype)), bits), x.dtype)
+
+
+def clz(x):
+    """Number of leading zero bits (32 for 0 in 32 bits), in x's type."""
+    if isinstance(x, Matrix):
+        return x._like([clz(e) for e in x.entries])
+    bits = _bits_of(x)
+    if not isinstance(x, Expr):
+        return bits - (int(x) & ((1 << bits) - 1)).bit_length()
+    y = _as(x, _UNSIGNED.get(x.dtype, x.dtype))
+    k = 1
+    while k < bits:  # smear the highest set bit downwards; then clz = bits - popcount
+        y = ops.bit_or(y, ops.shr(y, k))
+        k *= 2
+    return _as(bits - _popcnt_bits(y, bits), x.dtype)
+
+
+def _as(x, t):
+    return x if x.dtype is t else ops.bit_cast(x, t)

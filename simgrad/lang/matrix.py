@@ -13,7 +13,18 @@ from simgrad import dtypes as dt
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 
-_SWIZZLE = {"x": 0, "y": 1, "z": 2, "w": 3, "r": 0, "g": 1, "b": 2, "a": 3}
+_SWIZZLE_GROUPS = ("xyzw", "rgba", "stpq")
+_SWIZZLE = {c: i for g in _SWIZZLE_GROUPS for i, c in enumerate(g)}
+
+
+def _swizzle_indices(name: str) -> list[int] | None:
+    """Indices of a swizzle like "zyx" (letters of one group, Taichi's rule), or None."""
+    if not 0 < len(name) <= 4:
+        return None
+    for g in _SWIZZLE_GROUPS:
+        if all(c in g for c in name):
+            return [g.index(c) for c in name]
+    return None
 
 
 class Matrix:
@@ -53,6 +64,13 @@ class Matrix:
     @property
     def is_vector(self) -> bool:
         return self.m == 0
+
+    @property
+    def ndim(self) -> int:
+        return 1 if self.m == 0 else 2
+
+    def get_shape(self) -> tuple[int, ...]:
+        return self.shape
 
     def _like(self, entries) -> Matrix:
         return Matrix(n=self.n, m=self.m, _entries=entries)
@@ -99,6 +117,8 @@ class Matrix:
         return (i % self.n) * self.m + (j % self.m)
 
     def __getitem__(self, key):
+        if isinstance(key, slice) or (isinstance(key, tuple) and any(isinstance(k, slice) for k in key)):
+            return self._slice(key)
         idx = self._flat_index(key)
         if idx is not None:
             return self.entries[idx]
@@ -106,6 +126,22 @@ class Matrix:
         if self.m and len(key) == 1 and not isinstance(key[0], Expr):
             return self._row(int(key[0]))
         return self._dynamic_get(key)
+
+    def _slice(self, key):
+        """Compile-time slices: v[1:], m[0, :], m[:2, 1:] (a vector when one index is an int)."""
+        key = key if isinstance(key, tuple) else (key,)
+        dims = (self.n,) if self.m == 0 else (self.n, self.m)
+        if len(key) == 1 and self.m:
+            key = (key[0], slice(None))
+        if len(key) != len(dims):
+            raise IndexError(f"{len(key)} indices for a matrix of shape {self.shape}")
+        ranges = [range(*k.indices(d)) if isinstance(k, slice) else [int(k) % d] for k, d in zip(key, dims)]
+        if self.m == 0:
+            return Matrix([self.entries[i] for i in ranges[0]])
+        rows = [[self.entries[i * self.m + j] for j in ranges[1]] for i in ranges[0]]
+        if all(isinstance(k, slice) for k in key):
+            return Matrix(rows)
+        return Matrix([e for r in rows for e in r])
 
     def _dynamic_get(self, key):
         """Index with kernel values: a chain of selects over the candidates."""
@@ -131,22 +167,31 @@ class Matrix:
             raise IndexError("assigning through a kernel-value index is not supported on a temporary matrix")
         self.entries[idx] = value
 
+    def _swizzle(self, name: str) -> list[int]:
+        idx = _swizzle_indices(name)
+        if idx is None or name.startswith("_"):
+            raise AttributeError(f"'Matrix' object has no attribute '{name}'")
+        if self.m != 0 or max(idx) >= self.n:
+            raise AttributeError(f"a {self.shape} {'vector' if self.m == 0 else 'matrix'} has no swizzle "
+                                 f"'{name}'")
+        return idx
+
     def __getattr__(self, name):
-        if name and all(c in _SWIZZLE for c in name) and len(name) <= 4:
-            if len(name) == 1:
-                return self.entries[_SWIZZLE[name]]
-            return Matrix([self.entries[_SWIZZLE[c]] for c in name])
-        raise AttributeError(name)
+        idx = self._swizzle(name)
+        if len(idx) == 1:
+            return self.entries[idx[0]]
+        return Matrix([self.entries[i] for i in idx])
 
     def __setattr__(self, name, value):
         if name in Matrix.__slots__:
             object.__setattr__(self, name, value)
-        elif all(c in _SWIZZLE for c in name):
-            vals = [value] if len(name) == 1 else list(value)
-            for c, v in zip(name, vals):
-                self.entries[_SWIZZLE[c]] = v
-        else:
-            raise AttributeError(name)
+            return
+        idx = self._swizzle(name)
+        vals = [value] if len(idx) == 1 else list(value)
+        if len(vals) != len(idx):
+            raise ValueError(f"swizzle '{name}' takes {len(idx)} values, got {len(vals)}")
+        for i, v in zip(idx, vals):
+            self.entries[i] = v
 
     # -- arithmetic --------------------------------------------------------------------------------
     def __add__(self, o):
@@ -176,8 +221,14 @@ class Matrix:
     def __floordiv__(self, o):
         return ops.floordiv(self, o)
 
+    def __rfloordiv__(self, o):
+        return ops.floordiv(o, self)
+
     def __mod__(self, o):
         return ops.mod(self, o)
+
+    def __rmod__(self, o):
+        return ops.mod(o, self)
 
     def __pow__(self, o):
         return ops.pow(self, o)
@@ -215,19 +266,41 @@ class Matrix:
     def __and__(self, o):
         return ops.bit_and(self, o)
 
+    def __rand__(self, o):
+        return ops.bit_and(o, self)
+
     def __or__(self, o):
         return ops.bit_or(self, o)
+
+    def __ror__(self, o):
+        return ops.bit_or(o, self)
 
     def __xor__(self, o):
         return ops.bit_xor(self, o)
 
+    def __rxor__(self, o):
+        return ops.bit_xor(o, self)
+
+    def __lshift__(self, o):
+        return ops.shl(self, o)
+
+    def __rshift__(self, o):
+        return ops.shr(self, o)
+
+    def __invert__(self):
+        return ops.bit_not(self)
+
     __hash__ = None  # type: ignore[assignment]
 
     def __matmul__(self, o):
+        """matrix @ matrix, matrix @ vector (a vector), vector @ matrix (row vector times matrix, a vector,
+        as Taichi), vector @ vector (the dot product)."""
         o = o if isinstance(o, Matrix) else Matrix(o)
         if self.m == 0 and o.m == 0:
+            if self.n != o.n:
+                raise ValueError(f"matmul of {self.shape} and {o.shape}")
             return self.dot(o)
-        a = self if self.m else Matrix([[e] for e in self.entries])
+        a = self if self.m else Matrix([list(self.entries)])
         b = o if o.m else Matrix([[e] for e in o.entries])
         if a.m != b.n:
             raise ValueError(f"matmul of {self.shape} and {o.shape}")
@@ -235,6 +308,8 @@ class Matrix:
                  for j in range(b.m)] for i in range(a.n)]
         if o.m == 0:
             return Matrix([r[0] for r in rows])
+        if self.m == 0:
+            return Matrix(rows[0])
         return Matrix(rows)
 
     def __rmatmul__(self, o):
@@ -267,23 +342,31 @@ class Matrix:
 
     def dot(self, o):
         o = o if isinstance(o, Matrix) else Matrix(o)
+        if self.m != 0 or o.m != 0 or self.n != o.n:
+            raise ValueError(f"dot needs two vectors of one size, got {self.shape} and {o.shape}")
         return _sum([ops.mul(a, b) for a, b in zip(self.entries, o.entries)])
 
-    def norm_sqr(self):
-        return self.dot(self)
-
     def norm(self, eps=0):
-        s = self.norm_sqr()
+        """sqrt(sum of squares + eps); also the Frobenius norm of a matrix."""
+        s = _sum([ops.mul(e, e) for e in self.entries])
         return ops.sqrt(ops.add(s, eps) if not _is_zero(eps) else s)
 
     def norm_inv(self, eps=0):
         return ops.rsqrt(ops.add(self.norm_sqr(), eps))
 
+    def norm_sqr(self):
+        return _sum([ops.mul(e, e) for e in self.entries])
+
     def normalized(self, eps=0):
-        inv = ops.truediv(1.0, self.norm(eps)) if _is_zero(eps) else ops.rsqrt(ops.add(self.norm_sqr(), eps))
-        return ops.mul(self, inv)
+        """v / (|v| + eps): Taichi's formula (eps is added to the norm, not under the sqrt)."""
+        n = self.norm()
+        return ops.mul(self, ops.truediv(1.0, n if _is_zero(eps) else ops.add(n, eps)))
 
     def cross(self, o):
+        """2D: the scalar a.x*b.y - a.y*b.x; 3D: the cross-product vector."""
+        o = o if isinstance(o, Matrix) else Matrix(o)
+        if self.m != 0 or o.m != 0 or self.n != o.n or self.n not in (2, 3):
+            raise ValueError(f"cross needs two 2D or two 3D vectors, got {self.shape} and {o.shape}")
         a, b = self.entries, o.entries
         if self.n == 2:
             return ops.sub(ops.mul(a[0], b[1]), ops.mul(a[1], b[0]))
@@ -294,10 +377,15 @@ class Matrix:
         ])
 
     def outer_product(self, o):
+        o = o if isinstance(o, Matrix) else Matrix(o)
+        if self.m != 0 or o.m != 0:
+            raise ValueError(f"outer_product needs two vectors, got {self.shape} and {o.shape}")
         return Matrix([[ops.mul(x, y) for y in o.entries] for x in self.entries])
 
     def trace(self):
-        return _sum([self.entries[i * self.m + i] for i in range(min(self.n, self.m))])
+        if self.n != self.m:
+            raise ValueError(f"trace of a non-square {self.shape} matrix")
+        return _sum([self.entries[i * self.m + i] for i in range(self.n)])
 
     def _e(self, i, j):
         return self.entries[i * self.m + j]
@@ -318,7 +406,10 @@ class Matrix:
         return _sum(terms)
 
     def inverse(self):
+        """Adjugate over determinant (unrolled cofactors): exact formulas, no pivoting, for n <= 4."""
         n = self.n
+        if n != self.m:
+            raise ValueError("inverse of a non-square matrix")
         if n == 1:
             return Matrix([[ops.truediv(1.0, self.entries[0])]])
         inv_det = ops.truediv(1.0, self.determinant())
@@ -363,14 +454,26 @@ class Matrix:
 
     @staticmethod
     def zero(dt_, n, m=None):
+        return Matrix._filled(0, dt_, n, m)
+
+    @staticmethod
+    def one(dt_, n, m=None):
+        return Matrix._filled(1, dt_, n, m)
+
+    @staticmethod
+    def _filled(v, dt_, n, m):
         if m is None:
-            return Matrix([ops.cast(0, dt_) for _ in range(n)])
-        return Matrix([[ops.cast(0, dt_) for _ in range(m)] for _ in range(n)])
+            return Matrix([ops.cast(v, dt_) for _ in range(n)])
+        return Matrix([[ops.cast(v, dt_) for _ in range(m)] for _ in range(n)])
 
     @staticmethod
     def diag(dim, val):
-        return Matrix([[val if i == j else 0 * val if isinstance(val, Expr) else 0 for j in range(dim)]
-                       for i in range(dim)])
+        """val on the diagonal, zeros of val's type elsewhere."""
+        if isinstance(val, Expr):
+            zero = ops.cast(0, val.dtype)
+        else:
+            zero = 0.0 if isinstance(val, float) else 0
+        return Matrix([[val if i == j else zero for j in range(dim)] for i in range(dim)])
 
     @staticmethod
     def unit(n, i, dt=None):
@@ -385,8 +488,14 @@ class Matrix:
         return Matrix.rows(cols).transpose()
 
 
-class Vector(Matrix):
-    """`ti.Vector([...])`: builds a Matrix; `ti.Vector.field` makes a vector field."""
+class _VectorMeta(type):
+    def __instancecheck__(cls, obj):
+        return isinstance(obj, Matrix) and obj.m == 0
+
+
+class Vector(Matrix, metaclass=_VectorMeta):
+    """`ti.Vector([...])`: builds a Matrix (m == 0); isinstance(x, ti.Vector) holds for any vector.
+    `ti.Vector.field` makes a vector field."""
 
     def __new__(cls, arr=None, dt=None, **kw):
         return Matrix(arr, dt=dt)
