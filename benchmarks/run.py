@@ -71,7 +71,7 @@ def main():
     tpy = taichi_python()
     results: dict[tuple, dict] = {}
     rows = [r for r in ROWS if not args.case or r[1] in args.case]
-    for label, case, metric, extra, _ in rows:
+    for _label, case, _metric, extra, _ in rows:
         for fw, py in (("simgrad", sys.executable), ("taichi", tpy)):
             key = (fw, case, tuple(extra))
             if py is None or key in results:
@@ -82,7 +82,7 @@ def main():
                 print(f"warning: {e}", file=sys.stderr)
                 results[key] = {}
     table = []
-    for label, case, metric, extra, lower in rows:
+    for label, case, metric, extra, _lower in rows:
         ours = results.get(("simgrad", case, tuple(extra)), {}).get(metric)
         theirs = results.get(("taichi", case, tuple(extra)), {}).get(metric)
         ratio = ours / theirs if ours is not None and theirs else None
@@ -101,7 +101,7 @@ def main():
     def fmt(v):
         return "-" if v is None else f"{v:.3g}"
 
-    header = f"| case | simgrad | taichi | simgrad/taichi |\n|---|---|---|---|"
+    header = "| case | simgrad | taichi | simgrad/taichi |\n|---|---|---|---|"
     lines = [f"| {label} | {fmt(a)} | {fmt(b)} | {fmt(r)} |" for label, a, b, r in table]
     print(f"{time.strftime('%Y-%m-%d')} on {platform.machine()} {os.cpu_count()} cores, "
           f"python {platform.python_version()}")

@@ -14,8 +14,9 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-import simgrad as ti  # noqa: E402
 from _common import out_dir, parse_args, plot_losses, progress  # noqa: E402
+
+import simgrad as ti  # noqa: E402
 
 
 def build(steps: int = 512, dt: float = 0.002, real=ti.f32):

@@ -29,10 +29,10 @@ def llvm_type(t: dt.DataType) -> str:
 def const_text(value, t: dt.DataType) -> str:
     if t.is_float:
         if t is dt.f16:
-            return "0xH%04X" % np.float16(value).view(np.uint16)
+            return f"0xH{np.float16(value).view(np.uint16):04X}"
         if t is dt.f32:
             value = float(np.float32(value))
-        return "0x%016X" % struct.unpack("<Q", struct.pack("<d", float(value)))[0]
+        return "0x{:016X}".format(struct.unpack("<Q", struct.pack("<d", float(value)))[0])
     if t is dt.u1:
         return "true" if value else "false"
     return str(int(value))
@@ -52,7 +52,7 @@ class ModuleText:
     def string(self, s: str) -> str:
         data = s.encode() + b"\0"
         name = f"@.str{len(self.globals)}"
-        esc = "".join(chr(b) if 32 <= b < 127 and b not in (34, 92) else "\\%02X" % b for b in data)
+        esc = "".join(chr(b) if 32 <= b < 127 and b not in (34, 92) else f"\\{b:02X}" for b in data)
         self.globals.append(f'{name} = private unnamed_addr constant [{len(data)} x i8] c"{esc}"')
         return name
 

@@ -77,7 +77,7 @@ class GlobalRef:
         if kind == "sub":
             kind, v = "add", ops.neg(v)
         if kind in ("and", "or", "xor") and self.dtype.is_float:
-            raise SimgradTypeError(f"atomic bit operation on a float field", context.current_loc())
+            raise SimgradTypeError("atomic bit operation on a float field", context.current_loc())
         s = context.builder().emit(Op.ATOMIC, self.dtype, (self.ptr(), v.stmt), {"kind": kind})
         return Expr(s)
 

@@ -11,7 +11,6 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.runtime.memory import Memory
 
-
 DEFAULT_TAPE_ENTRIES = 1 << 16
 
 

@@ -80,7 +80,7 @@ def test_tape_size_is_inferred_from_static_bounds_beyond_the_default():
     def run():
         for i in x:
             s = x[i]
-            for k in range(200_000):
+            for _k in range(200_000):
                 s = s + 1e-4 * ti.sin(s)
             y[i] = s
 
