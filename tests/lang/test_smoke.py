@@ -63,3 +63,20 @@ def test_default_parameter_values_apply_to_positional_calls():
     assert k(1) == 17
     assert k(1, 2) == 12
     assert k(a=3) == 37
+
+
+def test_vector_scatter_under_contention_is_exact():
+    """`g[c] += v` on a 2-vector f32 field (one 64-bit compare-and-swap per update) loses no update."""
+    n, cells = 400_000, 3
+    g = ti.Vector.field(2, ti.f32, shape=cells)
+    idx = ti.field(ti.i32, shape=n)
+    idx.from_numpy((np.arange(n) % cells).astype(np.int32))
+
+    @ti.kernel
+    def scatter():
+        for p in range(n):
+            g[idx[p]] += ti.Vector([1.0, 2.0])
+
+    scatter()
+    counts = np.bincount(np.arange(n) % cells).astype(np.float32)
+    np.testing.assert_array_equal(g.to_numpy(), np.stack([counts, 2 * counts], axis=1))
