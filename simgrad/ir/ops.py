@@ -6,6 +6,8 @@ from enum import Enum, auto
 
 
 class Op(Enum):
+    __hash__ = object.__hash__  # members are singletons: identity hashing, at C speed (hot in every pass)
+
     # memory
     CONST = auto()
     ARG = auto()  # a scalar kernel argument (attrs: slot)

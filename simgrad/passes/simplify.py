@@ -45,8 +45,13 @@ def _fold(s: Stmt):
     return None
 
 
+_IDENTITY_OPS = {Op.ADD, Op.SUB, Op.MUL, Op.CAST}
+
+
 def _identity(s: Stmt):
     """x + 0, x * 1, x - 0 -> x (integers, and floats where exact)."""
+    if s.op not in _IDENTITY_OPS:
+        return None
     if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
         a, b = s.operands
         cb, ca = _const(b), _const(a)
