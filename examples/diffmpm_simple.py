@@ -8,7 +8,6 @@ The grid is a single buffer: each substep is @ti.ad.grad_replaced and its gradie
     python examples/diffmpm_simple.py [--iters 20] [--out out/diffmpm_simple] [--steps 512]
 """
 
-from __future__ import annotations
 
 import os
 import sys

@@ -56,14 +56,16 @@ def build(steps: int = 512, dt: float = 0.002, real=ti.f32):
         c = x[t, 0]
         loss[None] = (c[0] - target[0]) ** 2 + (c[1] - target[1]) ** 2
 
+    np_real = np.float64 if real == ti.f64 else np.float32
+
     def setup():
         x0 = np.zeros((steps, n_particles, 2))
         x0[0] = [[0.3, 0.5], [0.3, 0.4], [0.4, 0.4]]
-        x.from_numpy(x0.astype(real.np))
+        x.from_numpy(x0.astype(np_real))
         v.fill(0)
         anchor_a.from_numpy(np.array([0, 1, 2], dtype=np.int32))
         anchor_b.from_numpy(np.array([1, 2, 0], dtype=np.int32))
-        rest_length.from_numpy(np.array([0.1, 0.1, 0.14], dtype=real.np))
+        rest_length.from_numpy(np.array([0.1, 0.1, 0.14], dtype=np_real))
         stiffness.fill(100.0)
 
     def forward():
