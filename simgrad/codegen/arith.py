@@ -84,7 +84,7 @@ def lower_binary(f, s) -> str:
         return r
     if t.is_float:
         if op in _FLT_BIN:
-            f.emit(f"{r} = {_FLT_BIN[op]} {ty} {x}, {y}")
+            f.emit(f"{r} = {_FLT_BIN[op]} {f.gen.fm}{ty} {x}, {y}")
             return r
         if op is Op.POW:
             return _intrinsic(f, "pow", t, [x, y])
@@ -147,7 +147,7 @@ def lower_unary(f, s) -> str:
     op = s.op
     r = f.tmp("u")
     if op is Op.NEG:
-        f.emit(f"{r} = fneg {ty} {x}" if t.is_float else f"{r} = sub {ty} 0, {x}")
+        f.emit(f"{r} = fneg {f.gen.fm}{ty} {x}" if t.is_float else f"{r} = sub {ty} 0, {x}")
         return r
     if op is Op.BIT_NOT:
         f.emit(f"{r} = xor {ty} {x}, -1")
@@ -163,7 +163,7 @@ def lower_unary(f, s) -> str:
         return r
     if op is Op.RSQRT:
         sq = _intrinsic(f, "sqrt", t, [x])
-        f.emit(f"{r} = fdiv {ty} 1.0, {sq}")
+        f.emit(f"{r} = fdiv {f.gen.fm}{ty} 1.0, {sq}")
         return r
     if op in _FLOAT_INTRINSIC:
         return _intrinsic(f, _FLOAT_INTRINSIC[op], t, [x])

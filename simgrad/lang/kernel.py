@@ -184,7 +184,7 @@ class Kernel:
         ir.ret_slot = slots[1]
         run_pipeline(ir, transform)
         symbol = f"sg_{self.name}{name_suffix}_{id(ir):x}"
-        cg = KernelCodegen(ir, symbol, debug=prog.config.debug)
+        cg = KernelCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
         text = cg.generate()
         # the disk cache is keyed by the IR text with the symbol name made stable
         stable = text.replace(symbol, "sg_kernel")

@@ -23,6 +23,7 @@ class Config:
         self.random_seed = int(kw.get("random_seed", 0))
         self.kernel_profiler = bool(kw.get("kernel_profiler", False))
         self.ad_stack_size = int(kw.get("ad_stack_size", 0) or 0)
+        self.fast_math = bool(kw.get("fast_math", True))  # Taichi's default; see codegen.llvm.FAST_MATH_FLAGS
         self.offline_cache = bool(kw.get("offline_cache", True))
         self.offline_cache_file_path = kw.get("offline_cache_file_path")
         threads = kw.get("cpu_max_num_threads") or int(os.environ.get("SIMGRAD_NUM_THREADS", 0) or 0)
