@@ -106,7 +106,10 @@ def write_gif(ti, images, out: str, name: str, framerate: int = 20) -> str:
     for img in images:
         video.write_frame(img)
     video.make_video(gif=True, mp4=False)
-    video.clean_frames()
+    for fn in video.frame_fns:  # (not video.clean_frames(): Taichi's removes paths relative to the cwd)
+        path = os.path.join(video.get_frame_directory(), fn)
+        if os.path.exists(path):
+            os.remove(path)
     try:
         os.rmdir(video.get_frame_directory())
     except OSError:  # not empty: frames of someone else
@@ -141,7 +144,10 @@ def plot_losses_smoothed(losses, path: str, title: str, window: int = 50) -> Non
 def finish_gif(video) -> None:
     """Build only the GIF of a ti.tools.VideoManager, then delete its frame PNGs and their empty folder."""
     video.make_video(gif=True, mp4=False)
-    video.clean_frames()
+    for fn in video.frame_fns:  # (not video.clean_frames(): Taichi's removes paths relative to the cwd)
+        path = os.path.join(video.get_frame_directory(), fn)
+        if os.path.exists(path):
+            os.remove(path)
     try:
         os.rmdir(video.get_frame_directory())
     except OSError:

@@ -122,14 +122,15 @@ class FunctionText:
         self.array_shapes: dict[tuple[int, int], str] = {}
         self.tid = "%tid" if in_task else "0"
         self.shared: set = set()  # locals of the caller that a task writes through a pointer
+        self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
 
     def tmp(self, hint: str = "t") -> str:
         self.counter += 1
-        return f"%{hint}{self.counter}"
+        return f"%{hint}.{self.counter}"  # the dot keeps hints ending in digits from clashing
 
     def label(self, hint: str) -> str:
         self.counter += 1
-        return f"{hint}{self.counter}"
+        return f"{hint}.{self.counter}"
 
     def emit(self, line: str) -> None:
         self.body.append("  " + line)
@@ -252,7 +253,8 @@ class KernelCodegen:
         (tree1, c1, terms1, _), (tree2, c2, terms2, _) = t1.layout, t2.layout
         if tree1 != tree2 or terms1 != terms2 or c2 != c1 + 4 or c1 % 8 or any(t.stride % 8 for t in terms1):
             return False
-        if _owned_by_iteration(f, p1) or _owned_by_iteration(f, p2):
+        if _owned_by_iteration(f, p1) or _owned_by_iteration(f, p2) or id(a) in f.reduction_of \
+                or id(b) in f.reduction_of:
             return False
         self.lower_global_ptr(f, p1)
         f.names[p2] = f.names[p1]
@@ -353,6 +355,7 @@ class KernelCodegen:
                             if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
                             and not _injective_in(s, x.operands[0], t.inside)}
         t.prologue.append("  %ctx = load ptr, ptr %clo")
+        reductions = _reductions(s, t.inside, self.uses)
         clo = f.tmp("clo")
         f.prologue.append(f"  {clo} = alloca [{len(captured) + 1} x i64], align 8")
         f.emit(f"store ptr %ctx, ptr {clo}")
@@ -383,7 +386,21 @@ class KernelCodegen:
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
         t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
+        for _key, (place, adds) in reductions.items():  # each thread sums into its own variable first
+            acc = t.tmp("red")
+            rty = llvm_type(adds[0].type)
+            t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].type)}, ptr {acc}"]
+            for a in adds:
+                t.reduction_of[id(a)] = acc
         self._serial_loop(t, s, lo, hi)
+        for _key, (place, adds) in reductions.items():  # ... and adds it to the shared place once per chunk
+            rty = llvm_type(adds[0].type)
+            total = t.tmp("sum")
+            t.emit(f"{total} = load {rty}, ptr {t.reduction_of[id(adds[0])]}")
+            if place.op is Op.GLOBAL_PTR:
+                self.lower_global_ptr(t, place)
+            op = "fadd" if adds[0].type.is_float else "add"
+            t.emit(f"{t.tmp('old')} = atomicrmw {op} ptr {t.v(place)}, {rty} {total} monotonic")
         t.emit("ret void")
         self.module.functions.append(t.text())
         b64, e64 = f.tmp("b"), f.tmp("e")
@@ -447,6 +464,14 @@ class KernelCodegen:
             op = {"add": "add", "and": "and", "or": "or", "xor": "xor", "xchg": "xchg",
                   "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
         r = f.tmp("old")
+        acc = f.reduction_of.get(id(s))
+        if acc is not None:  # a reduction: this thread's own partial sum
+            f.emit(f"{r} = load {ty}, ptr {acc}")
+            n = f.tmp("new")
+            f.emit(_combine_text(n, op, ty, r, f.v(v), t))
+            f.emit(f"store {ty} {n}, ptr {acc}")
+            f.names[s] = r
+            return
         private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p)
         if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
             f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
@@ -606,6 +631,38 @@ def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
         elif o.op is not Op.CONST and id(o) in inside:
             return False
     return direct or bool(divs & mods)
+
+
+def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
+    """Places a parallel loop only accumulates into (`total[None] += v`, `s += v` on a kernel-scope
+    local): every access is an atomic add whose old value is unused, at loop-invariant indices.
+    Returns {key: (a pointer statement, [the ATOMIC statements])}; these sum per thread first."""
+    groups: dict = {}
+    spoiled: set = set()
+    inside = inside | {id(loop)}  # the loop index varies too
+    for x in walk(loop.blocks[0]):
+        for k, o in enumerate(x.operands):
+            is_place = (o.op is Op.ALLOCA and id(o) not in inside) or o.op is Op.GLOBAL_PTR
+            if not is_place:
+                continue
+            if o.op is Op.GLOBAL_PTR:
+                if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):
+                    spoiled.add(id(o.attrs["target"]))
+                    continue
+                key = (id(o.attrs["target"]), tuple(id(i) if i.op is not Op.CONST else ("c", i.attrs["value"])
+                                                    for i in o.operands))
+            else:
+                key = (id(o),)
+            reducing = x.op is Op.ATOMIC and k == 0 and x.attrs["kind"] == "add" and not uses.get(id(x))
+            if not reducing:
+                spoiled.add(key[0])
+                continue
+            place, adds = groups.setdefault(key, (o, []))
+            adds.append(x)
+    by_target: dict = {}
+    for key in groups:
+        by_target.setdefault(key[0], []).append(key)
+    return {key: groups[key] for key in groups if key[0] not in spoiled and len(by_target[key[0]]) == 1}
 
 
 def _free_values(loop: Stmt) -> list[Stmt]:

@@ -80,3 +80,32 @@ def test_vector_scatter_under_contention_is_exact():
     scatter()
     counts = np.bincount(np.arange(n) % cells).astype(np.float32)
     np.testing.assert_array_equal(g.to_numpy(), np.stack([counts, 2 * counts], axis=1))
+
+
+def test_reductions_sum_per_thread_then_once_into_the_shared_place():
+    """`total[None] += v` and `s += v` on a kernel-scope local reduce per thread; the gradient of such a
+    reduction (x.grad[i] at the loop index) must still land on every element."""
+    n = 1 << 16
+    x = ti.field(ti.f64, shape=n, needs_grad=True)
+    total = ti.field(ti.f64, shape=(), needs_grad=True)
+    x.from_numpy(np.arange(n, dtype=np.float64) % 7)
+
+    @ti.kernel
+    def reduce_field():
+        for i in x:
+            total[None] += 3.0 * x[i]
+
+    @ti.kernel
+    def reduce_local() -> ti.f64:
+        s = 0.0
+        for i in x:
+            s += x[i] * x[i]
+        return s
+
+    reduce_field()
+    xs = x.to_numpy()
+    assert total[None] == 3.0 * xs.sum()
+    assert reduce_local() == (xs * xs).sum()
+    total.grad[None] = 1.0
+    reduce_field.grad()
+    np.testing.assert_array_equal(x.grad.to_numpy(), np.full(n, 3.0))
