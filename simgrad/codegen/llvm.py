@@ -386,7 +386,7 @@ class KernelCodegen:
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
         t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
-        for _key, (place, adds) in reductions.items():  # each thread sums into its own variable first
+        for _place, adds in reductions.values():  # each thread sums into its own variable first
             acc = t.tmp("red")
             rty = llvm_type(adds[0].type)
             t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].type)}, ptr {acc}"]
