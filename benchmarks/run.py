@@ -37,6 +37,14 @@ ROWS = [
 ]
 
 
+def _env() -> dict:
+    """Child environment: quiet taichi, and bytecode caching on as on a user's machine (this sandbox sets
+    PYTHONDONTWRITEBYTECODE, which would charge every process for compiling our Python sources)."""
+    env = dict(os.environ, TI_LOG_LEVEL="error")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
 def taichi_python() -> str | None:
     try:
         import taichi  # noqa: F401
@@ -48,7 +56,7 @@ def taichi_python() -> str | None:
 
 def run_case(python: str, framework: str, case: str, extra: list[str]) -> dict:
     cmd = [python, CASES, "--framework", framework, "--case", case, *extra]
-    env = dict(os.environ, TI_LOG_LEVEL="error")
+    env = _env()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
     for line in proc.stdout.splitlines():
         if line.startswith("RESULT "):
