@@ -185,10 +185,12 @@ def train(iters: int, out: str | None, n_side=40, n_grid=64, steps=512, lr=10.0,
         if frames:
             gui = ti.GUI("diffmpm_simple", res=512, background_color=0xFFFFFF, show_gui=False)
             xs = sim.x.to_numpy()
-            for s in range(0, steps, max(1, steps // 8)):
-                gui.circles(xs[s], radius=1.5, color=0x3366CC)
-                gui.circle(sim.target.to_numpy(), radius=6, color=0xEE3333)
-                gui.show(os.path.join(out, f"frame_{s:04d}.png"))
+            snaps = list(range(0, steps, max(1, steps // 6))) + [steps - 1]
+            for k, s in enumerate(snaps):  # one picture: the throw, darker as time goes on
+                shade = int(0xCC - 0xAA * k / max(len(snaps) - 1, 1))
+                gui.circles(xs[s], radius=1.2, color=(shade << 16) | (shade << 8) | 0xFF)
+            gui.circle(sim.target.to_numpy(), radius=7, color=0xEE3333)
+            gui.show(os.path.join(out, "trajectory.png"))
     return losses, seconds
 
 
