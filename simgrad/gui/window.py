@@ -14,28 +14,18 @@ import numpy as np
 
 from . import _tk
 from .canvas import ImageCanvas, cook_image, to_numpy
+from .gui import GUI as _GUI
 from .image import imresize
 
 __all__ = ["Window", "Canvas", "Gui"]
 
 PRESS = _tk.PRESS
 RELEASE = _tk.RELEASE
-SHIFT = "Shift"
-ALT = "Alt"
-CTRL = "Control"
-ESCAPE = "Escape"
-RETURN = "Return"
-TAB = "Tab"
-BACKSPACE = "BackSpace"
-SPACE = " "
-UP = "Up"
-DOWN = "Down"
-LEFT = "Left"
-RIGHT = "Right"
-CAPSLOCK = "Caps_Lock"
-LMB = "LMB"
-MMB = "MMB"
-RMB = "RMB"
+# key names are the GUI's (ti.ui and ti.GUI share them)
+SHIFT, ALT, CTRL, ESCAPE = _GUI.SHIFT, _GUI.ALT, _GUI.CTRL, _GUI.ESCAPE
+RETURN, TAB, BACKSPACE, SPACE = _GUI.RETURN, _GUI.TAB, _GUI.BACKSPACE, _GUI.SPACE
+UP, DOWN, LEFT, RIGHT, CAPSLOCK = _GUI.UP, _GUI.DOWN, _GUI.LEFT, _GUI.RIGHT, _GUI.CAPSLOCK
+LMB, MMB, RMB = _GUI.LMB, _GUI.MMB, _GUI.RMB
 
 
 def _vertices(v):

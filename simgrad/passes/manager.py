@@ -9,10 +9,9 @@ from simgrad.ir.printer import print_kernel
 
 
 def _debug() -> int:
-    try:
-        return int(os.environ.get("SIMGRAD_DEBUG", "0"))
-    except ValueError:
-        return 0
+    from simgrad.runtime.jit import debug_level
+
+    return debug_level()
 
 
 def _verify_enabled() -> bool:

@@ -17,7 +17,8 @@ import llvmlite.binding as llvm
 _COMPILER_VERSION = "simgrad-jit-1"
 
 
-def _debug_level() -> int:
+def debug_level() -> int:
+    """SIMGRAD_DEBUG: 1 names passes, 2 prints IR after each, 3 the LLVM IR, 4 the assembly."""
     try:
         return int(os.environ.get("SIMGRAD_DEBUG", "0"))
     except ValueError:
@@ -82,7 +83,7 @@ class Jit:
         module.data_layout = self.data_layout
         module.verify()
         self._optimize(module)
-        level = _debug_level()
+        level = debug_level()
         if level >= 3:
             print(str(module))
         if level >= 4:
