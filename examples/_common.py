@@ -86,19 +86,6 @@ def actuation_colors(act, active, passive=0x404040):
     return np.where(np.asarray(active), rgb, np.uint32(passive)).astype(np.uint32)
 
 
-def save_gif(ti, frames, out: str, name: str, framerate: int = 15) -> None:
-    """Write `frames` (images as from gui.get_image()) to out/<name>.gif through ti.tools.VideoManager."""
-    video = ti.tools.VideoManager(output_dir=out, video_filename=name, framerate=framerate, automatic_build=False)
-    for img in frames:
-        video.write_frame(img)
-    video.make_video(mp4=False, gif=True)
-    video.clean_frames()
-    try:
-        os.rmdir(video.get_frame_directory())
-    except OSError:
-        pass
-
-
 def write_gif(ti, images, out: str, name: str, framerate: int = 20) -> str:
     """Assemble frames ((W, H, 3) floats in [0, 1]) into out/<name>.gif through ti.tools.VideoManager, then
     delete the frame PNGs it wrote. Returns the GIF's path."""

@@ -14,7 +14,7 @@ particles (checkpointing by recomputation) before running the adjoint kernels.
 
 Defaults are the paper's: a 128 x 128 grid, dt = 1e-3, 1024 steps, 2 particles per cell width (2976
 particles), E = 10, gravity 3.8, 4 sine waves at omega = 20, actuation strength 4, learning rate 0.1;
-they take about 2.5 s per iteration on this 2-core CPU, so all of them are kept. The paper trains 80-100
+they take about 2 s per iteration on this 2-core CPU, so all of them are kept. The paper trains 80-100
 iterations; the default here is 40 (run with --iters 100 for the full optimisation).
 
     python examples/diffmpm.py [--iters 40] [--out out/diffmpm] [--steps 1024] [--n-grid 128]
@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import actuation_colors, out_dir, parse_args, plot_losses, progress, save_gif  # noqa: E402
+from _common import actuation_colors, out_dir, parse_args, plot_losses, progress, write_gif  # noqa: E402
 
 import simgrad as ti  # noqa: E402
 
@@ -242,16 +242,20 @@ def render(sim, xs: np.ndarray, acts: np.ndarray, out: str, prefix: str, n_png: 
         gui.circles(xs[s], radius=1.5, color=actuation_colors(act, ids >= 0))
         gui.line((0.0, 3 / sim.n_grid), (1.0, 3 / sim.n_grid), radius=2, color=0x222222)
         if s in gif_steps:
-            frames.append(gui.get_image())
+            frames.append(gui.get_image()[:, :, :3])
         gui.show(os.path.join(out, f"{prefix}{s:04d}.png") if s in png_steps else None)
     if frames:
-        save_gif(ti, frames, out, "diffmpm")
+        write_gif(ti, frames, out, "diffmpm")
 
 
 def train(iters: int, out: str | None, n_grid: int = 128, steps: int = 1024, lr: float = 0.1,
           frames: int = 6, gif_frames: int = 48, timings: dict | None = None):
-    """Optimise the controller for `iters` iterations; returns (losses, seconds per iteration)."""
+    """Optimise the controller for `iters` iterations; returns (losses, seconds per iteration).
+
+    The time step grows as the grid coarsens (1e-3 at 128 cells), so that few steps still make a gait."""
     dt = 1e-3 * 128 / n_grid
+    if out is not None:
+        os.makedirs(out, exist_ok=True)
     sim = build(n_grid=n_grid, steps=steps, dt=dt)
     sim.reset()
     losses, durations = [], []

@@ -14,13 +14,14 @@ As in examples/diffmpm.py, the particle state of every step is stored and each s
 @ti.ad.grad_replaced with a gradient that recomputes the grid before running the adjoint kernels.
 
 Sizes. The paper's run (64^3 grid, 3 particles per cell width, block size 0.1: 30.5K particles, 512 steps
-of dt = 2e-3, 40-100 iterations with learning rate 30) needs about a minute per iteration here (2 CPU
-cores) and 3 GB for the stored states. The default keeps the paper's 64^3 grid, time step, 512 steps,
-robot geometry and physical constants (E = 10, gravity 10, omega = 40, actuation strength 5) but seeds
-the blocks with 1 particle per cell width (1.1K particles, ~3 s per iteration); --per-cell 3 gives the
-paper's particle count.
+of dt = 2e-3, 40-100 iterations with learning rate 30) takes about 33 s per iteration on this 2-core CPU
+(35K particles with our rounding of the block sizes) and 3.5 GB for the stored states and their
+gradients. The default keeps the paper's robot geometry, time step, 512 steps, physical constants (E = 10,
+gravity 10, omega = 40, actuation strength 5) and learning rate, but uses a 48^3 grid seeded with 2
+particles per cell width (4.5K particles, ~6 s per iteration) and 30 iterations; --n-grid 64 --per-cell 3
+gives the paper's resolution.
 
-    python examples/diffmpm3d.py [--iters 30] [--out out/diffmpm3d] [--steps 512] [--n-grid 64] [--per-cell 1]
+    python examples/diffmpm3d.py [--iters 30] [--out out/diffmpm3d] [--steps 512] [--n-grid 48] [--per-cell 2]
 """
 
 import math
@@ -31,7 +32,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import actuation_colors, out_dir, parse_args, plot_losses, progress, save_gif  # noqa: E402
+from _common import actuation_colors, out_dir, parse_args, plot_losses, progress, write_gif  # noqa: E402
 
 import simgrad as ti  # noqa: E402
 
@@ -263,9 +264,9 @@ def build(scene: Scene, n_grid: int = 64, steps: int = 512, dt: float = 2e-3):
 
 
 def project(xs: np.ndarray) -> np.ndarray:
-    """Oblique view of the middle of the box, z in [0.2, 0.8]: depth moves a point up and to the right."""
-    u = (xs[:, 0] + 0.4 * (xs[:, 2] - 0.2)) / 1.24
-    w = (xs[:, 1] + 0.3 * (xs[:, 2] - 0.2)) / 1.24 + 0.1
+    """Oblique view of the region where the robot walks: depth (z) moves a point up and to the right."""
+    u = 1.1 * (xs[:, 0] + 0.3 * (xs[:, 2] - 0.25)) - 0.05
+    w = 1.1 * (xs[:, 1] + 0.25 * (xs[:, 2] - 0.25)) + 0.1
     return np.stack([u, w], axis=1)
 
 
@@ -278,7 +279,7 @@ def render(sim, xs: np.ndarray, acts: np.ndarray, out: str, prefix: str, n_png: 
     png_steps = set(np.linspace(0, n - 1, n_png).astype(int).tolist()) if n_png else set()
     gif_steps = set(np.linspace(0, n - 1, n_gif).astype(int).tolist()) if n_gif else set()
     y0 = 3 / sim.n_grid
-    floor = project(np.array([[0, y0, 0.2], [1, y0, 0.2], [1, y0, 0.8], [0, y0, 0.8]], dtype=np.float64))
+    floor = project(np.array([[0, y0, 0.25], [1, y0, 0.25], [1, y0, 0.65], [0, y0, 0.65]], dtype=np.float64))
     frames = []
     for s in sorted(png_steps | gif_steps):
         order = np.argsort(-xs[s][:, 2])  # far (large z) first
@@ -289,14 +290,16 @@ def render(sim, xs: np.ndarray, acts: np.ndarray, out: str, prefix: str, n_png: 
             gui.line(floor[a], floor[(a + 1) % 4], radius=1.5, color=0x888888)
         gui.circles(project(xs[s][order]), radius=2.5, color=colors[order])
         if s in gif_steps:
-            frames.append(gui.get_image())
+            frames.append(gui.get_image()[:, :, :3])
         gui.show(os.path.join(out, f"{prefix}{s:04d}.png") if s in png_steps else None)
     if frames:
-        save_gif(ti, frames, out, name)
+        write_gif(ti, frames, out, name)
 
 
 def run(sim, name: str, iters: int, out, lr: float, frames: int, gif_frames: int, timings):
     """Gradient descent on the controller of `sim`; returns (losses, seconds per iteration)."""
+    if out is not None:
+        os.makedirs(out, exist_ok=True)
     sim.reset()
     losses, durations = [], []
     for it in progress(iters, name):
@@ -320,7 +323,7 @@ def run(sim, name: str, iters: int, out, lr: float, frames: int, gif_frames: int
     return losses, seconds
 
 
-def train(iters: int, out, n_grid: int = 32, steps: int = 512, per_cell: float = 2, block: float = 0.1,
+def train(iters: int, out, n_grid: int = 48, steps: int = 512, per_cell: float = 2, block: float = 0.1,
           dt: float = 2e-3, lr: float = 30.0, frames: int = 6, gif_frames: int = 48, timings: dict | None = None):
     """Optimise the robot's controller for `iters` iterations; returns (losses, seconds per iteration)."""
     scene = Scene(1 / n_grid, per_cell)
@@ -331,7 +334,7 @@ def train(iters: int, out, n_grid: int = 32, steps: int = 512, per_cell: float =
 
 def main():
     args = parse_args("Teach a 3-D MPM soft robot to walk (open-loop sine controller)", iters=30, steps=512,
-                      n_grid=32, per_cell=2.0)
+                      n_grid=48, per_cell=2.0)
     ti.init(arch=ti.cpu, default_fp=real)
     out = out_dir(args.out, "diffmpm3d")
     timings = {}

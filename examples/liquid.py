@@ -7,12 +7,13 @@ MPM grid. The loss is minus the x-displacement of the robot's centre of mass (th
 gradient descent on the controller's weights and biases, through the liquid's dynamics.
 
 Sizes. The paper's run (64^3 grid, 3 particles per cell width, block size 0.08: 43.5K particles, 512 steps
-of dt = 2e-3, 450 iterations with learning rate 10) would take over a minute per iteration on this 2-core
-CPU. The default keeps the paper's geometry (blocks of 0.08, a 0.2 x 0.05 x 0.2 slab of liquid), time
-step, 512 steps and physical constants, but uses a 32^3 grid with 2 particles per cell width (1.3K
-particles, a few seconds per iteration), and 30 iterations.
+of dt = 2e-3, 450 iterations with learning rate 10) would take about half a minute per iteration on this
+2-core CPU (estimated from diffmpm3d at that resolution), and 450 iterations of it. The default keeps the
+paper's geometry (blocks of 0.08, a 0.2 x 0.05 x 0.2 slab of liquid), time step, 512 steps and physical
+constants, but uses a 48^3 grid with 2 particles per cell width (4.3K particles, ~6-7 s per iteration)
+and 30 iterations with learning rate 30 instead of 450 with 10.
 
-    python examples/liquid.py [--iters 30] [--out out/liquid] [--steps 512] [--n-grid 32] [--per-cell 2]
+    python examples/liquid.py [--iters 30] [--out out/liquid] [--steps 512] [--n-grid 48] [--per-cell 2]
 """
 
 import os
@@ -30,8 +31,8 @@ def robot_with_liquid(scene: Scene, block: float = 0.08) -> None:
     scene.add_rect(0.1, 0.15, 0.1, 0.2, 0.05, 0.2, -1, FLUID)
 
 
-def train(iters: int, out, n_grid: int = 32, steps: int = 512, per_cell: float = 2, block: float = 0.08,
-          dt: float = 2e-3, lr: float = 10.0, frames: int = 6, gif_frames: int = 48, timings: dict | None = None):
+def train(iters: int, out, n_grid: int = 48, steps: int = 512, per_cell: float = 2, block: float = 0.08,
+          dt: float = 2e-3, lr: float = 30.0, frames: int = 6, gif_frames: int = 48, timings: dict | None = None):
     """Optimise the robot's controller for `iters` iterations; returns (losses, seconds per iteration)."""
     scene = Scene(1 / n_grid, per_cell)
     robot_with_liquid(scene, block)
@@ -40,7 +41,7 @@ def train(iters: int, out, n_grid: int = 32, steps: int = 512, per_cell: float =
 
 
 def main():
-    args = parse_args("Teach a 3-D MPM soft robot carrying liquid to walk", iters=30, steps=512, n_grid=32,
+    args = parse_args("Teach a 3-D MPM soft robot carrying liquid to walk", iters=30, steps=512, n_grid=48,
                       per_cell=2.0)
     ti.init(arch=ti.cpu, default_fp=real)
     out = out_dir(args.out, "liquid")
