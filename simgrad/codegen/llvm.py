@@ -468,7 +468,7 @@ class KernelCodegen:
         if acc is not None:  # a reduction: this thread's own partial sum
             f.emit(f"{r} = load {ty}, ptr {acc}")
             n = f.tmp("new")
-            f.emit(_combine_text(n, op, ty, r, f.v(v), t))
+            f.emit(_combine_text(n, op, ty, r, f.v(v), self.fm))
             f.emit(f"store {ty} {n}, ptr {acc}")
             f.names[s] = r
             return
@@ -476,7 +476,7 @@ class KernelCodegen:
         if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
             f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
             n = f.tmp("new")
-            f.emit(_combine_text(n, op, ty, r, f.v(v), t))
+            f.emit(_combine_text(n, op, ty, r, f.v(v), self.fm))
             f.emit(f"store {ty} {n}, ptr {f.v(p)}")
         else:
             f.emit(f"{r} = atomicrmw {op} ptr {f.v(p)}, {ty} {f.v(v)} monotonic")
@@ -592,11 +592,11 @@ class KernelCodegen:
         f.names[s] = random_value(f, s.type)
 
 
-def _combine_text(dst, op, ty, a, b, t) -> str:
+def _combine_text(dst, op, ty, a, b, fm: str) -> str:
     if op == "xchg":
         return f"{dst} = select i1 true, {ty} {b}, {ty} {b}"
     if op in ("fadd", "add", "and", "or", "xor"):
-        return f"{dst} = {op} {FAST_MATH_FLAGS if op == 'fadd' else ''}{ty} {a}, {b}"
+        return f"{dst} = {op} {fm if op == 'fadd' else ''}{ty} {a}, {b}"
     intr = {"fmin": "minnum", "fmax": "maxnum", "min": "smin", "max": "smax", "umin": "umin", "umax": "umax"}[op]
     suffix = {"float": "f32", "double": "f64", "half": "f16"}.get(ty, ty)
     return f"{dst} = call {ty} @llvm.{intr}.{suffix}({ty} {a}, {ty} {b})"

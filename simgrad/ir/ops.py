@@ -76,7 +76,6 @@ class Op(Enum):
     PRINT = auto()
     ASSERT = auto()
     RANDOM = auto()
-    DEBUG_CHECK = auto()  # bounds check (operands: index, extent)
     # autodiff: the per-thread tape (adstack) of values the adjoint needs, in LIFO order
     TAPE_RESET = auto()
     TAPE_PUSH = auto()
@@ -100,7 +99,7 @@ CONTROL = {Op.IF, Op.RANGE_FOR, Op.WHILE}
 # Statements with an effect beyond their value: never removed by dead-code elimination.
 SIDE_EFFECTS = {
     Op.LOCAL_STORE, Op.GLOBAL_STORE, Op.ATOMIC, Op.RET_STORE, Op.IF, Op.RANGE_FOR, Op.WHILE, Op.BREAK,
-    Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.DEBUG_CHECK, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP,
+    Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP,
 }
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = BINARY_ARITH | COMPARE | UNARY_MATH | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG,

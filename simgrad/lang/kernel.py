@@ -128,6 +128,13 @@ class Kernel:
         self._generation = prog.generation
 
     def _launch_for(self, args, grad: bool = False):
+        return self._instance_for(args, grad).launch
+
+    def instance(self, args) -> Instance:
+        """The (compiled) forward instance these arguments launch."""
+        return self._instance_for(args, grad=False)
+
+    def _instance_for(self, args, grad: bool) -> Instance:
         if len(args) != self._nparams:
             names = ", ".join(p.name for p in self.params)
             raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
@@ -147,14 +154,7 @@ class Kernel:
                     self._simple_launch = inst.launch
             cache[key] = inst
             self._keep.extend(keep)
-        return inst.launch
-
-    def instance(self, args) -> Instance:
-        """The (compiled) forward instance these arguments launch."""
-        self._launch_for(args)
-        keep: list = []
-        key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
-        return self._instances[key]
+        return inst
 
     def _key_part(self, p: Param, a, keep):
         if p.kind == "template":
