@@ -60,7 +60,11 @@ def lower_global_ptr(gen, f, s) -> str:
             f.emit(f"{a} = add nuw nsw i64 {off}, {m}")
             off = a
         p = f.tmp("ptr")
-        f.emit(f"{p} = getelementptr inbounds i8, ptr {f.root(tree_id)}, i64 {off}")
+        private = f.private_roots.get(id(target))
+        if private is not None:  # this thread's copy (codegen/privatize.py); its root points before it
+            f.emit(f"{p} = getelementptr i8, ptr {private}, i64 {off}")
+        else:
+            f.emit(f"{p} = getelementptr inbounds i8, ptr {f.root(tree_id)}, i64 {off}")
         return p
     # an ndarray argument: C-contiguous, element components as trailing dimensions
     arg = target.arg

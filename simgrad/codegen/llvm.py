@@ -5,7 +5,8 @@ into a task function `void task(ptr closure, i64 lo, i64 hi, i32 tid)` that the 
 parallel_for splits across threads; the closure carries every value the loop body uses from outside.
 
 Context layout (8-byte slots): 0 roots table, 1 error buffer, 2 RNG states, 3 parallel_for,
-4 tape of the tasks, 5 tape capacity per thread (entries), 6 tape of the serial part, 7.. arguments.
+4 tape of the tasks, 5 tape capacity per thread (entries), 6 tape of the serial part, 7 number of pool
+threads, 8.. arguments.
 """
 
 from __future__ import annotations
@@ -15,11 +16,12 @@ import struct
 import numpy as np
 
 from simgrad import dtypes as dt
+from simgrad.codegen.privatize import emit_private_launch, private_regions
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
 
-CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, CTX_ARGS = range(8)
+CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, CTX_NTHREADS, CTX_ARGS = range(9)
 
 
 
@@ -123,6 +125,18 @@ class FunctionText:
         self.tid = "%tid" if in_task else "0"
         self.shared: set = set()  # locals of the caller that a task writes through a pointer
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
+        self.private_roots: dict[int, str] = {}  # id(field) -> the root of this thread's private copy
+
+    def private_root(self, region, slot: int) -> None:
+        """Point the region's fields at this thread's zeroed copy (closure slot `slot`), shifted so that
+        the fields' usual byte offsets land inside it."""
+        q, buf, t64, off, base, root = (self.tmp("pr") for _ in range(6))
+        self.prologue += [f"  {q} = getelementptr i64, ptr %clo, i64 {slot}", f"  {buf} = load ptr, ptr {q}",
+                          f"  {t64} = zext i32 %tid to i64", f"  {off} = mul i64 {t64}, {region.hi - region.lo}",
+                          f"  {base} = getelementptr inbounds i8, ptr {buf}, i64 {off}",
+                          f"  {root} = getelementptr i8, ptr {base}, i64 {-region.lo}"]
+        for target in region.targets:
+            self.private_roots[target] = root
 
     def tmp(self, hint: str = "t") -> str:
         self.counter += 1
@@ -254,7 +268,7 @@ class KernelCodegen:
         if tree1 != tree2 or terms1 != terms2 or c2 != c1 + 4 or c1 % 8 or any(t.stride % 8 for t in terms1):
             return False
         if _owned_by_iteration(f, p1) or _owned_by_iteration(f, p2) or id(a) in f.reduction_of \
-                or id(b) in f.reduction_of:
+                or id(b) in f.reduction_of or _in_private_copy(f, p1) or _in_private_copy(f, p2):
             return False
         self.lower_global_ptr(f, p1)
         f.names[p2] = f.names[p1]
@@ -345,21 +359,19 @@ class KernelCodegen:
 
     def _parallel_for(self, f, s):
         captured = _free_values(s)
-        self.ntasks += 1
-        tname = f"{self.symbol}_task{self.ntasks}"
-        t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
-        t.loop = s
-        t.inside = {id(x) for x in walk(s.blocks[0])}
+        inside = {id(x) for x in walk(s.blocks[0])}
         # fields some iteration writes at an element it does not own keep every update atomic
-        t.shared_targets = {id(x.operands[0].attrs["target"]) for x in walk(s.blocks[0])
-                            if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
-                            and not _injective_in(s, x.operands[0], t.inside)}
-        t.prologue.append("  %ctx = load ptr, ptr %clo")
-        reductions = _reductions(s, t.inside, self.uses)
+        shared_targets = {id(x.operands[0].attrs["target"]) for x in walk(s.blocks[0])
+                          if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
+                          and not _injective_in(s, x.operands[0], inside)}
+        reductions = _reductions(s, inside, self.uses)
+        reduced = {key[0] for key in reductions}
+        regions, weight = private_regions(s, self.uses, shared_targets, reduced)
         clo = f.tmp("clo")
-        f.prologue.append(f"  {clo} = alloca [{len(captured) + 1} x i64], align 8")
+        f.prologue.append(f"  {clo} = alloca [{len(captured) + len(regions) + 1} x i64], align 8")
         f.emit(f"store ptr %ctx, ptr {clo}")
         stored = {id(x.operands[0]) for x in walk(s.blocks[0]) if x.op in (Op.LOCAL_STORE, Op.ATOMIC)}
+        slots = []  # (k, llvm type, by value) per captured value
         for k, v in enumerate(captured, start=1):
             by_value = v.op is Op.ALLOCA and id(v) not in stored  # read-only local: a private copy
             is_ptr = v.op is Op.GLOBAL_PTR or (v.op is Op.ALLOCA and not by_value)
@@ -371,6 +383,36 @@ class KernelCodegen:
             p = f.tmp("cap")
             f.emit(f"{p} = getelementptr i64, ptr {clo}, i64 {k}")
             f.emit(f"store {ty} {src}, ptr {p}")
+            slots.append((k, ty, by_value))
+        self.ntasks += 1
+        tname = f"{self.symbol}_task{self.ntasks}"
+        self._emit_task(s, tname, captured, slots, inside, shared_targets, reductions, [])
+        ty = llvm_type(s.type)
+        b64, e64 = f.tmp("b"), f.tmp("e")
+        ext = "sext" if ty != "i64" else None
+        for dst, src in ((b64, s.operands[0]), (e64, s.operands[1])):
+            f.emit(f"{dst} = {ext} {ty} {f.v(src)} to i64" if ext else f"{dst} = add i64 {f.v(src)}, 0")
+        pfor = f.ctx_slot(CTX_PFOR, "ptr")
+        grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
+        if not regions:
+            f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
+            return
+        pname = f"{tname}_private"
+        self._emit_task(s, pname, captured, slots, inside, shared_targets, reductions, regions,
+                        first_slot=len(captured) + 1)
+        nthreads = f.ctx_slot(CTX_NTHREADS, "i64")
+        emit_private_launch(f, regions, weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64, e64,
+                            grain)
+
+    def _emit_task(self, s, tname, captured, slots, inside, shared_targets, reductions, regions, first_slot=0):
+        """The outlined loop: `task(closure, lo, hi, tid)`; with `regions`, the variant that adds into this
+        thread's private copies of those regions (closure slots from `first_slot` hold the copies)."""
+        t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
+        t.loop = s
+        t.inside = inside
+        t.shared_targets = shared_targets
+        t.prologue.append("  %ctx = load ptr, ptr %clo")
+        for v, (k, ty, by_value) in zip(captured, slots):
             q, val = t.tmp("cap"), t.tmp("capv")
             t.prologue.append(f"  {q} = getelementptr i64, ptr %clo, i64 {k}")
             t.prologue.append(f"  {val} = load {ty}, ptr {q}")
@@ -382,6 +424,8 @@ class KernelCodegen:
             t.names[v] = val
             if v.op is Op.ALLOCA and not by_value:
                 t.shared.add(v)
+        for k, r in enumerate(regions):
+            t.private_root(r, first_slot + k)
         ty = llvm_type(s.type)
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
@@ -403,13 +447,6 @@ class KernelCodegen:
             t.emit(f"{t.tmp('old')} = atomicrmw {op} ptr {t.v(place)}, {rty} {total} monotonic")
         t.emit("ret void")
         self.module.functions.append(t.text())
-        b64, e64 = f.tmp("b"), f.tmp("e")
-        ext = "sext" if ty != "i64" else None
-        for dst, src in ((b64, s.operands[0]), (e64, s.operands[1])):
-            f.emit(f"{dst} = {ext} {ty} {f.v(src)} to i64" if ext else f"{dst} = add i64 {f.v(src)}, 0")
-        pfor = f.ctx_slot(CTX_PFOR, "ptr")
-        grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
-        f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
 
     # -- memory ------------------------------------------------------------------------------------
     def lower_const(self, f, s):
@@ -472,7 +509,7 @@ class KernelCodegen:
             f.emit(f"store {ty} {n}, ptr {acc}")
             f.names[s] = r
             return
-        private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p)
+        private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p) or _in_private_copy(f, p)
         if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
             f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
             n = f.tmp("new")
@@ -619,6 +656,10 @@ def _owned_by_iteration(f: FunctionText, ptr: Stmt) -> bool:
     if loop is None or ptr.op is not Op.GLOBAL_PTR or id(ptr.attrs["target"]) in f.shared_targets:
         return False
     return _injective_in(loop, ptr, f.inside)
+
+
+def _in_private_copy(f: FunctionText, ptr: Stmt) -> bool:
+    return ptr.op is Op.GLOBAL_PTR and id(ptr.attrs["target"]) in f.private_roots
 
 
 def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:

@@ -23,13 +23,14 @@ def _axes(ndim: int):
 
 def _place_new(f: Field, shape, offset, needs_grad: bool):
     """`ti.field(shape=...)`: its own SNode tree, dense over the shape, gradient beside it."""
-    f._needs_grad = needs_grad
     if shape is None:
+        f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
         return f  # to be placed by the user with ti.root...place()
     tree = get_program().new_tree()
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
+    f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
     if needs_grad and f.grad.snode is None:
         gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
         gnode.place(f.grad, offset=offset)

@@ -8,7 +8,7 @@ import ctypes
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.codegen.llvm import CTX_ARGS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
+from simgrad.codegen.llvm import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
 from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
 
 _VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
@@ -24,6 +24,7 @@ class Launcher:
         self.program = program
         self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
         self.buf[:4] = program.context_header()
+        self.buf[CTX_NTHREADS] = program.pool.num_threads
         self.tape = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}

@@ -1,0 +1,201 @@
+"""Scatter privatisation (codegen/privatize.py): loops that only add into a field run over per-thread
+copies when they do many more updates than the field has elements. Results must equal numpy's, and
+the fields the loop does not own entirely (read, stored, interleaved with others) must stay atomic."""
+
+import numpy as np
+import pytest
+
+import simgrad as ti
+
+
+@pytest.fixture(autouse=True)
+def four_threads():
+    ti.init(arch=ti.cpu, cpu_max_num_threads=4)  # privatisation needs > 1 thread, whatever the machine has
+    yield
+
+
+def _text(kernel, *args):
+    return kernel._instance_for(args, grad=False).llvm_text
+
+
+def test_p2g_scatter_into_small_grid_matches_numpy():
+    n, g = 60_000, 16
+    rng = np.random.default_rng(1)
+    xs = (rng.random((n, 2)) * 0.8 + 0.1).astype(np.float64)
+    vs = rng.standard_normal((n, 2))
+    x = ti.Vector.field(2, ti.f64, shape=n)
+    v = ti.Vector.field(2, ti.f64, shape=n)
+    grid_v = ti.Vector.field(2, ti.f64, shape=(g, g), needs_grad=True)
+    grid_m = ti.field(ti.f64, shape=(g, g))
+    x.from_numpy(xs)
+    v.from_numpy(vs)
+    grid_v.grad.from_numpy(np.full((g, g, 2), 7.0))  # the gradient lives in the same tree: untouched
+
+    @ti.kernel
+    def p2g():
+        for p in x:
+            base = ti.cast(x[p] * g - 0.5, ti.i32)
+            fx = x[p] * g - ti.cast(base, ti.f64)
+            w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1) ** 2, 0.5 * (fx - 0.5) ** 2]
+            for i in ti.static(range(3)):
+                for j in ti.static(range(3)):
+                    weight = w[i][0] * w[j][1]
+                    grid_v[base + ti.Vector([i, j])] += weight * v[p]
+                    grid_m[base + ti.Vector([i, j])] += weight
+
+    p2g()
+    assert "_private" in _text(p2g)
+    base = (xs * g - 0.5).astype(np.int32)
+    fx = xs * g - base
+    w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1) ** 2, 0.5 * (fx - 0.5) ** 2]
+    gm, gv = np.zeros((g, g)), np.zeros((g, g, 2))
+    for i in range(3):
+        for j in range(3):
+            wt = w[i][:, 0] * w[j][:, 1]
+            np.add.at(gm, (base[:, 0] + i, base[:, 1] + j), wt)
+            np.add.at(gv, (base[:, 0] + i, base[:, 1] + j), wt[:, None] * vs)
+    np.testing.assert_allclose(grid_m.to_numpy(), gm, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(grid_v.to_numpy(), gv, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(grid_v.grad.to_numpy(), np.full((g, g, 2), 7.0))
+
+
+@pytest.mark.parametrize("dtype", [ti.i32, ti.i64])
+def test_integer_histogram_is_exact_and_adds_to_existing_counts(dtype):
+    n, bins = 200_000, 37
+    data = ti.field(ti.i32, shape=n)
+    hist = ti.field(dtype, shape=bins)
+    values = np.random.default_rng(2).integers(0, 1000, n).astype(np.int32)
+    data.from_numpy(values)
+    hist.from_numpy(np.arange(bins))
+
+    @ti.kernel
+    def count():
+        for i in data:
+            hist[data[i] % bins] += 1
+
+    count()
+    count()
+    assert "_private" in _text(count)
+    np.testing.assert_array_equal(hist.to_numpy(), np.arange(bins) + 2 * np.bincount(values % bins, minlength=bins))
+
+
+def test_updates_in_a_constant_serial_loop_count_towards_the_decision():
+    """100 iterations x 64 inner updates into 4096 cells: worth privatising only counting the inner loop."""
+    cells = 4096
+    acc = ti.field(ti.f32, shape=cells)
+
+    @ti.kernel
+    def spread():
+        for p in range(100):
+            for s in range(64):
+                acc[(p * 64 + s * 7) % cells] += 1.0
+
+    spread()
+    expect = np.zeros(cells, np.float32)
+    for p in range(100):
+        np.add.at(expect, (p * 64 + np.arange(64) * 7) % cells, 1.0)
+    assert "_private" in _text(spread)
+    np.testing.assert_array_equal(acc.to_numpy(), expect)
+
+
+def test_a_negative_zero_no_update_reached_keeps_its_sign():
+    n = 50_000
+    h = ti.field(ti.f32, shape=8)
+    h.from_numpy(np.array([-0.0] * 8, np.float32))
+
+    @ti.kernel
+    def only_first_four():
+        for i in range(n):
+            h[i % 4] += 0.5
+
+    only_first_four()
+    out = h.to_numpy()
+    np.testing.assert_array_equal(out[:4], np.full(4, n / 8))
+    assert np.all(np.signbit(out[4:]))
+
+
+def test_fields_the_loop_reads_or_whose_old_value_it_uses_stay_atomic():
+    n, bins = 100_000, 5
+    hist = ti.field(ti.i32, shape=bins)
+    seen = ti.field(ti.i32, shape=n)
+    read = ti.field(ti.i32, shape=bins)
+    total = ti.field(ti.i32, shape=n)
+
+    @ti.kernel
+    def with_old_value():
+        for i in range(n):
+            seen[i] = ti.atomic_add(hist[i % bins], 1)
+
+    @ti.kernel
+    def reads_too():
+        for i in range(n):
+            read[i % bins] += 1
+            total[i] = read[0] * 0 + 1
+
+    with_old_value()
+    reads_too()
+    assert "_private" not in _text(with_old_value)
+    assert "_private" not in _text(reads_too)
+    np.testing.assert_array_equal(hist.to_numpy(), np.full(bins, n // bins))
+    # every old value of a bin was seen exactly once
+    for b in range(bins):
+        np.testing.assert_array_equal(np.sort(seen.to_numpy()[b::bins]), np.arange(n // bins))
+    np.testing.assert_array_equal(read.to_numpy(), np.full(bins, n // bins))
+
+
+def test_a_field_interleaved_with_another_in_its_tree_stays_atomic():
+    """a and b share a dense node (AoS): a copy of a's range would hold b's elements too."""
+    n, cells = 64 * 1600, 64
+    a = ti.field(ti.f32)
+    b = ti.field(ti.f32)
+    ti.root.dense(ti.i, cells).place(a, b)
+    b.from_numpy(np.arange(cells, dtype=np.float32))
+
+    @ti.kernel
+    def scatter():
+        for i in range(n):
+            a[i % cells] += 1.0
+
+    scatter()
+    assert "_private" not in _text(scatter)
+    np.testing.assert_array_equal(a.to_numpy(), np.full(cells, n / cells, np.float32))
+    np.testing.assert_array_equal(b.to_numpy(), np.arange(cells, dtype=np.float32))
+
+
+def test_few_updates_into_a_large_field_use_atomics_with_the_same_result():
+    n, cells = 1000, 1_000_000
+    big = ti.field(ti.f32, shape=cells)
+
+    @ti.kernel
+    def few():
+        for i in range(n):
+            big[(i * 7919) % cells] += 2.0
+            big[(i * 7919 + 1) % cells] += 1.0
+
+    few()
+    expect = np.zeros(cells, np.float32)
+    np.add.at(expect, (np.arange(n) * 7919) % cells, 2.0)
+    np.add.at(expect, (np.arange(n) * 7919 + 1) % cells, 1.0)
+    np.testing.assert_array_equal(big.to_numpy(), expect)
+
+
+def test_adjoint_of_a_gather_scatters_into_a_private_gradient_copy():
+    """out[i] = sum_k c_k * d[idx(i, k)]: d.grad[idx] += c_k * out.grad[i] over a small d, against numpy."""
+    n, cells = 40_000, 50
+    d = ti.field(ti.f64, shape=cells, needs_grad=True)
+    out = ti.field(ti.f64, shape=n, needs_grad=True)
+
+    @ti.kernel
+    def gather():
+        for i in out:
+            for k in range(4):
+                out[i] += (k + 1.0) * d[(i * 3 + k * 11) % cells]
+
+    out.grad.from_numpy(np.linspace(0, 1, n))
+    gather.grad()
+    g = np.zeros(cells)
+    og = np.linspace(0, 1, n)
+    for k in range(4):
+        np.add.at(g, (np.arange(n) * 3 + k * 11) % cells, (k + 1.0) * og)
+    np.testing.assert_allclose(d.grad.to_numpy(), g, rtol=1e-12)
+    assert "_private" in gather._instance_for((), grad=True).llvm_text
