@@ -60,7 +60,7 @@ def lower_global_ptr(gen, f, s) -> str:
             f.emit(f"{a} = add nuw nsw i64 {off}, {m}")
             off = a
         p = f.tmp("ptr")
-        private = f.private_roots.get(id(target))
+        private = f.private_root_of(s)
         if private is not None:  # this thread's copy (codegen/privatize.py); its root points before it
             f.emit(f"{p} = getelementptr i8, ptr {private}, i64 {off}")
         else:

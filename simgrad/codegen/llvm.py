@@ -16,7 +16,7 @@ import struct
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.codegen.privatize import emit_private_launch, private_regions
+from simgrad.codegen.privatize import access_key, emit_private_launch, private_regions, slice_shift
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
@@ -125,18 +125,31 @@ class FunctionText:
         self.tid = "%tid" if in_task else "0"
         self.shared: set = set()  # locals of the caller that a task writes through a pointer
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
-        self.private_roots: dict[int, str] = {}  # id(field) -> the root of this thread's private copy
+        self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
+        self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
 
     def private_root(self, region, slot: int) -> None:
-        """Point the region's fields at this thread's zeroed copy (closure slot `slot`), shifted so that
+        """Point the region's updates at this thread's zeroed copy (closure slot `slot`), shifted so that
         the fields' usual byte offsets land inside it."""
-        q, buf, t64, off, base, root = (self.tmp("pr") for _ in range(6))
-        self.prologue += [f"  {q} = getelementptr i64, ptr %clo, i64 {slot}", f"  {buf} = load ptr, ptr {q}",
-                          f"  {t64} = zext i32 %tid to i64", f"  {off} = mul i64 {t64}, {region.hi - region.lo}",
-                          f"  {base} = getelementptr inbounds i8, ptr {buf}, i64 {off}",
-                          f"  {root} = getelementptr i8, ptr {base}, i64 {-region.lo}"]
-        for target in region.targets:
-            self.private_roots[target] = root
+        q, buf, t64, off, base, at, root = (self.tmp("pr") for _ in range(7))
+        lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
+                 f"{t64} = zext i32 %tid to i64", f"{off} = mul i64 {t64}, {region.hi - region.lo}",
+                 f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
+        shift = slice_shift(lines, lambda: self.tmp("sh"), self.v, region)
+        neg = self.tmp("pr")
+        lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{at} = getelementptr i8, ptr {base}, i64 {neg}",
+                  f"{root} = getelementptr i8, ptr {at}, i64 0"]
+        self.prologue += ["  " + line for line in lines]
+        for key in region.keys:
+            self.private_roots[key] = root
+
+    def private_root_of(self, ptr: Stmt) -> str | None:
+        """The private root an update of this task goes through, if its field is privatised here."""
+        if not self.private_roots or ptr.op is not Op.GLOBAL_PTR:
+            return None
+        tid = id(ptr.attrs["target"])
+        nprefix = self.private_prefix.get(tid)
+        return None if nprefix is None else self.private_roots.get((tid, access_key(ptr, nprefix)))
 
     def tmp(self, hint: str = "t") -> str:
         self.counter += 1
@@ -366,7 +379,7 @@ class KernelCodegen:
                           and not _injective_in(s, x.operands[0], inside)}
         reductions = _reductions(s, inside, self.uses)
         reduced = {key[0] for key in reductions}
-        regions, weight = private_regions(s, self.uses, shared_targets, reduced)
+        regions, weight, prefix_of = private_regions(s, inside, self.uses, shared_targets, reduced, self.debug)
         clo = f.tmp("clo")
         f.prologue.append(f"  {clo} = alloca [{len(captured) + len(regions) + 1} x i64], align 8")
         f.emit(f"store ptr %ctx, ptr {clo}")
@@ -399,12 +412,13 @@ class KernelCodegen:
             return
         pname = f"{tname}_private"
         self._emit_task(s, pname, captured, slots, inside, shared_targets, reductions, regions,
-                        first_slot=len(captured) + 1)
+                        first_slot=len(captured) + 1, prefix_of=prefix_of)
         nthreads = f.ctx_slot(CTX_NTHREADS, "i64")
         emit_private_launch(f, regions, weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64, e64,
                             grain)
 
-    def _emit_task(self, s, tname, captured, slots, inside, shared_targets, reductions, regions, first_slot=0):
+    def _emit_task(self, s, tname, captured, slots, inside, shared_targets, reductions, regions, first_slot=0,
+                   prefix_of=None):
         """The outlined loop: `task(closure, lo, hi, tid)`; with `regions`, the variant that adds into this
         thread's private copies of those regions (closure slots from `first_slot` hold the copies)."""
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
@@ -424,6 +438,7 @@ class KernelCodegen:
             t.names[v] = val
             if v.op is Op.ALLOCA and not by_value:
                 t.shared.add(v)
+        t.private_prefix = prefix_of or {}
         for k, r in enumerate(regions):
             t.private_root(r, first_slot + k)
         ty = llvm_type(s.type)
@@ -659,7 +674,7 @@ def _owned_by_iteration(f: FunctionText, ptr: Stmt) -> bool:
 
 
 def _in_private_copy(f: FunctionText, ptr: Stmt) -> bool:
-    return ptr.op is Op.GLOBAL_PTR and id(ptr.attrs["target"]) in f.private_roots
+    return f.private_root_of(ptr) is not None
 
 
 def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:

@@ -20,24 +20,30 @@ from simgrad.lang.field import ScalarField
 
 @dataclass
 class Region:
-    """A byte range of one SNode tree holding only privatised fields of one dtype."""
+    """The bytes [lo, hi) past a run-time slice base of one SNode tree, copied per thread. The base is
+    the sum of `index * stride` over `prefix`: leading axes every update indexes with the same
+    loop-invariant values (a time step `t` of `h.grad[t, i, j]`), so only that slice is copied."""
 
     tree_id: int
-    lo: int  # first byte
-    hi: int  # one past the last byte
+    lo: int
+    hi: int
     dtype: object
-    targets: set = field(default_factory=set)  # id() of the ScalarFields in it
+    prefix: tuple  # ((index Stmt, stride in bytes), ...)
+    keys: set = field(default_factory=set)  # (id(field), access_key) of the updates it takes
 
     @property
     def count(self) -> int:
         return (self.hi - self.lo) // self.dtype.nbytes
 
 
-def _span(f: ScalarField) -> tuple[int, int]:
-    """[first byte, one past the last byte] that a dense field's elements occupy in its tree."""
+def _span(f: ScalarField, nprefix: int) -> tuple[int, int]:
+    """[first byte, one past the last byte] of a dense field's elements in its tree, for fixed values of
+    its first `nprefix` indices (their offset left out)."""
     _tree, const, terms, shape = f.layout
     top = const
     for t in terms:
+        if t.axis < nprefix:
+            continue
         digit = (shape[t.axis] - 1) // t.divisor
         if t.modulus:
             digit = min(digit, t.modulus - 1)
@@ -45,16 +51,31 @@ def _span(f: ScalarField) -> tuple[int, int]:
     return const, top + f.dtype.nbytes
 
 
-def _tree_fields(f: ScalarField) -> list[ScalarField]:
-    node = f.snode
-    while node.parent is not None:
-        node = node.parent
-    return [n.field for n in node._walk() if n.kind == "place" and n.field.layout is not None]
+def _prefix_len(f: ScalarField, ptrs: list[Stmt], loop: Stmt, inside: set) -> int:
+    """How many leading axes every update indexes with loop-invariant values, each a plain strided axis."""
+    n = min(len(p.operands) for p in ptrs)
+    for p in ptrs:
+        k = 0
+        while k < n and (p.operands[k].op is Op.CONST or (id(p.operands[k]) not in inside
+                                                          and p.operands[k] is not loop)):
+            k += 1
+        n = k
+    terms = f.layout[2]
+    for a in range(n):
+        own = [t for t in terms if t.axis == a]
+        if len(own) != 1 or own[0].divisor != 1 or own[0].modulus:
+            return a
+    return n
 
 
-def _updates(block, uses: dict, times: int, adds: dict, spoiled: set) -> None:
+def access_key(ptr: Stmt, nprefix: int) -> tuple:
+    """Which slice an update goes to: its first `nprefix` index values (constants by value)."""
+    return tuple(("c", o.attrs["value"]) if o.op is Op.CONST else id(o) for o in ptr.operands[:nprefix])
+
+
+def _updates(block, uses: dict, times: int, adds: dict, others: dict) -> None:
     """Per field target: the unused-result atomic adds of a block with how often each runs per iteration
-    (serial loops of constant trip multiply), and the targets touched any other way."""
+    (serial loops of constant trip multiply), and the pointers through which it is touched any other way."""
     for x in block.stmts:
         for k, o in enumerate(x.operands):
             if o.op is not Op.GLOBAL_PTR:
@@ -63,45 +84,98 @@ def _updates(block, uses: dict, times: int, adds: dict, spoiled: set) -> None:
             if x.op is Op.ATOMIC and k == 0 and x.attrs["kind"] == "add" and not uses.get(id(x)):
                 adds.setdefault(id(target), []).append((x, times))
             else:
-                spoiled.add(id(target))
+                others.setdefault(id(target), []).append(o)
         inner = times
         if x.op is Op.RANGE_FOR and all(o.op is Op.CONST for o in x.operands[:2]):
             inner = times * max(0, x.operands[1].attrs["value"] - x.operands[0].attrs["value"])
         for b in x.blocks:
-            _updates(b, uses, inner, adds, spoiled)
+            _updates(b, uses, inner, adds, others)
 
 
-def private_regions(loop: Stmt, uses: dict, shared: set, reduced: set) -> tuple[list[Region], int]:
-    """Regions worth privatising in a parallel loop, and the estimated updates per iteration into them.
+def _offset_form(s: Stmt) -> tuple:
+    """(base statement or None, constant) with s == base + constant, looking through +/- constants."""
+    c = 0
+    while True:
+        if s.op is Op.CONST:
+            return None, c + s.attrs["value"]
+        if s.op in (Op.ADD, Op.SUB) and s.operands[1].op is Op.CONST:
+            c += s.operands[1].attrs["value"] * (1 if s.op is Op.ADD else -1)
+            s = s.operands[0]
+        elif s.op is Op.ADD and s.operands[0].op is Op.CONST:
+            c += s.operands[0].attrs["value"]
+            s = s.operands[1]
+        else:
+            return s, c
 
-    `shared`: ids of targets some iteration updates at elements it does not own (the others need no
-    atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices."""
+
+def _other_slice(a: Stmt, b: Stmt, nprefix: int) -> bool:
+    """True when two accesses of one field provably differ in one of its first `nprefix` indices
+    (`p[t + 1, ...]` against `p[t, ...]`), so they never touch the same element."""
+    for x, y in zip(a.operands[:nprefix], b.operands[:nprefix]):
+        (bx, cx), (by, cy) = _offset_form(x), _offset_form(y)
+        if bx is by and cx != cy:
+            return True
+    return False
+
+
+def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: set,
+                    debug: bool) -> tuple[list[Region], int, dict]:
+    """Regions worth privatising in a parallel loop, the estimated updates per iteration into them, and
+    {id(field): number of prefix axes} for the fields they take.
+
+    A field the loop also reads or stores qualifies only where those accesses provably hit another
+    slice. `shared`: ids of targets some iteration updates at elements it does not own (the others need no
+    atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices. A copy
+    may span bytes of fields that are not privatised (interleaved layouts): they stay zero in it, and
+    the final sum leaves an element alone where the copy holds zero. In debug mode slices are off (an
+    out-of-bounds slice index must be reported, not summed into)."""
     adds: dict[int, list] = {}
-    spoiled: set[int] = set()
-    _updates(loop.blocks[0], uses, 1, adds, spoiled)
-    chosen = {t: a for t, a in adds.items() if t in shared and t not in spoiled and t not in reduced}
-    by_tree: dict[int, list[ScalarField]] = {}
-    for stmts in chosen.values():
-        f = stmts[0][0].operands[0].attrs["target"]
-        if isinstance(f, ScalarField) and f.layout is not None:
-            by_tree.setdefault(f.layout[0], []).append(f)
-    regions = []
+    others: dict[int, list] = {}
+    _updates(loop.blocks[0], uses, 1, adds, others)
+    groups: dict[tuple, Region] = {}
     weight = 0
-    for tree_id, fields in by_tree.items():
-        dtypes = {f.dtype.name for f in fields}
-        if len(dtypes) != 1 or fields[0].dtype.name not in ("f32", "f64", "i32", "i64"):
+    prefix_of: dict[int, int] = {}
+    for tid, updates in adds.items():
+        f = updates[0][0].operands[0].attrs["target"]
+        if tid not in shared or tid in reduced or not isinstance(f, ScalarField) \
+                or f.layout is None or f.dtype.name not in ("f32", "f64", "i32", "i64"):
             continue
-        lo = min(_span(f)[0] for f in fields)
-        hi = max(_span(f)[1] for f in fields)
-        mine = {id(f) for f in fields}
-        if any(id(g) not in mine and _span(g)[0] < hi and lo < _span(g)[1] for g in _tree_fields(fields[0])):
-            continue  # another field lives inside the range
-        size = fields[0].dtype.nbytes
-        if lo % size or hi % size:
-            continue
-        regions.append(Region(tree_id, lo, hi, fields[0].dtype, mine))
-        weight += sum(times for f in fields for _a, times in chosen[id(f)])
-    return regions, weight
+        ptrs = [a.operands[0] for a, _times in updates]
+        nprefix = 0 if debug else _prefix_len(f, ptrs, loop, inside)
+        if any(not _other_slice(o, p, nprefix) for o in others.get(tid, ()) for p in ptrs):
+            continue  # the loop reads (or stores) what it would add into a copy of
+        prefix_of[tid] = nprefix
+        strides = {t.axis: t.stride for t in f.layout[2]}
+        lo, hi = _span(f, nprefix)
+        for a, times in updates:
+            ptr = a.operands[0]
+            key = access_key(ptr, nprefix)
+            prefix = tuple((ptr.operands[k], strides[k]) for k in range(nprefix))
+            gkey = (f.layout[0], f.dtype.name, key, tuple(st for _o, st in prefix))
+            r = groups.get(gkey)
+            if r is None:
+                r = groups[gkey] = Region(f.layout[0], lo, hi, f.dtype, prefix)
+            r.lo, r.hi = min(r.lo, lo), max(r.hi, hi)
+            r.keys.add((tid, key))
+            weight += times
+    return list(groups.values()), weight, prefix_of
+
+
+def slice_shift(lines: list, tmp, value, region: Region) -> str:
+    """Append to `lines` the computation of a region's slice base (bytes, i64); returns its name.
+    `value(stmt)` names an index value in the function at hand, `tmp()` makes a fresh name."""
+    total = "0"
+    for stmt, stride in region.prefix:
+        v = value(stmt)
+        if stmt.type.llvm != "i64":
+            w = tmp()
+            lines.append(f"{w} = sext {stmt.type.llvm} {v} to i64")
+            v = w
+        m, a = tmp(), tmp()
+        lines.append(f"{m} = mul i64 {v}, {stride}")
+        lines.append(f"{a} = add i64 {total}, {m}")
+        total = a
+    return total
 
 
 def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_slot: int, task: str,
@@ -152,11 +226,17 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
 
 def _emit_sum_into(f, r: Region, buf: str, nthreads: str) -> None:
     """field[k] += copy_t[k] for every thread's copy t, in thread order; a zero partial leaves the element
-    untouched (so an element no iteration updated keeps even the sign of a zero)."""
+    untouched: bytes of other fields in the range stay as they are, and an element no iteration updated
+    keeps even the sign of a zero."""
     ty = r.dtype.llvm
     n = r.count
-    real = f.tmp("real")
-    f.emit(f"{real} = getelementptr i8, ptr {f.root(r.tree_id)}, i64 {r.lo}")
+    lines: list[str] = []
+    shift = slice_shift(lines, lambda: f.tmp("sh"), f.v, r)
+    for line in lines:
+        f.emit(line)
+    real, at = f.tmp("real"), f.tmp("real")
+    f.emit(f"{at} = getelementptr i8, ptr {f.root(r.tree_id)}, i64 {shift}")
+    f.emit(f"{real} = getelementptr i8, ptr {at}, i64 {r.lo}")
     pre, thead, tbody, khead, kbody, kdone, tdone = (f.label(h) for h in
                                                      ("sum", "sumt", "sumtb", "sumk", "sumkb", "sumkd", "sumtd"))
     f.emit(f"br label %{pre}")

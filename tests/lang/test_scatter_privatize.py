@@ -143,8 +143,9 @@ def test_fields_the_loop_reads_or_whose_old_value_it_uses_stay_atomic():
     np.testing.assert_array_equal(read.to_numpy(), np.full(bins, n // bins))
 
 
-def test_a_field_interleaved_with_another_in_its_tree_stays_atomic():
-    """a and b share a dense node (AoS): a copy of a's range would hold b's elements too."""
+def test_a_copy_spanning_an_interleaved_field_leaves_that_field_as_the_loop_left_it():
+    """a and b share a dense node (AoS): a's copy spans b's elements too; b, stored by the same loop at
+    elements it owns, must keep the loop's values (the final sum skips zero partials)."""
     n, cells = 64 * 1600, 64
     a = ti.field(ti.f32)
     b = ti.field(ti.f32)
@@ -155,11 +156,45 @@ def test_a_field_interleaved_with_another_in_its_tree_stays_atomic():
     def scatter():
         for i in range(n):
             a[i % cells] += 1.0
+            if i < cells:
+                b[i] = b[i] * 2.0 + 1.0
 
     scatter()
-    assert "_private" not in _text(scatter)
+    assert "_private" in _text(scatter)
     np.testing.assert_array_equal(a.to_numpy(), np.full(cells, n / cells, np.float32))
-    np.testing.assert_array_equal(b.to_numpy(), np.arange(cells, dtype=np.float32))
+    np.testing.assert_array_equal(b.to_numpy(), np.arange(cells, dtype=np.float32) * 2 + 1)
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_stencil_scatter_into_one_time_slice_copies_only_that_slice(debug):
+    """h[t, i +- 1, j +- 1] += ...: the leading index is the same loop-invariant t in every update, so the
+    per-thread copy is one (n, n) slice (the whole field is 50x larger than the loop); other slices keep
+    their values. In debug mode slices are off (the whole field would be copied, so atomics run)."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=4, debug=debug)
+    steps, n = 50, 64
+    h = ti.field(ti.f64, shape=(steps, n, n))
+    src = ti.field(ti.f64, shape=(n, n))
+    rng = np.random.default_rng(3)
+    start = rng.standard_normal((steps, n, n))
+    h.from_numpy(start)
+    s = rng.standard_normal((n, n))
+    src.from_numpy(s)
+
+    @ti.kernel
+    def spread(t: ti.i32):
+        for i, j in src:
+            for di, dj in ti.static([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]):
+                if 0 <= i + di < n and 0 <= j + dj < n:
+                    h[t, i + di, j + dj] += (1.0 + di + 2 * dj) * src[i, j]
+
+    spread(7)
+    expect = start.copy()
+    for di, dj in [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]:
+        dst = expect[7, max(di, 0):n + min(di, 0), max(dj, 0):n + min(dj, 0)]
+        dst += (1.0 + di + 2 * dj) * s[max(-di, 0):n - max(di, 0), max(-dj, 0):n - max(dj, 0)]
+    np.testing.assert_allclose(h.to_numpy(), expect, rtol=1e-13, atol=1e-13)
+    if not debug:
+        assert "_private" in _text(spread, 7)
 
 
 def test_few_updates_into_a_large_field_use_atomics_with_the_same_result():
@@ -199,3 +234,32 @@ def test_adjoint_of_a_gather_scatters_into_a_private_gradient_copy():
         np.add.at(g, (np.arange(n) * 3 + k * 11) % cells, (k + 1.0) * og)
     np.testing.assert_allclose(d.grad.to_numpy(), g, rtol=1e-12)
     assert "_private" in gather._instance_for((), grad=True).llvm_text
+
+
+def test_reading_another_slice_of_the_field_keeps_privatisation_reading_maybe_the_same_one_does_not():
+    """q[t, .] += q[t + 1, .]: the read slice differs from the updated one by construction. With
+    q[u, .] read (u a second argument, maybe equal to t) the copy could hide updates: atomics run."""
+    n, c = 40_000, 16
+    q = ti.field(ti.f64, shape=(4, c))
+    start = np.arange(4 * c, dtype=np.float64).reshape(4, c)
+
+    @ti.kernel
+    def next_slice(t: ti.i32):
+        for i in range(n):
+            q[t, i % c] += q[t + 1, i % c] * 0.5
+
+    @ti.kernel
+    def any_slice(t: ti.i32, u: ti.i32):
+        for i in range(n):
+            q[t, i % c] += 1.0 + 0.0 * q[u, 0]
+
+    q.from_numpy(start)
+    next_slice(1)
+    expect = start.copy()
+    expect[1] += (n // c) * 0.5 * start[2]
+    np.testing.assert_array_equal(q.to_numpy(), expect)
+    assert "_private" in _text(next_slice, 1)
+    any_slice(2, 2)
+    expect[2] += n // c
+    np.testing.assert_array_equal(q.to_numpy(), expect)
+    assert "_private" not in _text(any_slice, 2, 2)
