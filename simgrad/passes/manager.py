@@ -23,11 +23,11 @@ def run_pipeline(kernel: Kernel, transform=None) -> None:
     from simgrad.passes import hoist, promote, simplify, verify
 
     level = _debug()
-    steps = [("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
+    steps = [("promote", promote.promote),  # locals assigned once become their values
+             ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
     if transform is not None:  # e.g. the reverse-mode adjoint, then a clean-up of what it produced
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
-    steps += [("promote", promote.promote),  # locals assigned once become their values
-              ("hoist", hoist.hoist)]  # loop-invariant index arithmetic out of parallel loops
+    steps.append(("hoist", hoist.hoist))  # loop-invariant index arithmetic out of parallel loops
     if _verify_enabled():  # structural and type invariants before and after every pass
         steps = [("verify", verify.verify)] + [x for st in steps for x in (st, ("verify", verify.verify))]
     for name, fn in steps:

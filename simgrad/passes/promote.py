@@ -31,7 +31,12 @@ def promote(kernel: Kernel) -> bool:
     _forward(kernel.body, once, {}, value_of)
     if not value_of:
         return False
-    _rewrite(kernel.body, value_of)
+    left = set()
+    for s in walk(kernel.body):
+        if s.op is Op.LOCAL_LOAD and id(s) not in value_of:
+            left.add(id(s.operands[0]))
+    gone = once - left  # no load left: the local and its store go too
+    _rewrite(kernel.body, value_of, gone)
     return True
 
 
@@ -48,15 +53,15 @@ def _forward(block: Block, once: set, known: dict, value_of: dict) -> None:
             known[id(s.operands[0])] = s.operands[1]
 
 
-def _rewrite(block: Block, value_of: dict) -> None:
+def _rewrite(block: Block, value_of: dict, gone: set) -> None:
     keep = []
     for s in block.stmts:
-        if id(s) in value_of:
-            continue  # the load itself goes away
+        if id(s) in value_of or id(s) in gone or (s.op is Op.LOCAL_STORE and id(s.operands[0]) in gone):
+            continue  # the load itself goes away, and so does a local nobody reads any more
         if any(id(o) in value_of for o in s.operands):
             s.operands = tuple(_resolve(o, value_of) for o in s.operands)
         for b in s.blocks:
-            _rewrite(b, value_of)
+            _rewrite(b, value_of, gone)
         keep.append(s)
     block.stmts = keep
 
