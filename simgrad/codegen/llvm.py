@@ -678,15 +678,39 @@ def _in_private_copy(f: FunctionText, ptr: Stmt) -> bool:
 
 
 def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
-    divs, mods, direct = set(), set(), False
+    """True when the element's indices determine the loop index: apart from loop-invariant values they
+    are digits `(index // d) % m` of it (raw division by constants, as flattened struct-for and ndrange
+    loops produce) that chain from d = 1 up to a digit without modulus."""
+    digits = {}
     for o in ptr.operands:
-        if o is loop:
-            direct = True
-        elif o.op in (Op.RAW_DIV, Op.RAW_MOD) and o.operands[0] is loop and o.operands[1].op is Op.CONST:
-            (divs if o.op is Op.RAW_DIV else mods).add(o.operands[1].attrs["value"])
+        d = _digit_of(o, loop)
+        if d is not None:
+            digits.setdefault(d[0], set()).add(d[1])
         elif o.op is not Op.CONST and id(o) in inside:
             return False
-    return direct or bool(divs & mods)
+    place = 1
+    while place in digits:
+        mods = digits[place]
+        if 0 in mods:
+            return True
+        step = max(mods)  # the widest digit at this place
+        if step <= 1:
+            return False
+        place *= step
+    return False
+
+
+def _digit_of(o: Stmt, loop: Stmt):
+    """(divisor, modulus or 0) when o is (loop // divisor) % modulus by raw division by constants."""
+    mod = 0
+    if o.op is Op.RAW_MOD and o.operands[1].op is Op.CONST:
+        mod = o.operands[1].attrs["value"]
+        o = o.operands[0]
+    div = 1
+    while o.op is Op.RAW_DIV and o.operands[1].op is Op.CONST and o.operands[1].attrs["value"] > 0:
+        div *= o.operands[1].attrs["value"]
+        o = o.operands[0]
+    return (div, mod) if o is loop and mod >= 0 else None
 
 
 def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:

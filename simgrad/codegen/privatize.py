@@ -17,6 +17,10 @@ from simgrad.ir.nodes import Stmt
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
 
+# One contended-or-not lock-prefixed update costs about as much as zeroing and summing this many elements
+# of a copy (vectorised, mostly in cache): measured on the 3-D MPM p2g (110k cells, 4.5k particles).
+ATOMIC_COST = 8
+
 
 @dataclass
 class Region:
@@ -181,11 +185,12 @@ def slice_shift(lines: list, tmp, value, region: Region) -> str:
 def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_slot: int, task: str,
                         private_task: str, pfor: str, nthreads: str, begin: str, end: str, grain: int) -> None:
     """Caller side: run `private_task` over per-thread zeroed copies of the regions and add them into the
-    fields when the loop's updates outnumber the copies' elements; else run the atomic `task`."""
+    fields when the loop's updates cost more as atomics than the copies cost to zero and sum (see
+    ATOMIC_COST); else run the atomic `task`."""
     elems = sum(r.count for r in regions)
     iters, work, need, big, multi, ok = (f.tmp("pv") for _ in range(6))
     f.emit(f"{iters} = sub i64 {end}, {begin}")
-    f.emit(f"{work} = mul i64 {iters}, {weight}")
+    f.emit(f"{work} = mul i64 {iters}, {weight * ATOMIC_COST}")
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")
     f.emit(f"{multi} = icmp sgt i64 {nthreads}, 1")

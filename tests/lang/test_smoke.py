@@ -68,7 +68,7 @@ def test_default_parameter_values_apply_to_positional_calls():
 def test_vector_scatter_under_contention_is_exact():
     """`g[c] += v` on a 2-vector f32 field (one 64-bit compare-and-swap per update) loses no update. The
     field is much larger than the number of updates, so the atomic path runs (not per-thread copies)."""
-    n, cells = 400_000, 1_000_000
+    n, cells = 200_000, 4_000_000
     g = ti.Vector.field(2, ti.f32, shape=cells)
     idx = ti.field(ti.i32, shape=n)
     idx.from_numpy((np.arange(n) % 3).astype(np.int32))
@@ -111,3 +111,34 @@ def test_reductions_sum_per_thread_then_once_into_the_shared_place():
     total.grad[None] = 1.0
     reduce_field.grad()
     np.testing.assert_array_equal(x.grad.to_numpy(), np.full(n, 3.0))
+
+
+def test_owned_updates_of_a_3d_struct_for_need_no_atomics():
+    """(i, j, k) of a flattened 3-D loop are digits of its index: g[i, j, k] += ... is owned."""
+    g = ti.field(ti.f32, shape=(6, 5, 4))
+    h = ti.field(ti.f32, shape=(6, 5, 4))
+
+    @ti.kernel
+    def bump_owned():
+        for i, j, k in g:
+            g[i, j, k] += i * 100 + j * 10 + k
+
+    @ti.kernel
+    def bump_shared():
+        for i, j, _k in g:
+            h[i, j, 0] += 1.0  # not owned: four iterations share it
+
+    def atomics(kernel):
+        text = kernel._instance_for((), grad=False).llvm_text
+        task = text[text.index("_task1("):]
+        task = task[:task.index("\n}\n")]
+        return task.count("cmpxchg") + task.count("atomicrmw")
+
+    bump_owned()
+    bump_shared()
+    assert atomics(bump_owned) == 0 and atomics(bump_shared) >= 1
+    i, j, k = np.meshgrid(np.arange(6), np.arange(5), np.arange(4), indexing="ij")
+    np.testing.assert_array_equal(g.to_numpy(), i * 100 + j * 10 + k)
+    expect = np.zeros((6, 5, 4), np.float32)
+    expect[:, :, 0] = 4
+    np.testing.assert_array_equal(h.to_numpy(), expect)
