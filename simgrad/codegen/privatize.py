@@ -20,6 +20,7 @@ from simgrad.lang.field import ScalarField
 # One contended-or-not lock-prefixed update costs about as much as zeroing and summing this many elements
 # of a copy (vectorised, mostly in cache): measured on the 3-D MPM p2g (110k cells, 4.5k particles).
 ATOMIC_COST = 8
+MAX_COPY_BYTES = 1 << 28  # all threads' copies together; a larger scatter keeps its atomics
 
 
 @dataclass
@@ -194,7 +195,11 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")
     f.emit(f"{multi} = icmp sgt i64 {nthreads}, 1")
-    f.emit(f"{ok} = and i1 {big}, {multi}")
+    nbytes, fits, both = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
+    f.emit(f"{nbytes} = mul i64 {nthreads}, {sum(r.hi - r.lo for r in regions)}")
+    f.emit(f"{fits} = icmp ule i64 {nbytes}, {MAX_COPY_BYTES}")
+    f.emit(f"{both} = and i1 {big}, {multi}")
+    f.emit(f"{ok} = and i1 {both}, {fits}")
     plain, alloc, run, done = f.label("atomic"), f.label("alloc"), f.label("private"), f.label("scatterdone")
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)
