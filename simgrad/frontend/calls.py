@@ -98,6 +98,8 @@ def call(comp, node: ast.Call):
                                  comp.loc(node))
     if not callable(fn):
         raise SimgradTypeError(f"'{type(fn).__name__}' object is not callable", comp.loc(node))
+    if comp.guard is not None:
+        comp.guard.call(fn)
     return fn(*args, **kwargs)
 
 

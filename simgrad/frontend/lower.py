@@ -98,6 +98,7 @@ class Compiler:
         self.next_loop_config: dict | None = None
         self.debug = debug
         self.return_types: list | None = None
+        self.guard = None  # a fingerprint.Guard when this instantiation may be cached
 
     @property
     def frame(self) -> Frame:
@@ -112,6 +113,8 @@ class Compiler:
             if name in scope:
                 return scope[name]
         src = self.frame.src
+        if self.guard is not None:
+            self.guard.name(src.func, name)
         if name in src.closure:
             return src.closure[name]
         if name in src.globals:
@@ -240,6 +243,8 @@ class Compiler:
             raise SimgradSyntaxError(f"cannot assign to {type(target).__name__}", self.loc(target))
 
     def _python_setitem(self, target, value):
+        if self.guard is not None:
+            self.guard.taint("a Python object is modified at compile time")
         obj = self.eval(target.value)
         if isinstance(target, ast.Subscript):
             obj[self.eval_index(target.slice)] = value

@@ -17,6 +17,9 @@ class FunctionSource:
     tree: ast.FunctionDef
     globals: dict
     closure: dict
+    text: str = ""  # the source as written, and its first line: part of the kernel cache key
+    start: int = 0
+    names: list | None = None  # every name in the source, in order (fingerprint.py fills it in)
 
     def loc(self, node: ast.AST) -> Loc:
         return Loc(self.file, getattr(node, "lineno", self.tree.lineno), getattr(node, "col_offset", 0))
@@ -54,6 +57,6 @@ def get_source(func) -> FunctionSource:
                 closure[name] = cell.cell_contents
             except ValueError:
                 pass
-    src = FunctionSource(func, file, fdef, func.__globals__, closure)
+    src = FunctionSource(func, file, fdef, func.__globals__, closure, text, start)
     _cache[code] = src
     return src

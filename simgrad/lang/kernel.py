@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import pickle
 import time
 
 import numpy as np
@@ -64,12 +65,28 @@ def _template_key(v, keep: list):
 
 
 class Instance:
-    def __init__(self, launcher, ir, llvm_text, ret_matrix):
+    """One compiled instantiation. Taken from the kernel cache, it has no IR: `ir` and `llvm_text` are
+    rebuilt on first use (tests and Tape validation read them)."""
+
+    def __init__(self, launcher, ir, llvm_text, ret_matrix, rebuild=None):
         self.launcher = launcher
         self.launch = launcher.launch
-        self.ir = ir
-        self.llvm_text = llvm_text
+        self._ir = ir
+        self._llvm_text = llvm_text
+        self._rebuild = rebuild
         self.ret_matrix = ret_matrix
+
+    @property
+    def ir(self):
+        if self._ir is None:
+            self._ir, self._llvm_text, _ = self._rebuild()
+        return self._ir
+
+    @property
+    def llvm_text(self) -> str:
+        if self._llvm_text is None:
+            self._ir, self._llvm_text, _ = self._rebuild()
+        return self._llvm_text
 
 
 class Kernel:
@@ -168,19 +185,70 @@ class Kernel:
 
     # -- compilation -------------------------------------------------------------------------------
     def instantiate(self, args, transform=None, name_suffix=""):
+        """Compile (or take from the kernel cache) the instantiation for `args` and build its launcher."""
+        prog = get_program()
+        prog.materialize_all()
+        key, guard = self._cache_key(prog, args, transform, name_suffix)
+        if key is not None:
+            entry = _read_entry(prog, key)
+            if entry is not None:
+                meta, obj = entry
+                launcher = _make_launcher(prog, meta, prog.jit.link(obj, ["sg_kernel"]))
+                light = tuple(np.empty((0,) * a.ndim, a.dtype) if isinstance(a, np.ndarray) else a for a in args)
+                return Instance(launcher, None, None, meta["ret_matrix"],
+                                rebuild=lambda: self._build(prog, light, transform, name_suffix))
+        ir, text, meta = self._build(prog, args, transform, name_suffix, guard)
+        obj = prog.jit.object_for(text)
+        if key is not None and guard.reason is None:
+            try:
+                prog.jit.write_entry(key, pickle.dumps((meta, obj), protocol=pickle.HIGHEST_PROTOCOL))
+            except (pickle.PicklingError, TypeError, AttributeError):
+                pass  # metadata that does not pickle only costs us the cache
+        launcher = _make_launcher(prog, meta, prog.jit.link(obj, ["sg_kernel"]))
+        return Instance(launcher, ir, text, meta["ret_matrix"])
+
+    def _cache_key(self, prog: Program, args, transform, name_suffix):
+        """(key, guard) of the kernel cache for this instantiation, or (None, None) when it is not cached."""
+        from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
+        from simgrad.runtime.jit import debug_level
+
+        if not prog.jit.cache_enabled or debug_level() > 0:  # debug levels print what the compile does
+            return None, None
+        kb = KeyBuilder()
+        config = tuple(sorted((k, repr(v)) for k, v in vars(prog.config).items()
+                              if k not in ("offline_cache", "offline_cache_file_path")))
+        step = None if transform is None else f"{transform.__module__}.{transform.__qualname__}"
+        try:
+            parts = (environment(), prog.jit.target_id(), config, dt.Defaults.fp.name, dt.Defaults.ip.name,
+                     name_suffix, step, kb.function(self.func), kb.signature(self.signature),
+                     tuple(self._param_fingerprint(kb, p, a) for p, a in zip(self.params, args)))
+        except Exception:  # Unkeyable, or e.g. a function without source: compiling reports it (or never needs it)
+            return None, None
+        return kb.digest(parts), Guard(kb.covered)
+
+    def _param_fingerprint(self, kb, p: Param, a):
+        if p.kind == "template":
+            return kb.value(a)
+        if p.kind == "ndarray":
+            return self._key_part(p, a, [])  # dtype and ndim; the annotation is in the signature
+        return None
+
+    def _build(self, prog: Program, args, transform, name_suffix, guard=None):
+        """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
         from simgrad.codegen.llvm import KernelCodegen
         from simgrad.frontend.lower import Compiler
         from simgrad.passes.manager import run_pipeline
-        from simgrad.runtime.launch import Launcher
 
-        prog = get_program()
-        prog.materialize_all()
         ir = IRKernel(self.name + name_suffix)
         comp = Compiler(ir, get_source(self.func), debug=prog.config.debug)
+        comp.guard = guard
+        trees = len(prog.trees)
         slots, ret_matrix = self._bind_params(comp, args)
         prog.materialize_all()
         comp.compile_body()
         prog.materialize_all()
+        if guard is not None and len(prog.trees) != trees:
+            guard.taint("fields were created while compiling")
         ir.ret_slot = slots[1]
         run_pipeline(ir, transform)
         symbol = f"sg_{self.name}{name_suffix}_{id(ir):x}"
@@ -188,23 +256,11 @@ class Kernel:
         text = cg.generate()
         # the disk cache is keyed by the IR text with the symbol name made stable
         stable = text.replace(symbol, "sg_kernel")
-        addr = prog.jit.load(stable, ["sg_kernel"])["sg_kernel"]
-        launcher = Launcher(ir.name, slots[0], addr, slots[1], ir.returns, cg.error_table, prog)
-        if getattr(ir, "uses_tape", False):
-            # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
-            bound = getattr(ir, "tape_bound", None)
-            launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
-        launcher.ret_matrix = ret_matrix
-        if ret_matrix is not None:
-            inner = launcher.launch
-            n, m = ret_matrix
-
-            def launch(*a):
-                vals = inner(*a)
-                return Matrix(list(vals)) if m == 0 else Matrix([list(vals[r * m:(r + 1) * m]) for r in range(n)])
-
-            launcher.launch = launch
-        return Instance(launcher, ir, stable, ret_matrix)
+        uses_tape = getattr(ir, "uses_tape", False)
+        meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
+                "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
+                "tape_bound": getattr(ir, "tape_bound", None) if uses_tape else None}
+        return ir, stable, meta
 
     def _bind_params(self, comp, args):
         from simgrad.lang.ndarray import ArrayArg
@@ -266,6 +322,41 @@ class Kernel:
         finally:
             context.pop()
         return (out, slot), ret_matrix
+
+
+def _make_launcher(prog: Program, meta: dict, entries: dict):
+    """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
+    from simgrad.runtime.launch import Launcher
+
+    launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
+                        meta["errors"], prog)
+    if meta["uses_tape"]:
+        # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
+        bound = meta["tape_bound"]
+        launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
+    ret_matrix = meta["ret_matrix"]
+    launcher.ret_matrix = ret_matrix
+    if ret_matrix is not None:
+        inner = launcher.launch
+        n, m = ret_matrix
+
+        def launch(*a):
+            vals = inner(*a)
+            return Matrix(list(vals)) if m == 0 else Matrix([list(vals[r * m:(r + 1) * m]) for r in range(n)])
+
+        launcher.launch = launch
+    return launcher
+
+
+def _read_entry(prog: Program, key: str):
+    """(metadata, object) stored under `key`, or None (absent or unreadable: then it is compiled again)."""
+    data = prog.jit.read_entry(key)
+    if data is None:
+        return None
+    try:
+        return pickle.loads(data)
+    except Exception:  # a truncated or foreign file is a miss, never an error
+        return None
 
 
 def _torch_dtype(t):

@@ -53,7 +53,7 @@ class Jit:
         self._lock = threading.Lock()
         self.cache_enabled = True
         self.cache_dir = default_cache_dir()
-        self.stats = {"compiled": 0, "cache_hits": 0}
+        self.stats = {"compiled": 0, "cache_hits": 0, "kernel_hits": 0}
 
     # -- compilation -------------------------------------------------------------------------
     def _optimize(self, module: llvm.ModuleRef) -> None:
@@ -64,9 +64,13 @@ class Jit:
         builder = llvm.create_pass_builder(self.target_machine, pto)
         builder.getModulePassManager().run(module, builder)
 
+    def target_id(self) -> tuple:
+        """What native code depends on besides its LLVM IR."""
+        return (_COMPILER_VERSION, llvmlite.__version__, self.triple, self.cpu, self.features)
+
     def _cache_key(self, ir_text: str) -> str:
         h = hashlib.sha256()
-        for part in (_COMPILER_VERSION, llvmlite.__version__, self.triple, self.cpu, self.features, ir_text):
+        for part in (*self.target_id(), ir_text):
             h.update(part.encode())
             h.update(b"\0")
         return h.hexdigest()[:40]
@@ -91,18 +95,40 @@ class Jit:
         obj = self.target_machine.emit_object(module)
         self.stats["compiled"] += 1
         if self.cache_enabled:
-            try:
-                self.cache_dir.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_suffix(f".{os.getpid()}.tmp")
-                tmp.write_bytes(obj)
-                os.replace(tmp, path)
-            except OSError:
-                pass  # a read-only or full disk only costs us the cache
+            self._write(path, obj)
         return obj
+
+    def _write(self, path: Path, data: bytes) -> None:
+        try:
+            self.cache_dir.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
+            tmp.write_bytes(data)
+            os.replace(tmp, path)  # readers see the whole file or none
+        except OSError:
+            pass  # a read-only or full disk only costs us the cache
+
+    # -- kernel entries: an object with what its launcher needs, stored under a frontend-level key --------
+    def read_entry(self, key: str) -> bytes | None:
+        if not self.cache_enabled:
+            return None
+        try:
+            data = (self.cache_dir / f"{key}.kernel").read_bytes()
+        except OSError:
+            return None
+        self.stats["cache_hits"] += 1
+        self.stats["kernel_hits"] += 1
+        return data
+
+    def write_entry(self, key: str, data: bytes) -> None:
+        if self.cache_enabled:
+            self._write(self.cache_dir / f"{key}.kernel", data)
 
     def load(self, ir_text: str, symbols: list[str], cache_key: str | None = None) -> dict[str, int]:
         """Compile (or fetch) `ir_text`, link it into the process and return symbol addresses."""
-        obj = self.object_for(ir_text, cache_key)
+        return self.link(self.object_for(ir_text, cache_key), symbols)
+
+    def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:
+        """Add native object code to the process and return the addresses of `symbols`."""
         with self._lock:
             self.engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
             self.engine.finalize_object()
