@@ -10,6 +10,19 @@ per-thread LIFO tape (the adstack): each statement pushes the operand values its
 after it runs, and the backward walk pops them in exactly the reverse order. Control decisions go on the
 same tape: if-conditions, serial loop bounds, and while-loop trip counts, so serial loops run reversed and
 while loops (which Taichi cannot differentiate) replay the recorded number of iterations.
+
+A serial range-for inside a task that stores no local declared outside it (Taichi's case for long inner
+loops such as a ray march) is not replayed at all: its replay could have no effect, since global writes
+are dropped. Its backward loop instead recomputes each iteration's forward statements and then reverses
+them, so nothing per iteration goes on the tape. The values it takes from outside (its bounds, outer SSA
+values, and a snapshot of each outer local it reads, loaded where the loop stood) are taken as the replay
+passes the loop: directly when they are still in scope in the backward walk, else through the tape once
+per execution of the loop. Values inside such a body that its nested blocks need still use the tape, but
+each iteration pops what its own recompute pushed.
+
+Adjoints are accumulated only for active values, those that depend on a field with a gradient (`_active`):
+the derivative chains of everything else (a ray's positions from the camera, weights from loop indices)
+could never reach a .grad field, and LLVM does not remove them once they run through adjoint locals.
 """
 
 from __future__ import annotations
@@ -74,8 +87,13 @@ class Reverse:
         for s in walk(kernel.body):
             for o in s.operands:
                 self.uses[id(o)] = self.uses.get(id(o), 0) + 1
+        self.active = _active(kernel.body)
         self.task = _Task(self.body)
         self.used_tape = False
+        self.in_task = False  # inside a parallel loop's body (only there are serial loops recomputed)
+        self.snap: dict[int, list] = {}  # recomputed loop -> [(outer local, snapshot value, in scope)]
+        self.held: dict[int, Stmt] = {}  # outer local -> its snapshot, while a recomputed loop is rebuilt
+        self._free_cache: dict[int, tuple] = {}
 
     # -- entry -------------------------------------------------------------------------------------
     def run(self) -> Block:
@@ -108,12 +126,14 @@ class Reverse:
         self.depth[id(loop)] = 0
         saved = self.task
         self.task = _Task(new.blocks[0])
+        self.in_task = True
         with self.b.inside(new.blocks[0]):
             reset = self.b.emit(Op.TAPE_RESET, None)
             for s in loop.blocks[0].stmts:
                 self.clone(s, 0)
             for s in reversed(loop.blocks[0].stmts):
                 self.backward(s)
+        self.in_task = False
         if not any(x.op is Op.TAPE_PUSH for x in walk(new.blocks[0])) and not self.push_pending(loop):
             new.blocks[0].stmts.remove(reset)
         self._declare(self.task)
@@ -135,7 +155,11 @@ class Reverse:
 
     # -- forward replay -----------------------------------------------------------------------------
     def v(self, o: Stmt) -> Stmt:
-        return o if o.op is Op.CONST else self.fmap[id(o)]
+        """The value of `o` where it is being cloned: in a recompute inside the backward walk, loop indices
+        and values taken from outside the recomputed loop are in bmap."""
+        if o.op is Op.CONST:
+            return o
+        return self.bmap.get(id(o)) or self.fmap[id(o)]
 
     def _anchor(self, s: Stmt, new: Stmt | None) -> None:
         if new is None:
@@ -156,6 +180,11 @@ class Reverse:
                         self.clone(x, depth + 1)
             self.fmap[id(s)] = new
             self._anchor(s, new)
+        elif op is Op.RANGE_FOR and self._recomputable(s):
+            self._snapshot(s)
+        elif op is Op.LOCAL_LOAD and id(s.operands[0]) in self.held:
+            # an outer local read by a recomputed loop: its value where the loop stood, in scope
+            self.fmap[id(s)] = self.bmap[id(s)] = self.held[id(s.operands[0])]
         elif op is Op.RANGE_FOR:
             attrs = dict(s.attrs, parallel=False)
             new = self.b.emit(Op.RANGE_FOR, s.type, tuple(self.v(o) for o in s.operands), attrs, nblocks=1)
@@ -185,6 +214,92 @@ class Reverse:
             new = self.b.emit(op, s.type, tuple(self.v(o) for o in s.operands), dict(s.attrs))
             self.fmap[id(s)] = new
             self._anchor(s, new)
+
+    # -- recomputed serial loops -----------------------------------------------------------------------
+    def _recomputable(self, loop: Stmt) -> bool:
+        """A serial range-for in a task whose body stores no local declared outside it: replaying it has no
+        effect (global writes are dropped), so its backward loop can recompute each iteration instead."""
+        if not self.in_task or loop.attrs.get("parallel"):
+            return False
+        inside = {id(x) for x in walk(loop.blocks[0])}
+        for x in walk(loop.blocks[0]):
+            if x.op in (Op.LOCAL_STORE, Op.ATOMIC) and x.operands[0].op is Op.ALLOCA \
+                    and id(x.operands[0]) not in inside:
+                return False
+        return True
+
+    def _free(self, loop: Stmt) -> tuple[list[Stmt], list[Stmt]]:
+        """(SSA values the loop uses from outside, bounds first; outer locals it reads)."""
+        got = self._free_cache.get(id(loop))
+        if got is None:
+            inside = {id(x) for x in walk(loop.blocks[0])} | {id(loop)}
+            values: dict[int, Stmt] = {id(o): o for o in loop.operands if o.op is not Op.CONST}
+            local: dict[int, Stmt] = {}
+            for x in walk(loop.blocks[0]):
+                for o in x.operands:
+                    if id(o) not in inside and o.op is not Op.CONST:
+                        (local if o.op is Op.ALLOCA else values).setdefault(id(o), o)
+            got = self._free_cache[id(loop)] = (list(values.values()), list(local.values()))
+        return got
+
+    def _snapshot(self, loop: Stmt) -> None:
+        """In the replay, in place of the loop: load each outer local it reads (it cannot change them, so
+        this is the value every iteration saw) and mark the spot where its outer values are pushed."""
+        snaps = []
+        for a in self._free(loop)[1]:
+            held = self.held.get(id(a))
+            value = held if held is not None else self.b.emit(Op.LOCAL_LOAD, a.type, (self.v(a),))
+            snaps.append((a, value, held is not None))
+        self.snap[id(loop)] = snaps
+        self._anchor(loop, None)
+
+    def _backward_recompute(self, s: Stmt) -> None:
+        """for k reversed: recompute the body's forward statements for index k, then reverse them."""
+        values, _ = self._free(s)
+        blk = self.b.block
+        mark = len(blk.stmts)
+        saved_bmap = {id(o): self.bmap.get(id(o)) for o in values}
+        saved_held = dict(self.held)
+        # outer values not in scope here come through the tape, pushed where the replay passed the loop
+        taped = [(o, self.fmap[id(o)], self.bmap) for o in values
+                 if id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
+        nested = self.depth.get(id(s), 0) > 0
+        for a, value, held in self.snap[id(s)]:
+            if nested and not held:
+                taped.append((a, value, self.held))
+            else:
+                self.held[id(a)] = value
+        for o, value, into in reversed(taped):
+            into[id(o)] = self.b.emit(Op.TAPE_POP, value.type, (), {"message": self._overflow_text(s)})
+        begin, end = (o if o.op is Op.CONST else self.v(o) for o in s.operands)
+        n = _trip(self.b, begin, end)
+        t = n.type
+        loop = Stmt(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True}, s.loc)
+        body = Block(loop)
+        loop.blocks = (body,)
+        with self.b.inside(body):
+            k = self.b.binary(Op.SUB, self.b.binary(Op.SUB, n, self.b.const(1, t)), loop)
+            self.bmap[id(s)] = self.b.binary(Op.ADD, begin, k)
+            for x in s.blocks[0].stmts:
+                self.clone(x, 0)
+            recomputed = len(body.stmts)
+            self.backward_block(s.blocks[0].stmts)
+        empty = len(body.stmts) == recomputed
+        self.bmap.pop(id(s), None)
+        for key, old in saved_bmap.items():
+            if old is None:
+                self.bmap.pop(key, None)
+            else:
+                self.bmap[key] = old
+        self.held = saved_held
+        if empty:  # nothing to differentiate: no loop, no pops, and the replay pushes nothing for it
+            del blk.stmts[mark:]
+            return
+        if taped:
+            self.push.setdefault(id(s), []).extend(value for _, value, _ in taped)
+            self.used_tape = True
+        loop.block = blk
+        blk.stmts.append(loop)
 
     def _clone_while(self, s: Stmt, depth: int) -> None:
         count = self.b.emit(Op.ALLOCA, dt.i32)
@@ -217,7 +332,7 @@ class Reverse:
 
     def acc(self, s: Stmt, contribution) -> None:
         """adj(s) += contribution (an atomic on a local shared by parallel iterations)."""
-        if s.op is Op.CONST or s.type is None or not s.type.is_float:
+        if s.op is Op.CONST or s.type is None or not s.type.is_float or id(s) not in self.active:
             return
         a = self._adj_var(s)
         c = ops.cast_expr(ops.to_expr(contribution, s.type), s.type)
@@ -273,6 +388,8 @@ class Reverse:
             return
         if op is Op.IF:
             self._backward_if(s)
+        elif op is Op.RANGE_FOR and id(s) in self.snap:
+            self._backward_recompute(s)
         elif op is Op.RANGE_FOR:
             self._backward_loop(s, s.operands)
         elif op is Op.WHILE:
@@ -347,6 +464,11 @@ class Reverse:
     def _backward_loop(self, s: Stmt, bounds) -> None:
         index_var = Stmt(Op.ALLOCA, s.type or dt.i32, (), {}, s.loc)
         body_old = s.blocks[0].stmts if s.op is Op.RANGE_FOR else _split_header(s.blocks[0])[1]
+        # a local stored late in the body feeds loads of the next iteration, whose backward ran before; the
+        # store is walked before those loads, so its adjoint variable must exist already
+        for x in walk(s.blocks[0]):
+            if x.op is Op.LOCAL_LOAD and id(x.operands[0]) in self.active:
+                self._adj_var(x.operands[0])
 
         def bind_index():
             if s.op is Op.RANGE_FOR:
@@ -362,7 +484,8 @@ class Reverse:
         else:
             (n,) = self.values(s, [s])
         t = n.type
-        loop = self.b.emit(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False}, nblocks=1)
+        loop = self.b.emit(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True},
+                           nblocks=1)
         with self.b.inside(loop.blocks[0]):
             if s.op is Op.RANGE_FOR:
                 last = self.b.binary(Op.SUB, n, self.b.const(1, t))
@@ -393,7 +516,7 @@ class Reverse:
 
     def _backward_global_store(self, s: Stmt) -> None:
         ptr, w = s.operands
-        if not w.type.is_float:
+        if not w.type.is_float or id(w) not in self.active:  # no gradient to pass on (and nothing to pop)
             return
         gp, _, _ = self._grad_ptr(s, ptr)
         if gp is not None:
@@ -414,6 +537,8 @@ class Reverse:
                 self.acc(w, Expr(self.b.emit(Op.LOCAL_LOAD, ptr.type, (self.adj[id(ptr)],))))
             return
         if kind == "add":
+            if id(w) not in self.active:
+                return
             gp, _, _ = self._grad_ptr(s, ptr)
             if gp is not None:
                 self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
@@ -452,6 +577,42 @@ class Reverse:
             last_at[key] = new[-1]
 
 
+def _active(body: Block) -> set[int]:
+    """Ids of the values (and locals) that depend on a field with a gradient: only their adjoints can reach
+    a .grad field, so the others are never accumulated (e.g. a ray's positions from the camera)."""
+    active: set[int] = set()
+    changed = True
+    while changed:  # a loop-carried local may become active on a later pass
+        changed = False
+        for s in walk(body):
+            if id(s) in active:
+                continue
+            op = s.op
+            if op in (Op.LOCAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.ALLOCA:
+                on, s = id(s.operands[1]) in active, s.operands[0]
+                if id(s) in active:
+                    continue
+            elif op is Op.GLOBAL_LOAD:
+                on = _grad_of(s.operands[0].attrs["target"]) is not None
+            elif op is Op.LOCAL_LOAD:
+                on = id(s.operands[0]) in active
+            else:
+                # through integers too, so that a float rebuilt from one (bit_cast) still meets the
+                # missing-rule error instead of a silent zero
+                on = s.type is not None and any(id(o) in active for o in s.operands)
+            if on:
+                active.add(id(s))
+                changed = True
+    return active
+
+
+def _trip(b: Builder, begin: Stmt, end: Stmt) -> Stmt:
+    """end - begin, folded when both are constants (so tape_bound can read it)."""
+    if begin.op is Op.CONST and end.op is Op.CONST:
+        return b.const(end.attrs["value"] - begin.attrs["value"], end.type)
+    return b.binary(Op.SUB, end, begin)
+
+
 def _split_header(body: Block) -> tuple[list[Stmt], list[Stmt]]:
     """A while body as (header: statements up to the last exit test, rest). The header only computes
     the loop condition, so the adjoint replays it but never reverses it."""
@@ -478,7 +639,8 @@ def make_adjoint(kernel: Kernel) -> bool:
 def tape_bound(block: Block) -> int | None:
     """Most tape entries one thread holds at once, when loop bounds are compile-time constants (None:
     unknown, e.g. a while loop or a run-time bound). A parallel loop's body resets the tape every
-    iteration, so it counts once."""
+    iteration, and a loop of the backward walk ("reversed") pops in each iteration what that iteration
+    pushed (a recomputed body), so both count once."""
     total = 0
     for s in block.stmts:
         if s.op is Op.TAPE_PUSH:
@@ -494,6 +656,8 @@ def tape_bound(block: Block) -> int | None:
             continue
         if s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
             total = max(total, n)
+        elif s.op is Op.RANGE_FOR and s.attrs.get("reversed"):
+            total += n
         elif s.op is Op.RANGE_FOR:
             b, e = s.operands
             if b.op is not Op.CONST or e.op is not Op.CONST:
