@@ -146,6 +146,8 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
                 or f.layout is None or f.dtype.name not in ("f32", "f64", "i32", "i64"):
             continue
         ptrs = [a.operands[0] for a, _times in updates]
+        if any(id(p) not in inside for p in ptrs):
+            continue  # an address computed before the loop would still point into the field itself
         nprefix = 0 if debug else _prefix_len(f, ptrs, loop, inside)
         if any(not _other_slice(o, p, nprefix) for o in others.get(tid, ()) for p in ptrs):
             continue  # the loop reads (or stores) what it would add into a copy of

@@ -263,3 +263,22 @@ def test_reading_another_slice_of_the_field_keeps_privatisation_reading_maybe_th
     expect[2] += n // c
     np.testing.assert_array_equal(q.to_numpy(), expect)
     assert "_private" not in _text(any_slice, 2, 2)
+
+
+def test_fixed_and_varying_updates_of_one_field_after_a_store_before_the_loop():
+    """hist[0] (a fixed element, not a per-thread reduction since the field is also updated at varying
+    elements) and hist[i % 5] go to the copies; the store before the loop happens first."""
+    n = 100_000
+    hist = ti.field(ti.i32, shape=5)
+    hist.from_numpy(np.full(5, 9, np.int32))
+
+    @ti.kernel
+    def count():
+        hist[0] = 0
+        for i in range(n):
+            hist[0] += 1
+            hist[i % 5] += 1
+
+    count()
+    assert "_private" in _text(count)
+    np.testing.assert_array_equal(hist.to_numpy(), [n + n // 5] + [9 + n // 5] * 4)
