@@ -98,3 +98,46 @@ def test_tape_size_is_inferred_from_static_bounds_beyond_the_default():
         fd = (f(x0 + h) - f(x0 - h)) / (2 * h)
         assert abs(fd - 1.0) > 0.1  # the derivative is far from trivial
         assert abs(x.grad[i] - fd) <= 1e-6 + 1e-5 * abs(fd)
+
+
+def test_pairwise_energy_with_a_carried_accumulator_where_taichi_crashes():
+    """The potential_forces pattern: per i, `e += pair(i, j)` over every j inside an `if`. taichi 1.7.4
+    (CPU, default ad_stack_size) segfaults in this kernel's Tape for n >= 64 (checked 2026-11-23 with the
+    same kernel; n = 4 works there). We size the tape from the static bound; forces against finite
+    differences of the energy."""
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    n = 64
+    x = ti.Vector.field(2, ti.f64, shape=n, needs_grad=True)
+    U = ti.field(ti.f64, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def energy():
+        for i in range(n):
+            e = 0.0
+            for j in range(n):
+                if i != j:
+                    r = x[i] - x[j]
+                    e += 0.5 / ti.sqrt(r.dot(r) + 0.01)
+            U[None] += e
+
+    p = np.random.default_rng(5).random((n, 2))
+    x.from_numpy(p)
+    with ti.ad.Tape(loss=U):
+        energy()
+    got = x.grad.to_numpy()
+
+    def u_of(q):
+        r = q[:, None, :] - q[None, :, :]
+        inv = 0.5 / np.sqrt((r ** 2).sum(-1) + 0.01)
+        np.fill_diagonal(inv, 0)
+        return inv.sum()
+
+    assert abs(U[None] - u_of(p)) <= 1e-10 * u_of(p)
+    h = 1e-6
+    for k in (0, 17, 63):
+        for c in (0, 1):
+            a, b = p.copy(), p.copy()
+            a[k, c] += h
+            b[k, c] -= h
+            fd = (u_of(a) - u_of(b)) / (2 * h)
+            assert abs(got[k, c] - fd) <= 1e-6 * max(1.0, abs(fd))
