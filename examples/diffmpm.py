@@ -14,7 +14,7 @@ particles (checkpointing by recomputation) before running the adjoint kernels.
 
 Defaults are the paper's: a 128 x 128 grid, dt = 1e-3, 1024 steps, 2 particles per cell width (2976
 particles), E = 10, gravity 3.8, 4 sine waves at omega = 20, actuation strength 4, learning rate 0.1;
-they take about 2 s per iteration on this 2-core CPU, so all of them are kept. The paper trains 80-100
+they take about 0.8 s per iteration on this 2-core CPU, so all of them are kept. The paper trains 80-100
 iterations; the default here is 40 (run with --iters 100 for the full optimisation).
 
     python examples/diffmpm.py [--iters 40] [--out out/diffmpm] [--steps 1024] [--n-grid 128]

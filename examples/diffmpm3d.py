@@ -14,11 +14,11 @@ As in examples/diffmpm.py, the particle state of every step is stored and each s
 @ti.ad.grad_replaced with a gradient that recomputes the grid before running the adjoint kernels.
 
 Sizes. The paper's run (64^3 grid, 3 particles per cell width, block size 0.1: 30.5K particles, 512 steps
-of dt = 2e-3, 40-100 iterations with learning rate 30) takes about 33 s per iteration on this 2-core CPU
-(35K particles with our rounding of the block sizes) and 3.5 GB for the stored states and their
+of dt = 2e-3, 40-100 iterations with learning rate 30) takes tens of seconds per iteration on this 2-core
+CPU (35K particles with our rounding of the block sizes) and 3.5 GB for the stored states and their
 gradients. The default keeps the paper's robot geometry, time step, 512 steps, physical constants (E = 10,
 gravity 10, omega = 40, actuation strength 5) and learning rate, but uses a 48^3 grid seeded with 2
-particles per cell width (4.5K particles, ~6 s per iteration) and 30 iterations; --n-grid 64 --per-cell 3
+particles per cell width (4.5K particles, ~3.5 s per iteration) and 30 iterations; --n-grid 64 --per-cell 3
 gives the paper's resolution.
 
     python examples/diffmpm3d.py [--iters 30] [--out out/diffmpm3d] [--steps 512] [--n-grid 48] [--per-cell 2]

@@ -7,10 +7,10 @@ MPM grid. The loss is minus the x-displacement of the robot's centre of mass (th
 gradient descent on the controller's weights and biases, through the liquid's dynamics.
 
 Sizes. The paper's run (64^3 grid, 3 particles per cell width, block size 0.08: 43.5K particles, 512 steps
-of dt = 2e-3, 450 iterations with learning rate 10) would take about half a minute per iteration on this
+of dt = 2e-3, 450 iterations with learning rate 10) would take tens of seconds per iteration on this
 2-core CPU (estimated from diffmpm3d at that resolution), and 450 iterations of it. The default keeps the
 paper's geometry (blocks of 0.08, a 0.2 x 0.05 x 0.2 slab of liquid), time step, 512 steps and physical
-constants, but uses a 48^3 grid with 2 particles per cell width (4.3K particles, ~6-7 s per iteration)
+constants, but uses a 48^3 grid with 2 particles per cell width (4.3K particles, ~3.5 s per iteration)
 and 30 iterations with learning rate 30 instead of 450 with 10.
 
     python examples/liquid.py [--iters 30] [--out out/liquid] [--steps 512] [--n-grid 48] [--per-cell 2]
