@@ -226,8 +226,8 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"br label %{plain}")
     f.start_block(run)
     f.emit(f"call void {pfor}(ptr @{private_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
-    for r, buf in zip(regions, bufs):
-        _emit_sum_into(f, r, buf, nthreads)
+    for k, (r, buf) in enumerate(zip(regions, bufs)):
+        _emit_sum_into(f, r, buf, nthreads, pfor, f"{private_task}_sum{k}")
         f.emit(f"call void @free(ptr {buf})")
     f.emit(f"br label %{done}")
     f.start_block(plain)
@@ -236,56 +236,69 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(done)
 
 
-def _emit_sum_into(f, r: Region, buf: str, nthreads: str) -> None:
-    """field[k] += copy_t[k] for every thread's copy t, in thread order; a zero partial leaves the element
-    untouched: bytes of other fields in the range stay as they are, and an element no iteration updated
-    keeps even the sign of a zero."""
-    ty = r.dtype.llvm
-    n = r.count
+def _emit_sum_into(f, r: Region, buf: str, nthreads: str, pfor: str, name: str) -> None:
+    """Add every thread's copy into the field, split across the pool by element ranges (task `name`)."""
     lines: list[str] = []
     shift = slice_shift(lines, lambda: f.tmp("sh"), f.v, r)
     for line in lines:
         f.emit(line)
-    real, at = f.tmp("real"), f.tmp("real")
+    real, at, clo = f.tmp("real"), f.tmp("real"), f.tmp("sclo")
     f.emit(f"{at} = getelementptr i8, ptr {f.root(r.tree_id)}, i64 {shift}")
     f.emit(f"{real} = getelementptr i8, ptr {at}, i64 {r.lo}")
-    pre, thead, tbody, khead, kbody, kdone, tdone = (f.label(h) for h in
-                                                     ("sum", "sumt", "sumtb", "sumk", "sumkb", "sumkd", "sumtd"))
-    f.emit(f"br label %{pre}")
-    f.start_block(pre)
-    f.emit(f"br label %{thead}")
-    f.start_block(thead)
-    t, tnext, tc = f.tmp("st"), f.tmp("stn"), f.tmp("stc")
-    f.emit(f"{t} = phi i64 [0, %{pre}], [{tnext}, %{kdone}]")
-    f.emit(f"{tc} = icmp slt i64 {t}, {nthreads}")
-    f.emit(f"br i1 {tc}, label %{tbody}, label %{tdone}")
-    f.start_block(tbody)
-    base, copy = f.tmp("sb"), f.tmp("scopy")
-    f.emit(f"{base} = mul i64 {t}, {n}")
-    f.emit(f"{copy} = getelementptr inbounds {ty}, ptr {buf}, i64 {base}")
-    f.emit(f"br label %{khead}")
-    f.start_block(khead)
-    k, knext, kc = f.tmp("sk"), f.tmp("skn"), f.tmp("skc")
-    f.emit(f"{k} = phi i64 [0, %{tbody}], [{knext}, %{kbody}]")
-    f.emit(f"{kc} = icmp slt i64 {k}, {n}")
-    f.emit(f"br i1 {kc}, label %{kbody}, label %{kdone}")
-    f.start_block(kbody)
-    src, dst, part, old, new = f.tmp("ss"), f.tmp("sd"), f.tmp("sp"), f.tmp("so"), f.tmp("sn")
-    f.emit(f"{src} = getelementptr inbounds {ty}, ptr {copy}, i64 {k}")
-    f.emit(f"{dst} = getelementptr inbounds {ty}, ptr {real}, i64 {k}")
-    f.emit(f"{part} = load {ty}, ptr {src}")
-    f.emit(f"{old} = load {ty}, ptr {dst}")
-    if r.dtype.is_float:
-        added, zero = f.tmp("sa"), f.tmp("sz")
-        f.emit(f"{added} = fadd {ty} {old}, {part}")
-        f.emit(f"{zero} = fcmp oeq {ty} {part}, 0.0")
-        f.emit(f"{new} = select i1 {zero}, {ty} {old}, {ty} {added}")
+    f.prologue.append(f"  {clo} = alloca [3 x i64], align 8")
+    for k, (ty, v) in enumerate((("ptr", buf), ("ptr", real), ("i64", nthreads))):
+        slot = f.tmp("sslot")
+        f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {k}")
+        f.emit(f"store {ty} {v}, ptr {slot}")
+    f.emit(f"call void {pfor}(ptr @{name}, ptr {clo}, i64 0, i64 {r.count}, i64 {SUM_GRAIN})")
+    f.gen.module.functions.append(_sum_task(name, r.dtype, r.count))
+
+
+SUM_GRAIN = 8192  # elements per chunk of the final sum
+
+
+def _sum_task(name: str, dtype, n: int) -> str:
+    """field[k] += copy_t[k] for k in [lo, hi) and every thread's copy t, in thread order. A zero partial
+    leaves the element untouched: bytes of other fields in the copied range stay as they are, and an
+    element no iteration updated keeps even the sign of a zero."""
+    ty = dtype.llvm
+    if dtype.is_float:
+        combine = (f"  %added = fadd {ty} %old, %part\n  %zero = fcmp oeq {ty} %part, 0.0\n"
+                   f"  %new = select i1 %zero, {ty} %old, {ty} %added")
     else:
-        f.emit(f"{new} = add {ty} {old}, {part}")
-    f.emit(f"store {ty} {new}, ptr {dst}")
-    f.emit(f"{knext} = add i64 {k}, 1")
-    f.emit(f"br label %{khead}")
-    f.start_block(kdone)
-    f.emit(f"{tnext} = add i64 {t}, 1")
-    f.emit(f"br label %{thead}")
-    f.start_block(tdone)
+        combine = f"  %new = add {ty} %old, %part"
+    return f"""define internal void @{name}(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {{
+entry:
+  %buf = load ptr, ptr %clo
+  %realp = getelementptr i64, ptr %clo, i64 1
+  %real = load ptr, ptr %realp
+  %ntp = getelementptr i64, ptr %clo, i64 2
+  %nt = load i64, ptr %ntp
+  br label %thead
+thead:
+  %t = phi i64 [0, %entry], [%tnext, %kdone]
+  %tc = icmp slt i64 %t, %nt
+  br i1 %tc, label %tbody, label %done
+tbody:
+  %base = mul i64 %t, {n}
+  %copy = getelementptr inbounds {ty}, ptr %buf, i64 %base
+  br label %khead
+khead:
+  %k = phi i64 [%lo, %tbody], [%knext, %kbody]
+  %kc = icmp slt i64 %k, %hi
+  br i1 %kc, label %kbody, label %kdone
+kbody:
+  %src = getelementptr inbounds {ty}, ptr %copy, i64 %k
+  %dst = getelementptr inbounds {ty}, ptr %real, i64 %k
+  %part = load {ty}, ptr %src
+  %old = load {ty}, ptr %dst
+{combine}
+  store {ty} %new, ptr %dst
+  %knext = add i64 %k, 1
+  br label %khead
+kdone:
+  %tnext = add i64 %t, 1
+  br label %thead
+done:
+  ret void
+}}"""
