@@ -45,6 +45,12 @@ def lower_global_ptr(gen, f, s) -> str:
             text = str(shape) + (f" with offset {tuple(offset)}" if any(offset) else "")
             idx = [_bounds_check(gen, f, s, k, i, str(shape[k]), text, offset[k]) for k, i in enumerate(idx)]
         off = str(const)
+        stride = None if gen.debug else _linear_stride(f, s, terms)
+        if stride is not None:  # the address is affine in the loop index: LLVM can vectorise the loop
+            lin, m, a = _i64(f, f.v(f.loop), f.loop.type), f.tmp("of"), f.tmp("of")
+            f.emit(f"{m} = mul nsw i64 {lin}, {stride}")
+            f.emit(f"{a} = add nsw i64 {const}, {m}")
+            terms, off = (), a
         for t in terms:
             d = idx[t.axis]
             if t.divisor != 1:
@@ -90,3 +96,34 @@ def lower_global_ptr(gen, f, s) -> str:
     p = f.tmp("ptr")
     f.emit(f"{p} = getelementptr inbounds {arg.dtype.llvm}, ptr {f.array_base(arg)}, i64 {lin}")
     return p
+
+
+def _linear_stride(f, s, terms) -> int | None:
+    """The byte stride `st` when the element address is `const + L * st` for the task's loop index L:
+    the indices are the digits `(L // d) % m` of a flattened struct-for (the loop starting at 0) and the
+    field's strides follow the same digits (a dense field iterated in its own order). Else None."""
+    from simgrad.codegen.llvm import _digit_of
+    from simgrad.ir.ops import Op
+
+    loop = getattr(f, "loop", None)
+    if loop is None or loop.operands[0].op is not Op.CONST or loop.operands[0].attrs["value"] != 0:
+        return None
+    if len(terms) != len(s.operands) or any(t.divisor != 1 or t.modulus for t in terms):
+        return None
+    digits = {}
+    for t in terms:
+        d = _digit_of(s.operands[t.axis], loop)
+        if d is None or d[0] in digits:
+            return None
+        digits[d[0]] = (d[1], t.stride)
+    place, unit = 1, None
+    while place in digits:
+        mod, stride = digits.pop(place)
+        if unit is None:
+            unit = stride
+        if stride != place * unit:
+            return None
+        if mod == 0:
+            return unit if not digits else None
+        place *= mod
+    return None

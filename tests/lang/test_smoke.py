@@ -142,3 +142,31 @@ def test_owned_updates_of_a_3d_struct_for_need_no_atomics():
     expect = np.zeros((6, 5, 4), np.float32)
     expect[:, :, 0] = 4
     np.testing.assert_array_equal(h.to_numpy(), expect)
+
+
+def test_struct_for_accesses_in_loop_order_transposed_and_of_other_shapes():
+    """g[i, j, k] of a field iterated in its own order is addressed as base + L * stride (affine in the
+    flat loop index); transposed indices, another shape, AoS vector components and neighbours are not:
+    all must agree with numpy."""
+    a = np.random.default_rng(7).random((4, 5, 6)).astype(np.float32)
+    src = ti.field(ti.f32, shape=(4, 5, 6))
+    out = ti.Vector.field(3, ti.f32, shape=(4, 5, 6))
+    tr = ti.field(ti.f32, shape=(6, 5, 4))
+    wide = ti.field(ti.f32, shape=(4, 5, 7))
+    src.from_numpy(a)
+
+    @ti.kernel
+    def run():
+        for i, j, k in src:
+            out[i, j, k] = ti.Vector([src[i, j, k], 2 * src[i, j, k], src[i, j, (k + 1) % 6]])
+            tr[k, j, i] = src[i, j, k] + 1
+            wide[i, j, k] = 3 * src[i, j, k]
+
+    run()
+    o = out.to_numpy()
+    np.testing.assert_array_equal(o[..., 0], a)
+    np.testing.assert_array_equal(o[..., 1], 2 * a)
+    np.testing.assert_array_equal(o[..., 2], np.roll(a, -1, axis=2))
+    np.testing.assert_array_equal(tr.to_numpy(), np.transpose(a + 1, (2, 1, 0)))
+    np.testing.assert_array_equal(wide.to_numpy()[:, :, :6], 3 * a)
+    np.testing.assert_array_equal(wide.to_numpy()[:, :, 6], 0)
