@@ -131,17 +131,17 @@ class FunctionText:
     def private_root(self, region, slot: int) -> None:
         """Point the region's updates at this thread's zeroed copy (closure slot `slot`), shifted so that
         the fields' usual byte offsets land inside it."""
-        q, buf, t64, off, base, at, root = (self.tmp("pr") for _ in range(7))
+        q, buf, t64, off, base, root = (self.tmp("pr") for _ in range(6))
         lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
                  f"{t64} = zext i32 %tid to i64", f"{off} = mul i64 {t64}, {region.hi - region.lo}",
                  f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
         shift = slice_shift(lines, lambda: self.tmp("sh"), self.v, region)
         neg = self.tmp("pr")
-        lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{at} = getelementptr i8, ptr {base}, i64 {neg}",
-                  f"{root} = getelementptr i8, ptr {at}, i64 0"]
+        lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{root} = getelementptr i8, ptr {base}, i64 {neg}"]
         self.prologue += ["  " + line for line in lines]
-        for key in region.keys:
-            self.private_roots[key] = root
+        for tid, key in region.keys:
+            self.private_roots[(tid, key)] = root
+            self.private_prefix[tid] = len(key)  # every update of a field uses the same number of prefix axes
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -281,7 +281,7 @@ class KernelCodegen:
         if tree1 != tree2 or terms1 != terms2 or c2 != c1 + 4 or c1 % 8 or any(t.stride % 8 for t in terms1):
             return False
         if _owned_by_iteration(f, p1) or _owned_by_iteration(f, p2) or id(a) in f.reduction_of \
-                or id(b) in f.reduction_of or _in_private_copy(f, p1) or _in_private_copy(f, p2):
+                or id(b) in f.reduction_of or f.private_root_of(p1) or f.private_root_of(p2):
             return False
         self.lower_global_ptr(f, p1)
         f.names[p2] = f.names[p1]
@@ -379,7 +379,7 @@ class KernelCodegen:
                           and not _injective_in(s, x.operands[0], inside)}
         reductions = _reductions(s, inside, self.uses)
         reduced = {key[0] for key in reductions}
-        regions, weight, prefix_of = private_regions(s, inside, self.uses, shared_targets, reduced, self.debug)
+        regions, weight = private_regions(s, inside, self.uses, shared_targets, reduced, self.debug)
         clo = f.tmp("clo")
         f.prologue.append(f"  {clo} = alloca [{len(captured) + len(regions) + 1} x i64], align 8")
         f.emit(f"store ptr %ctx, ptr {clo}")
@@ -412,13 +412,12 @@ class KernelCodegen:
             return
         pname = f"{tname}_private"
         self._emit_task(s, pname, captured, slots, inside, shared_targets, reductions, regions,
-                        first_slot=len(captured) + 1, prefix_of=prefix_of)
+                        first_slot=len(captured) + 1)
         nthreads = f.ctx_slot(CTX_NTHREADS, "i64")
         emit_private_launch(f, regions, weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64, e64,
                             grain)
 
-    def _emit_task(self, s, tname, captured, slots, inside, shared_targets, reductions, regions, first_slot=0,
-                   prefix_of=None):
+    def _emit_task(self, s, tname, captured, slots, inside, shared_targets, reductions, regions, first_slot=0):
         """The outlined loop: `task(closure, lo, hi, tid)`; with `regions`, the variant that adds into this
         thread's private copies of those regions (closure slots from `first_slot` hold the copies)."""
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
@@ -438,7 +437,6 @@ class KernelCodegen:
             t.names[v] = val
             if v.op is Op.ALLOCA and not by_value:
                 t.shared.add(v)
-        t.private_prefix = prefix_of or {}
         for k, r in enumerate(regions):
             t.private_root(r, first_slot + k)
         ty = llvm_type(s.type)
@@ -524,7 +522,8 @@ class KernelCodegen:
             f.emit(f"store {ty} {n}, ptr {acc}")
             f.names[s] = r
             return
-        private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p) or _in_private_copy(f, p)
+        private = (p.op is Op.ALLOCA and p not in f.shared) or _owned_by_iteration(f, p) \
+            or f.private_root_of(p) is not None
         if not f.in_task or private:  # serial code or a thread's own local: a plain read-modify-write
             f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
             n = f.tmp("new")
@@ -671,10 +670,6 @@ def _owned_by_iteration(f: FunctionText, ptr: Stmt) -> bool:
     if loop is None or ptr.op is not Op.GLOBAL_PTR or id(ptr.attrs["target"]) in f.shared_targets:
         return False
     return _injective_in(loop, ptr, f.inside)
-
-
-def _in_private_copy(f: FunctionText, ptr: Stmt) -> bool:
-    return f.private_root_of(ptr) is not None
 
 
 def _injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:

@@ -5,8 +5,8 @@ spends most of its time in lock-prefixed read-modify-writes. When a loop only *a
 reads it, never stores to it, never uses an atomic's old value), each thread can add into a private,
 zeroed copy of the field's memory with plain instructions, and the copies are summed into the field once
 after the loop. That pays off when the loop does many more updates than the field has elements, which
-the generated code decides at run time from the trip count (`worth_it`); otherwise the usual atomic task
-runs. Summing per-thread partials reorders float additions, which atomics already leave unordered.
+the generated code decides at run time from the trip count (`emit_private_launch`); otherwise the usual
+atomic task runs. Summing per-thread partials reorders float additions, which atomics already leave unordered.
 """
 
 from __future__ import annotations
@@ -124,9 +124,8 @@ def _other_slice(a: Stmt, b: Stmt, nprefix: int) -> bool:
 
 
 def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: set,
-                    debug: bool) -> tuple[list[Region], int, dict]:
-    """Regions worth privatising in a parallel loop, the estimated updates per iteration into them, and
-    {id(field): number of prefix axes} for the fields they take.
+                    debug: bool) -> tuple[list[Region], int]:
+    """Regions worth privatising in a parallel loop and the estimated updates per iteration into them.
 
     A field the loop also reads or stores qualifies only where those accesses provably hit another
     slice. `shared`: ids of targets some iteration updates at elements it does not own (the others need no
@@ -139,7 +138,6 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
     _updates(loop.blocks[0], uses, 1, adds, others)
     groups: dict[tuple, Region] = {}
     weight = 0
-    prefix_of: dict[int, int] = {}
     for tid, updates in adds.items():
         f = updates[0][0].operands[0].attrs["target"]
         if tid not in shared or tid in reduced or not isinstance(f, ScalarField) \
@@ -151,7 +149,6 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
         nprefix = 0 if debug else _prefix_len(f, ptrs, loop, inside)
         if any(not _other_slice(o, p, nprefix) for o in others.get(tid, ()) for p in ptrs):
             continue  # the loop reads (or stores) what it would add into a copy of
-        prefix_of[tid] = nprefix
         strides = {t.axis: t.stride for t in f.layout[2]}
         lo, hi = _span(f, nprefix)
         for a, times in updates:
@@ -165,7 +162,7 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
             r.lo, r.hi = min(r.lo, lo), max(r.hi, hi)
             r.keys.add((tid, key))
             weight += times
-    return list(groups.values()), weight, prefix_of
+    return list(groups.values()), weight
 
 
 def slice_shift(lines: list, tmp, value, region: Region) -> str:
@@ -197,11 +194,11 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")
     f.emit(f"{multi} = icmp sgt i64 {nthreads}, 1")
-    nbytes, fits, both = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
+    nbytes, fits, worth = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
     f.emit(f"{nbytes} = mul i64 {nthreads}, {sum(r.hi - r.lo for r in regions)}")
     f.emit(f"{fits} = icmp ule i64 {nbytes}, {MAX_COPY_BYTES}")
-    f.emit(f"{both} = and i1 {big}, {multi}")
-    f.emit(f"{ok} = and i1 {both}, {fits}")
+    f.emit(f"{worth} = and i1 {big}, {multi}")
+    f.emit(f"{ok} = and i1 {worth}, {fits}")
     plain, alloc, run, done = f.label("atomic"), f.label("alloc"), f.label("private"), f.label("scatterdone")
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)
@@ -210,13 +207,13 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     bufs = []
     got = "true"
     for k, r in enumerate(regions):
-        buf, slot, nonnull, both = f.tmp("priv"), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
+        buf, slot, nonnull, all_ok = f.tmp("priv"), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
         f.emit(f"{buf} = call ptr @calloc(i64 {nthreads}, i64 {r.hi - r.lo})")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
         f.emit(f"store ptr {buf}, ptr {slot}")
         f.emit(f"{nonnull} = icmp ne ptr {buf}, null")
-        f.emit(f"{both} = and i1 {got}, {nonnull}")
-        got = both
+        f.emit(f"{all_ok} = and i1 {got}, {nonnull}")
+        got = all_ok
         bufs.append(buf)
     nomem = f.label("nomem")
     f.emit(f"br i1 {got}, label %{run}, label %{nomem}")
