@@ -49,8 +49,30 @@ def to_expr(v, like: dt.DataType | None = None) -> Expr:
     if isinstance(v, _PY_NUM) or _np_scalar(v):
         t = _literal_type(v, like)
         value = v.item() if _np_scalar(v) else v
+        if isinstance(value, int) and not isinstance(value, bool) and not t.is_float:
+            _check_literal(value, t)
         return Expr(context.builder().const(value, t))
     raise SimgradTypeError(f"cannot use a {type(v).__name__} value in a kernel expression", context.current_loc())
+
+
+def _check_literal(v: int, t: dt.DataType) -> None:
+    """An integer literal must fit its type (Taichi refuses too) rather than wrap silently; a negative
+    literal meeting an unsigned value is its two's complement (`u - (-1)`), as in Taichi."""
+    lo = -(1 << (t.bits - 1))
+    hi = (1 << (t.bits - 1 if t.is_signed else t.bits)) - 1
+    if not lo <= v <= hi:
+        hint = "default_ip" if t is dt.Defaults.ip else "its type"
+        raise SimgradTypeError(f"integer literal {v} exceeds the range of {hint} {t} ([{lo}, {hi}]); give it a "
+                               f"wider type, e.g. ti.i64({v}) or ti.u64({v}), or set default_ip in ti.init()",
+                               context.current_loc())
+
+
+def _int_literal(v: int) -> Expr:
+    """An explicitly cast Python int: the narrowest of default_ip, i64, u64 that holds it."""
+    for t in (dt.Defaults.ip, dt.i64, dt.u64):
+        if -(1 << (t.bits - 1)) <= v < (1 << (t.bits - 1 if t.is_signed else t.bits)):
+            return Expr(context.builder().const(v, t))
+    return to_expr(v, dt.u64)  # raises: no 64-bit type holds it
 
 
 def cast_expr(e: Expr, t: dt.DataType) -> Expr:
@@ -92,6 +114,12 @@ def _binary(pyfn, irfn):
         return irfn(*_pair(a, b))
 
     return op
+
+
+def _c_div(a: int, b: int) -> int:
+    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
+    q = builtins.abs(a) // builtins.abs(b)
+    return q if (a < 0) == (b < 0) else -q
 
 
 def _py_div(a, b):
@@ -163,7 +191,7 @@ mul = _binary(lambda a, b: a * b, lambda a, b: _emit2(Op.MUL, a, b))
 truediv = _binary(_py_div, _ir_truediv)
 floordiv = _binary(lambda a, b: a // b, _ir_floordiv)
 mod = _binary(lambda a, b: a % b, _ir_mod)
-raw_div = _binary(lambda a, b: int(a / b) if isinstance(a, int) and isinstance(b, int) else a / b,
+raw_div = _binary(lambda a, b: _c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
                   lambda a, b: _emit2(Op.RAW_DIV if not a.dtype.is_float else Op.DIV, a, b))
 raw_mod = _binary(lambda a, b: math.fmod(a, b) if isinstance(a, float) or isinstance(b, float)
                   else int(math.fmod(a, b)), lambda a, b: _emit2(Op.RAW_MOD, a, b))
@@ -238,6 +266,8 @@ def abs(a):  # noqa: A001
         return _elementwise(abs, a)
     if not isinstance(a, Expr):
         return builtins.abs(a)
+    if not a.dtype.is_float and not a.dtype.is_signed:
+        return a  # an unsigned value is its own absolute value (llvm.abs would read it as signed)
     return _emit1(Op.ABS, a)
 
 
@@ -349,6 +379,8 @@ def cast(x, dtype):
     t = dt.from_any(dtype)
     if not isinstance(x, Expr):
         if context.in_kernel() and (isinstance(x, _PY_NUM) or _np_scalar(x)):
+            if isinstance(x, int) and not isinstance(x, bool):  # ti.cast(2**40, ti.i32) wraps, explicitly
+                return cast_expr(_int_literal(x), t)
             return cast_expr(to_expr(x, t), t)
         import numpy as np
 

@@ -1,21 +1,35 @@
-"""Local simplification: constant folding, algebraic identities, common subexpressions, dead code."""
+"""Local simplification: constant folding, algebraic identities, common subexpressions, dead code.
+
+A fold must give exactly what the instruction computes at its type (ir/numeric.py): integers wrap,
+f32/f16 arithmetic is left to the hardware, float min/max return the non-NaN operand (llvm.minnum),
+and identities keep the sign of zero (x + 0.0 is not x when x is -0.0)."""
 
 from __future__ import annotations
 
 import math
 
 from simgrad.ir import ops as O
-from simgrad.ir.builder import _wrap_int
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.numeric import wrap_int
 from simgrad.ir.ops import Op
 
 _FOLD = {
     Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
-    Op.MIN: min, Op.MAX: max, Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
+    Op.MIN: lambda a, b: _nan_aware(min, a, b), Op.MAX: lambda a, b: _nan_aware(max, a, b),
+    Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
     Op.BIT_XOR: lambda a, b: a ^ b, Op.LT: lambda a, b: int(a < b), Op.LE: lambda a, b: int(a <= b),
     Op.GT: lambda a, b: int(a > b), Op.GE: lambda a, b: int(a >= b), Op.EQ: lambda a, b: int(a == b),
     Op.NE: lambda a, b: int(a != b),
 }
+
+
+def _nan_aware(pick, a, b):
+    """llvm.minnum/maxnum: a NaN operand yields the other one (Python's min/max depend on the order)."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return pick(a, b)
 
 
 def simplify(kernel: Kernel) -> bool:
@@ -41,7 +55,7 @@ def _fold(s: Stmt):
         if s.type.is_float and s.type.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
             return None  # leave f32 rounding to the hardware
         v = _FOLD[s.op](a, b)
-        return v if s.type.is_float else _wrap_int(int(v), s.type)
+        return v if s.type.is_float else wrap_int(int(v), s.type)
     return None
 
 
@@ -55,10 +69,9 @@ def _identity(s: Stmt):
     if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
         a, b = s.operands
         cb, ca = _const(b), _const(a)
-        if s.op in (Op.ADD, Op.SUB) and cb == 0 and not (s.type.is_float and s.op is Op.ADD and
-                                                          math.copysign(1, cb) < 0):
+        if s.op in (Op.ADD, Op.SUB) and cb == 0 and (not s.type.is_float or _keeps_sign(s.op, cb)):
             return a
-        if s.op is Op.ADD and ca == 0 and not s.type.is_float:
+        if s.op is Op.ADD and ca == 0 and (not s.type.is_float or _keeps_sign(s.op, ca)):
             return b
         if s.op is Op.MUL and cb == 1:
             return a
@@ -67,6 +80,12 @@ def _identity(s: Stmt):
     if s.op is Op.CAST and s.operands[0].type is s.type:
         return s.operands[0]
     return None
+
+
+def _keeps_sign(op: Op, zero: float) -> bool:
+    """x + (-0.0) and x - 0.0 are x for every x; x + 0.0 is +0.0 for x = -0.0."""
+    negative = math.copysign(1.0, zero) < 0
+    return negative if op is Op.ADD else not negative
 
 
 def _key(s: Stmt, repl):
