@@ -122,7 +122,12 @@ def inline(comp, fn, args, kwargs, node):
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
+    from simgrad.lang.kernel import unexpected_keywords
+
     sig = fn.signature
+    unknown = unexpected_keywords(sig, kwargs)
+    if unknown:
+        raise SimgradTypeError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
     try:
         bound = sig.bind(*args, **kwargs)
     except TypeError as e:

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import linecache
+import re
+
+import numpy as np
+
 from simgrad import dtypes as dt
+from simgrad.errors import SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.runtime.program import get_program
@@ -10,11 +16,32 @@ from simgrad.runtime.program import get_program
 _counter = [0]
 
 
-def _name(name):
+_ASSIGNED = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*(?::[^=]*)?=\s*[\w.]+\(")
+
+
+def _name(name) -> tuple[str, bool]:
+    """(name, whether a kernel may still rename it): the given name, else the variable the caller assigns
+    the new field to (`x = ti.field(...)` names it `x`, as Taichi infers it), else field<N>."""
     if name:
-        return name
+        return name, False
+    loc = caller_loc()
+    if loc is not None:
+        m = _ASSIGNED.match(linecache.getline(loc.file, loc.line))
+        if m:
+            return m.group(1), False
     _counter[0] += 1
-    return f"field{_counter[0]}"
+    return f"field{_counter[0]}", True
+
+
+def _check_shape(shape):
+    """A shape of non-negative integers, refused (located at the caller) before numpy sees it."""
+    if shape is None:
+        return None
+    dims = (shape,) if isinstance(shape, (int, np.integer)) else tuple(shape)
+    for d in dims:
+        if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
+            raise SimgradValueError(f"field shape must be non-negative integers, got {shape!r}", caller_loc())
+    return tuple(int(d) for d in dims)
 
 
 def _axes(ndim: int):
@@ -27,7 +54,6 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
         f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
         return f  # to be placed by the user with ti.root...place()
     tree = get_program().new_tree()
-    shape = (shape,) if isinstance(shape, int) else tuple(shape)
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
@@ -61,17 +87,19 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     if isinstance(dtype, MatrixType):
         return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
     t = dt.from_any(dtype)
-    base = _name(name)
+    shape = _check_shape(shape)
+    base, auto = _name(name)
     f = _with_grad(lambda suffix: ScalarField(t, base + suffix), needs_grad, needs_dual)
-    f._auto_name = not name
+    f._auto_name = auto
     return _place_new(f, shape, offset, needs_grad)
 
 
 def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
-    base = _name(name)
+    shape = _check_shape(shape)
+    base, auto = _name(name)
     f = _with_grad(lambda suffix: MatrixField(n, m, t, base + suffix), needs_grad, needs_dual)
-    f._auto_name = not name
+    f._auto_name = auto
     return _place_new(f, shape, offset, needs_grad)
 
 
