@@ -12,6 +12,7 @@ import math
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
 from simgrad.frontend import context
+from simgrad.ir import numeric
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 
@@ -76,7 +77,13 @@ def _int_literal(v: int) -> Expr:
 
 
 def cast_expr(e: Expr, t: dt.DataType) -> Expr:
-    return Expr(context.builder().cast(e.stmt, t))
+    s = e.stmt
+    if s.op is Op.CONST and s.type.is_float and not t.is_float and t is not dt.u1 \
+            and numeric.convert(s.attrs["value"], s.type, t) is None:
+        raise SimgradTypeError(f"converting the constant {s.attrs['value']!r} to {t} is undefined (NaN, infinite "
+                               f"or out of {t}'s range); the machine result would be arbitrary",
+                               context.current_loc())
+    return Expr(context.builder().cast(s, t))
 
 
 def _pair(a, b) -> tuple[Expr, Expr]:

@@ -293,3 +293,22 @@ def test_f16_arithmetic_and_f64_argument():
     want = np.float16(np.float16(np.float16(x * x) + np.float16(np.sqrt(np.float32(x)))) -
                       np.float16(np.sin(np.float32(x))))
     assert abs(k(1.5) - float(want)) <= 2e-3
+
+
+def test_undefined_constant_float_to_int_conversion_is_refused():
+    """fptosi of NaN or an out-of-range value is poison in LLVM: a folded literal gave 0 while the same
+    value at run time gives INT_MIN on x86. A compile-time-known case is refused instead."""
+    x = ti.field(ti.i32, shape=1)
+
+    @ti.kernel
+    def cast_big() -> ti.i32:
+        return ti.cast(3e9, ti.i32)
+
+    @ti.kernel
+    def store_nan():
+        x[0] = math.nan
+
+    for k, line in ((cast_big, "return ti.cast(3e9, ti.i32)"), (store_nan, "x[0] = math.nan")):
+        with pytest.raises(TypeError, match=r"converting the constant .* to i32 is undefined") as e:
+            k()
+        assert line in str(e.value)
