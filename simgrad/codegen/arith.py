@@ -6,7 +6,7 @@ from simgrad import dtypes as dt
 from simgrad.ir.ops import Op
 
 _INT_BIN = {Op.ADD: "add", Op.SUB: "sub", Op.MUL: "mul", Op.BIT_AND: "and", Op.BIT_OR: "or",
-            Op.BIT_XOR: "xor", Op.SHL: "shl"}
+            Op.BIT_XOR: "xor"}
 _FLT_BIN = {Op.ADD: "fadd", Op.SUB: "fsub", Op.MUL: "fmul", Op.DIV: "fdiv"}
 _ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op.NE: "ne"}
 _UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
@@ -93,11 +93,16 @@ def lower_binary(f, s) -> str:
         if op is Op.ATAN2:
             return _libm(f, "atan2", t, [x, y])
         raise NotImplementedError(op)
+    if op in (Op.SHL, Op.SHR):
+        # a shift by >= the width is poison in LLVM: take the amount modulo the width, as x86 does at
+        # run time, so a constant shift and a run-time one agree
+        amt = f.tmp("sh")
+        f.emit(f"{amt} = and {ty} {y}, {t.bits - 1}")
+        kind = "shl" if op is Op.SHL else "ashr" if t.is_signed else "lshr"
+        f.emit(f"{r} = {kind} {ty} {x}, {amt}")
+        return r
     if op in _INT_BIN:
         f.emit(f"{r} = {_INT_BIN[op]} {ty} {x}, {y}")
-        return r
-    if op is Op.SHR:
-        f.emit(f"{r} = {'ashr' if t.is_signed else 'lshr'} {ty} {x}, {y}")
         return r
     if op in (Op.MIN, Op.MAX):
         name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")

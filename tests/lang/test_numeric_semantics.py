@@ -312,3 +312,31 @@ def test_undefined_constant_float_to_int_conversion_is_refused():
         with pytest.raises(TypeError, match=r"converting the constant .* to i32 is undefined") as e:
             k()
         assert line in str(e.value)
+
+
+@pytest.mark.parametrize("t", [ti.i8, ti.i32, ti.u32, ti.i64, ti.u64], ids=str)
+def test_shift_by_width_or_more_agrees_between_constant_and_run_time(t):
+    """LLVM makes `x << n` poison for n >= width; the amount is taken modulo the width (x86's run-time
+    behaviour), so a folded constant and a run-time amount give the same bits."""
+    bits = t.bits
+    out = ti.field(t, shape=(3, 4))
+
+    @ti.kernel
+    def k(x: t, n: t):
+        for j in ti.static(range(4)):
+            s = n + j
+            out[0, j] = x << s  # run-time amount
+            out[1, j] = (x >> s) + ti.cast(0, t)
+        out[2, 0] = ti.cast(3, t) << bits  # constant operands: LLVM would fold to poison
+        out[2, 1] = ti.cast(3, t) << (bits + 1)
+        out[2, 2] = x << bits
+        out[2, 3] = x >> (bits + 1)
+
+    k(3, bits - 1)
+    o = out.to_numpy().astype(object)
+    mask = (1 << bits) - 1
+    for j in range(4):
+        s = (bits - 1 + j) % bits
+        assert o[0, j] % (1 << bits) == (3 << s) & mask
+        assert o[1, j] == 3 >> s
+    assert [v % (1 << bits) for v in o[2]] == [3, 6, 3, 1]
