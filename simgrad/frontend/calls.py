@@ -12,7 +12,7 @@ from simgrad.frontend.refs import MatrixRef, VarRef
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
-from simgrad.lang.field import Field
+from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
 
 
@@ -98,9 +98,16 @@ def call(comp, node: ast.Call):
                                  comp.loc(node))
     if not callable(fn):
         raise SimgradTypeError(f"'{type(fn).__name__}' object is not callable", comp.loc(node))
+    if getattr(fn, "__func__", None) in _FILLS:  # emits IR from the field's (keyed) layout: cacheable
+        from simgrad.frontend.loops import emit_fill
+
+        return emit_fill(fn.__self__, *args, **kwargs)
     if comp.guard is not None:
         comp.guard.call(fn)
     return fn(*args, **kwargs)
+
+
+_FILLS = (ScalarField.fill, MatrixField.fill)
 
 
 def _atomic(comp, node: ast.Call, kind: str):

@@ -168,3 +168,31 @@ def test_python_scope_store_that_does_not_fit_is_refused(value):
     x[0] = -(2**31)
     x[1] = 2**31 - 1
     assert x.to_numpy().tolist() == [-(2**31), 2**31 - 1]
+
+
+def test_kernel_with_fill_is_taken_from_the_kernel_cache(tmp_path):
+    """fill emits IR from the field's layout, which is part of the key: no compile-time user call."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "prog.py"
+    script.write_text(
+        "import json, simgrad as ti\n"
+        "from simgrad.runtime.jit import get_jit\n"
+        f"ti.init(arch=ti.cpu, offline_cache_file_path=r'{tmp_path / 'cache'}')\n"
+        "v = ti.Vector.field(2, ti.f32, shape=5)\n"
+        "@ti.kernel\n"
+        "def k(a: ti.f32):\n"
+        "    v.fill(a)\n"
+        "k(2.5)\n"
+        "print('RESULT ' + json.dumps([v.to_numpy().tolist(), get_jit().stats['kernel_hits']]))\n")
+    outs = []
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=dict(os.environ),
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        outs.append(json.loads(next(s for s in proc.stdout.splitlines() if s.startswith("RESULT "))[7:]))
+    assert outs[0] == [[[2.5, 2.5]] * 5, 0]
+    assert outs[1] == [[[2.5, 2.5]] * 5, 1]
