@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import linecache
+import os
 import re
+import sys
 
 import numpy as np
 
@@ -16,6 +18,8 @@ from simgrad.runtime.program import get_program
 _counter = [0]
 
 
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+_FACTORY_FILES = {__file__, os.path.join(os.path.dirname(__file__), "types.py")}
 _ASSIGNED = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*(?::[^=]*)?=\s*[\w.]+\(")
 
 
@@ -24,9 +28,11 @@ def _name(name) -> tuple[str, bool]:
     the new field to (`x = ti.field(...)` names it `x`, as Taichi infers it), else field<N>."""
     if name:
         return name, False
-    loc = caller_loc()
-    if loc is not None:
-        m = _ASSIGNED.match(linecache.getline(loc.file, loc.line))
+    frame = sys._getframe(1)
+    while frame is not None and frame.f_code.co_filename in _FACTORY_FILES:
+        frame = frame.f_back
+    if frame is not None and not frame.f_code.co_filename.startswith(_PACKAGE):  # the user's own line
+        m = _ASSIGNED.match(linecache.getline(frame.f_code.co_filename, frame.f_lineno))
         if m:
             return m.group(1), False
     _counter[0] += 1
