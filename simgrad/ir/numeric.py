@@ -89,7 +89,12 @@ def const_value(v, t: DataType):
     return wrap_int(int(v), t)
 
 
-def fits(v: int, t: DataType) -> bool:
-    """An integer literal representable in `t`: its signed or its unsigned reading (so -1 as u32 and
-    0xFFFFFFFF as i32 are accepted as bit patterns, 2**40 as i32 is not)."""
-    return -(1 << (t.bits - 1)) <= v < (1 << t.bits)
+def minmax(pick, a, b):
+    """min/max as llvm.minnum/maxnum compute it: a NaN operand yields the other one (Python's min and
+    max would depend on the operand order)."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return pick(a, b)
+

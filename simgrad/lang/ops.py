@@ -154,9 +154,22 @@ def _ir_mod(a: Expr, b: Expr) -> Expr:
 def _ir_pow(a: Expr, b: Expr) -> Expr:
     if a.dtype.is_float:
         return _emit2(Op.POW, a, b)
-    # integer power with a runtime exponent: through f64 (exact for |result| < 2**53)
-    f = _emit2(Op.POW, cast_expr(a, dt.f64), cast_expr(b, dt.f64))
-    return cast_expr(f, a.dtype)
+    return _int_pow(a, b)
+
+
+def _int_pow(base: Expr, e: Expr) -> Expr:
+    """Integer power with a run-time exponent, as Taichi computes it: squaring over every bit of the
+    exponent, wrapping in the type (through f64 it was inexact beyond 2**53 and undefined beyond the
+    type); a negative exponent gives 1, as Taichi does outside debug mode. Branch-free: selects only."""
+    t = base.dtype
+    one = to_expr(1, t)
+    result, p = one, base
+    for k in range(t.bits - 1 if t.is_signed else t.bits):
+        bit = ne(bit_and(shr(e, k), 1), 0)
+        result = select(bit, mul(result, p), result)
+        if k < t.bits - 2:
+            p = mul(p, p)
+    return select(lt(e, 0), one, result) if t.is_signed else result
 
 
 def _ipow(base: Expr, n: int) -> Expr:
@@ -183,7 +196,8 @@ def pow(a, b):  # noqa: A001
         return _elementwise(pow, a, b)
     if not isinstance(a, Expr) and not isinstance(b, Expr):
         return a**b
-    if isinstance(a, Expr) and isinstance(b, int) and not isinstance(b, bool) and builtins.abs(b) <= 32:
+    if isinstance(a, Expr) and isinstance(b, int) and not isinstance(b, bool) and \
+            (builtins.abs(b) <= 32 or (not a.dtype.is_float and b > 0)):
         return _ipow(a, b)
     return _ir_pow(*_pair(a, b))
 
@@ -256,8 +270,8 @@ def _minmax(pyfn, op: Op):
     return f
 
 
-max = _minmax(builtins.max, Op.MAX)  # noqa: A001
-min = _minmax(builtins.min, Op.MIN)  # noqa: A001
+max = _minmax(lambda a, b: numeric.minmax(builtins.max, a, b), Op.MAX)  # noqa: A001
+min = _minmax(lambda a, b: numeric.minmax(builtins.min, a, b), Op.MIN)  # noqa: A001
 
 
 def neg(a):

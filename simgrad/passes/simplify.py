@@ -10,26 +10,17 @@ import math
 
 from simgrad.ir import ops as O
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
-from simgrad.ir.numeric import wrap_int
+from simgrad.ir.numeric import minmax, wrap_int
 from simgrad.ir.ops import Op
 
 _FOLD = {
     Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
-    Op.MIN: lambda a, b: _nan_aware(min, a, b), Op.MAX: lambda a, b: _nan_aware(max, a, b),
+    Op.MIN: lambda a, b: minmax(min, a, b), Op.MAX: lambda a, b: minmax(max, a, b),
     Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
     Op.BIT_XOR: lambda a, b: a ^ b, Op.LT: lambda a, b: int(a < b), Op.LE: lambda a, b: int(a <= b),
     Op.GT: lambda a, b: int(a > b), Op.GE: lambda a, b: int(a >= b), Op.EQ: lambda a, b: int(a == b),
     Op.NE: lambda a, b: int(a != b),
 }
-
-
-def _nan_aware(pick, a, b):
-    """llvm.minnum/maxnum: a NaN operand yields the other one (Python's min/max depend on the order)."""
-    if a != a:
-        return b
-    if b != b:
-        return a
-    return pick(a, b)
 
 
 def simplify(kernel: Kernel) -> bool:
