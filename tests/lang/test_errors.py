@@ -434,3 +434,10 @@ def test_python_scope_errors_name_the_users_variable():
     fields = [ti.field(ti.f32, shape=2) for _ in range(2)]  # no single variable: a generated name
     with pytest.raises(IndexError, match=r"field field\d+ of shape"):
         fields[0][5]
+
+
+def test_negative_dense_size_is_refused():
+    x = ti.field(ti.f32)
+    with pytest.raises(ValueError, match=r"dense\(\): sizes must be non-negative integers, got \(4, -1\)") as e:
+        ti.root.dense(ti.ij, (4, -1)).place(x)
+    assert "ti.root.dense(ti.ij, (4, -1)).place(x)" in str(e.value)
