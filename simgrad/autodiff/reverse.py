@@ -515,12 +515,16 @@ class Reverse:
             self.b.emit(Op.ATOMIC, gp.type, (gp, ops.cast_expr(g, gp.type).stmt), {"kind": "add"})
 
     def _backward_global_store(self, s: Stmt) -> None:
+        """The store overwrote the element, so the gradient that reached it belongs to the stored value and
+        is consumed: passed on, then zeroed (an earlier write of that element, or its value before this
+        kernel, no longer influences anything through it)."""
         ptr, w = s.operands
-        if not w.type.is_float or id(w) not in self.active:  # no gradient to pass on (and nothing to pop)
+        if not ptr.type.is_float or _grad_of(ptr.attrs["target"]) is None:
             return
         gp, _, _ = self._grad_ptr(s, ptr)
-        if gp is not None:
+        if w.type.is_float and id(w) in self.active:
             self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
+        self.b.emit(Op.GLOBAL_STORE, None, (gp, self.b.const(0, gp.type)))
 
     def _backward_atomic(self, s: Stmt) -> None:
         ptr, w = s.operands

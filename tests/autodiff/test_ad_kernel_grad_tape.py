@@ -117,7 +117,8 @@ def test_tape_sets_loss_to_zero_seeds_and_runs_in_reverse():
     assert loss[None] == pytest.approx(np.sum((2 * np.sin(xs)) ** 2), rel=1e-14)
     assert loss.grad[None] == 1.0
     np.testing.assert_allclose(x.grad.to_numpy(), 8 * np.sin(xs) * np.cos(xs), rtol=1e-13)
-    np.testing.assert_allclose(y.grad.to_numpy(), 4 * np.sin(xs), rtol=1e-13)
+    # step1's store consumed y.grad after passing it on (taichi 1.7.4 leaves it zero too)
+    np.testing.assert_array_equal(y.grad.to_numpy(), np.zeros(8))
 
 
 def test_tape_clear_gradients_false_keeps_them():
@@ -130,9 +131,9 @@ def test_tape_clear_gradients_false_keeps_them():
     with ti.ad.Tape(loss=loss, clear_gradients=False):
         step1()
         step2()
-    # y.grad kept its old value too, so x.grad gets the first gradient, plus a second pass seeded by
-    # the accumulated y.grad (2x): 1 + 2 = 3 times the first
-    np.testing.assert_allclose(x.grad.to_numpy(), 3 * g1, rtol=1e-13)
+    # x.grad keeps the first gradient and gets a second one; y.grad was consumed by step1's store in the
+    # first Tape, so it does not seed the second pass twice (taichi 1.7.4 gives 2x as well)
+    np.testing.assert_allclose(x.grad.to_numpy(), 2 * g1, rtol=1e-13)
     with ti.ad.Tape(loss=loss):
         step1()
         step2()
