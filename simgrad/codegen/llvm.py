@@ -4,9 +4,7 @@ A kernel becomes one entry function `void entry(ptr ctx)`. Each top-level parall
 into a task function `void task(ptr closure, i64 lo, i64 hi, i32 tid)` that the runtime's
 parallel_for splits across threads; the closure carries every value the loop body uses from outside.
 
-Context layout (8-byte slots): 0 roots table, 1 error buffer, 2 RNG states, 3 parallel_for,
-4 tape of the tasks, 5 tape capacity per thread (entries), 6 tape of the serial part, 7 number of pool
-threads, 8.. arguments.
+The context's slots (roots table, error buffer, RNG states, ...) are defined in runtime/abi.py.
 """
 
 from __future__ import annotations
@@ -20,9 +18,7 @@ from simgrad.codegen.privatize import access_key, emit_private_launch, private_r
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
-
-CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, CTX_NTHREADS, CTX_ARGS = range(9)
-
+from simgrad.runtime import abi
 
 
 def llvm_type(t: dt.DataType) -> str:
@@ -65,7 +61,7 @@ class ModuleText:
 
 _RUNTIME_HELPERS = r"""
 define internal void @sg_report(ptr %ctx, i64 %code, i64 %value) noinline {
-  %ep = getelementptr i64, ptr %ctx, i64 1
+  %ep = getelementptr i64, ptr %ctx, i64 @CTX_ERR@
   %err = load ptr, ptr %ep
   %r = cmpxchg ptr %err, i64 0, i64 %code monotonic monotonic
   %ok = extractvalue { i64, i1 } %r, 1
@@ -79,7 +75,7 @@ done:
 }
 
 define internal i32 @sg_rand_u32(ptr %ctx, i32 %tid) {
-  %rp = getelementptr i64, ptr %ctx, i64 2
+  %rp = getelementptr i64, ptr %ctx, i64 @CTX_RNG@
   %base = load ptr, ptr %rp
   %off = mul i32 %tid, 16
   %s = getelementptr i8, ptr %base, i32 %off
@@ -103,7 +99,7 @@ define internal i32 @sg_rand_u32(ptr %ctx, i32 %tid) {
   store i32 %n, ptr %p3
   ret i32 %n
 }
-"""
+""".replace("@CTX_ERR@", str(abi.CTX_ERR)).replace("@CTX_RNG@", str(abi.CTX_RNG))
 
 
 class FunctionText:
@@ -174,7 +170,7 @@ class FunctionText:
 
     def root(self, tree_id: int) -> str:
         if tree_id not in self.roots:
-            table = self.ctx_slot(CTX_ROOTS, "ptr")
+            table = self.ctx_slot(abi.CTX_ROOTS, "ptr")
             p = self.tmp("rp")
             v = self.tmp("root")
             self.prologue.append(f"  {p} = getelementptr ptr, ptr {table}, i64 {tree_id}")
@@ -184,26 +180,26 @@ class FunctionText:
 
     def array_base(self, arg) -> str:
         if arg.slot not in self.array_bases:
-            self.array_bases[arg.slot] = self.ctx_slot(CTX_ARGS + arg.slot, "ptr")
+            self.array_bases[arg.slot] = self.ctx_slot(abi.CTX_ARGS + arg.slot, "ptr")
         return self.array_bases[arg.slot]
 
     def array_shape(self, arg, dim: int) -> str:
         key = (arg.slot, dim)
         if key not in self.array_shapes:
-            self.array_shapes[key] = self.ctx_slot(CTX_ARGS + arg.slot + 1 + dim, "i64")
+            self.array_shapes[key] = self.ctx_slot(abi.CTX_ARGS + arg.slot + 1 + dim, "i64")
         return self.array_shapes[key]
 
     def tape(self) -> tuple[str, str, str]:
         """(base, top variable, capacity) of this function's tape, set up in the prologue on first use."""
         if not hasattr(self, "_tape"):
-            cap = self.ctx_slot(CTX_TAPE_CAP, "i64")
+            cap = self.ctx_slot(abi.CTX_TAPE_CAP, "i64")
             if self.in_task:
-                all_ = self.ctx_slot(CTX_TAPE, "ptr")
+                all_ = self.ctx_slot(abi.CTX_TAPE, "ptr")
                 t64, off, base = self.tmp("tt"), self.tmp("toff"), self.tmp("tbase")
                 self.prologue += [f"  {t64} = zext i32 %tid to i64", f"  {off} = mul i64 {t64}, {cap}",
                                   f"  {base} = getelementptr i64, ptr {all_}, i64 {off}"]
             else:
-                base = self.ctx_slot(CTX_TAPE_SERIAL, "ptr")
+                base = self.ctx_slot(abi.CTX_TAPE_SERIAL, "ptr")
             top = self.tmp("ttop")
             self.prologue += [f"  {top} = alloca i64", f"  store i64 0, ptr {top}"]
             self._tape = (base, top, cap)
@@ -405,7 +401,7 @@ class KernelCodegen:
         ext = "sext" if ty != "i64" else None
         for dst, src in ((b64, s.operands[0]), (e64, s.operands[1])):
             f.emit(f"{dst} = {ext} {ty} {f.v(src)} to i64" if ext else f"{dst} = add i64 {f.v(src)}, 0")
-        pfor = f.ctx_slot(CTX_PFOR, "ptr")
+        pfor = f.ctx_slot(abi.CTX_PFOR, "ptr")
         grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
         if not regions:
             f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
@@ -413,7 +409,7 @@ class KernelCodegen:
         pname = f"{tname}_private"
         self._emit_task(s, pname, captured, slots, inside, shared_targets, reductions, regions,
                         first_slot=len(captured) + 1)
-        nthreads = f.ctx_slot(CTX_NTHREADS, "i64")
+        nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
         emit_private_launch(f, regions, weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64, e64,
                             grain)
 
@@ -466,7 +462,7 @@ class KernelCodegen:
         f.names[s] = const_text(s.attrs["value"], s.type)
 
     def lower_arg(self, f, s):
-        f.names[s] = f.ctx_slot(CTX_ARGS + s.attrs["slot"], llvm_type(s.type))
+        f.names[s] = f.ctx_slot(abi.CTX_ARGS + s.attrs["slot"], llvm_type(s.type))
 
     def lower_array_shape(self, f, s):
         v = f.array_shape(s.attrs["arg"], s.attrs["dim"])
@@ -535,7 +531,7 @@ class KernelCodegen:
 
     def lower_ret_store(self, f, s):
         (v,) = s.operands
-        slot = CTX_ARGS + self.kernel.ret_slot + s.attrs["slot"]
+        slot = abi.CTX_ARGS + self.kernel.ret_slot + s.attrs["slot"]
         p = f.tmp("rp")
         f.emit(f"{p} = getelementptr i64, ptr %ctx, i64 {slot}")
         f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}")

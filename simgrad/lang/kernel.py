@@ -329,13 +329,12 @@ def _make_launcher(prog: Program, meta: dict, entries: dict):
     from simgrad.runtime.launch import Launcher
 
     launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog)
+                        meta["errors"], prog, meta["ret_matrix"])
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]
         launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
     ret_matrix = meta["ret_matrix"]
-    launcher.ret_matrix = ret_matrix
     if ret_matrix is not None:
         inner = launcher.launch
         n, m = ret_matrix
