@@ -235,7 +235,7 @@ class Kernel:
 
     def _build(self, prog: Program, args, transform, name_suffix, guard=None):
         """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
-        from simgrad.codegen.llvm import KernelCodegen
+        from simgrad.codegen.cpu import CpuCodegen
         from simgrad.frontend.lower import Compiler
         from simgrad.passes.manager import run_pipeline
 
@@ -250,9 +250,9 @@ class Kernel:
         if guard is not None and len(prog.trees) != trees:
             guard.taint("fields were created while compiling")
         ir.ret_slot = slots[1]
-        run_pipeline(ir, transform)
+        run_pipeline(ir, transform, debug=prog.config.debug)
         symbol = f"sg_{self.name}{name_suffix}_{id(ir):x}"
-        cg = KernelCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
         text = cg.generate()
         # the disk cache is keyed by the IR text with the symbol name made stable
         stable = text.replace(symbol, "sg_kernel")
