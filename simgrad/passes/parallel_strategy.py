@@ -113,13 +113,13 @@ def _pairs(block: Block, uses: dict) -> None:
     """Mark `a; p2; b` sequences (ATOMIC, GLOBAL_PTR, ATOMIC) that one 64-bit compare-and-swap can do."""
     stmts = block.stmts
     for k in range(len(stmts) - 2):
-        if _pairable(*stmts[k:k + 3], uses):
-            a, b = stmts[k], stmts[k + 2]
+        a, p2, b = stmts[k:k + 3]
+        if _pairable(a, p2, b, uses):
             prefix = PRIVATE if a.attrs["strategy"].startswith(PRIVATE) else ""
             a.attrs["strategy"] = b.attrs["strategy"] = prefix + PAIR
     for s in stmts:
-        for b in s.blocks:
-            _pairs(b, uses)
+        for inner in s.blocks:
+            _pairs(inner, uses)
 
 
 def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
@@ -154,14 +154,15 @@ def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
 def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
     """Places a parallel loop only accumulates into: every access is an atomic add whose old value is
     unused, at loop-invariant indices. {key: (a pointer statement, [the ATOMIC statements])}."""
-    groups: dict = {}
-    spoiled: set = set()
+    groups: dict[tuple, tuple[Stmt, list[Stmt]]] = {}
+    spoiled: set[int] = set()
     inside = inside | {id(loop)}  # the loop index varies too
     for x in walk(loop.blocks[0]):
         for k, o in enumerate(x.operands):
             is_place = (o.op is Op.ALLOCA and id(o) not in inside) or o.op is Op.GLOBAL_PTR
             if not is_place:
                 continue
+            key: tuple
             if o.op is Op.GLOBAL_PTR:
                 if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):
                     spoiled.add(id(o.attrs["target"]))
@@ -176,7 +177,7 @@ def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
                 continue
             place, adds = groups.setdefault(key, (o, []))
             adds.append(x)
-    by_target: dict = {}
+    by_target: dict[int, list[tuple]] = {}
     for key in groups:
         by_target.setdefault(key[0], []).append(key)
     return {key: groups[key] for key in groups if key[0] not in spoiled and len(by_target[key[0]]) == 1}

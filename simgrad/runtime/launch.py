@@ -26,7 +26,7 @@ class Launcher:
         self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
         self.buf[list(HEADER_SLOTS)] = program.context_header()
         self.buf[CTX_NTHREADS] = program.pool.num_threads
-        self.tape = None
+        self.tape: np.ndarray | None = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
         self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
@@ -35,10 +35,10 @@ class Launcher:
     def attach_tape(self, entries: int) -> None:
         """A private tape for this adjoint kernel: one region per thread plus one for the serial part."""
         regions = self.program.pool.num_threads + 1
-        self.tape = np.zeros(regions * entries, dtype=np.int64)
-        self.buf[CTX_TAPE] = self.tape.ctypes.data
+        tape = self.tape = np.zeros(regions * entries, dtype=np.int64)
+        self.buf[CTX_TAPE] = tape.ctypes.data
         self.buf[CTX_TAPE_CAP] = entries
-        self.buf[CTX_TAPE_SERIAL] = self.tape.ctypes.data + 8 * entries * (regions - 1)
+        self.buf[CTX_TAPE_SERIAL] = tape.ctypes.data + 8 * entries * (regions - 1)
 
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
