@@ -41,6 +41,7 @@ def lower_global_ptr(gen, f, s) -> str:
     target = s.attrs["target"]
     idx = [_i64(f, f.v(o), o.type) for o in s.operands]
     if isinstance(target, ScalarField):
+        assert target.layout is not None  # kernels compile after their fields' trees are materialised
         tree_id, const, terms, shape = target.layout
         if gen.debug:
             offset = target.offset or (0,) * len(shape)

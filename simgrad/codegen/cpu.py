@@ -9,7 +9,7 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 
 from __future__ import annotations
 
-from simgrad.codegen.llvm import FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr, vtype
+from simgrad.codegen.llvm import FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
 from simgrad.codegen.privatize import emit_private_launch, slice_shift
 from simgrad.ir.nodes import Block, Stmt, walk
 from simgrad.ir.ops import Op
@@ -39,7 +39,7 @@ class CpuCodegen(KernelCodegen):
         for k, v in enumerate(captured, start=1):
             by_value = v.op is Op.ALLOCA and id(v) not in stored  # read-only local: a private copy
             is_ptr = v.op is Op.GLOBAL_PTR or (v.op is Op.ALLOCA and not by_value)
-            ty = "ptr" if is_ptr else llvm_type(vtype(v))
+            ty = "ptr" if is_ptr else llvm_type(v.vtype)
             src = f.v(v)
             if by_value:
                 src = f.tmp("ld")
@@ -51,7 +51,7 @@ class CpuCodegen(KernelCodegen):
         self.ntasks += 1
         tname = f"{self.symbol}_task{self.ntasks}"
         self._emit_task(s, plan, tname, captured, slots, [])
-        ty = llvm_type(vtype(s))
+        ty = llvm_type(s.vtype)
         b64, e64 = f.tmp("b"), f.tmp("e")
         ext = "sext" if ty != "i64" else None
         for dst, src_stmt in ((b64, s.operands[0]), (e64, s.operands[1])):
@@ -86,24 +86,24 @@ class CpuCodegen(KernelCodegen):
             t.names[v] = val
         for k, r in enumerate(regions):
             _private_root(t, r, first_slot + k)
-        ty = llvm_type(vtype(s))
+        ty = llvm_type(s.vtype)
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
         t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
         for _place, adds in plan.reductions.values():  # each thread sums into its own variable first
             acc = t.tmp("red")
-            rty = llvm_type(vtype(adds[0]))
-            t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, vtype(adds[0]))}, ptr {acc}"]
+            rty = llvm_type(adds[0].vtype)
+            t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].vtype)}, ptr {acc}"]
             for a in adds:
                 t.reduction_of[id(a)] = acc
         self.serial_loop(t, s, lo, hi)
         for place, adds in plan.reductions.values():  # ... and adds it to the shared place once per chunk
-            rty = llvm_type(vtype(adds[0]))
+            rty = llvm_type(adds[0].vtype)
             total = t.tmp("sum")
             t.emit(f"{total} = load {rty}, ptr {t.reduction_of[id(adds[0])]}")
             if place.op is Op.GLOBAL_PTR:
                 lower_global_ptr(self, t, place)
-            op = "fadd" if vtype(adds[0]).is_float else "add"
+            op = "fadd" if adds[0].vtype.is_float else "add"
             t.emit(f"{t.tmp('old')} = atomicrmw {op} ptr {t.v(place)}, {rty} {total} monotonic")
         t.emit("ret void")
         self.module.functions.append(t.text())

@@ -27,12 +27,6 @@ def llvm_type(t: dt.DataType) -> str:
     return t.llvm
 
 
-def vtype(s: Stmt) -> dt.DataType:
-    """The type of the value `s` defines (statements without a value have none)."""
-    assert s.type is not None, f"internal: {s!r} has no value"
-    return s.type
-
-
 def const_text(value, t: dt.DataType) -> str:
     if t.is_float:
         if t is dt.f16:
@@ -201,7 +195,7 @@ class FunctionText:
 
     def v(self, s: Stmt) -> str:
         if s.op is Op.CONST:
-            return const_text(s.attrs["value"], vtype(s))
+            return const_text(s.attrs["value"], s.vtype)
         return self.names[s]
 
     def text(self) -> str:
@@ -257,7 +251,7 @@ class KernelCodegen:
             k += 1
 
     def serial_loop(self, f: FunctionText, s: Stmt, begin: str, end: str) -> None:
-        ty = llvm_type(vtype(s))
+        ty = llvm_type(s.vtype)
         pre = f.label("pre")
         f.emit(f"br label %{pre}")
         f.start_block(pre)
@@ -353,11 +347,11 @@ def lower_range_for(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 # -- memory ------------------------------------------------------------------------------------------
 def lower_const(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = const_text(s.attrs["value"], vtype(s))
+    f.names[s] = const_text(s.attrs["value"], s.vtype)
 
 
 def lower_arg(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = f.ctx_slot(abi.CTX_ARGS + s.attrs["slot"], llvm_type(vtype(s)))
+    f.names[s] = f.ctx_slot(abi.CTX_ARGS + s.attrs["slot"], llvm_type(s.vtype))
 
 
 def lower_array_shape(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -369,14 +363,14 @@ def lower_array_shape(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_alloca(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     a = f.tmp("var")
-    f.prologue.append(f"  {a} = alloca {llvm_type(vtype(s))}")
-    f.prologue.append(f"  store {llvm_type(vtype(s))} {const_text(0, vtype(s))}, ptr {a}")
+    f.prologue.append(f"  {a} = alloca {llvm_type(s.vtype)}")
+    f.prologue.append(f"  store {llvm_type(s.vtype)} {const_text(0, s.vtype)}, ptr {a}")
     f.names[s] = a
 
 
 def lower_local_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("l")
-    f.emit(f"{r} = load {llvm_type(vtype(s))}, ptr {f.v(s.operands[0])}")
+    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {f.v(s.operands[0])}")
     f.names[s] = r
 
 
@@ -391,7 +385,7 @@ def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("g")
-    f.emit(f"{r} = load {llvm_type(vtype(s))}, ptr {f.v(s.operands[0])}")
+    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {f.v(s.operands[0])}")
     f.names[s] = r
 
 
@@ -402,7 +396,7 @@ def lower_global_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     p, v = s.operands
-    t = vtype(s)
+    t = s.vtype
     ty = llvm_type(t)
     kind = s.attrs["kind"]
     if t.is_float:
@@ -476,13 +470,13 @@ def lower_unary_op(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 
 def lower_cast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.lower_cast(f, s.operands[0], vtype(s))
+    f.names[s] = arith.lower_cast(f, s.operands[0], s.vtype)
 
 
 def lower_bitcast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("bc")
     (a,) = s.operands
-    f.emit(f"{r} = bitcast {llvm_type(a.type)} {f.v(a)} to {llvm_type(vtype(s))}")
+    f.emit(f"{r} = bitcast {llvm_type(a.type)} {f.v(a)} to {llvm_type(s.vtype)}")
     f.names[s] = r
 
 
@@ -549,12 +543,12 @@ def lower_tape_pop(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     g.module.declare("declare i64 @llvm.umin.i64(i64, i64)")
     f.emit(f"{idx} = call i64 @llvm.umin.i64(i64 {n}, i64 {last})")
     f.emit(f"{p} = getelementptr i64, ptr {base}, i64 {idx}")
-    f.emit(f"{r} = load {llvm_type(vtype(s))}, ptr {p}")
+    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {p}")
     f.names[s] = r
 
 
 def lower_random(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.random_value(f, vtype(s))
+    f.names[s] = arith.random_value(f, s.vtype)
 
 
 def _combine_text(dst, op, ty, a, b, fm: str) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.errors import SimgradRuntimeError
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.runtime.program import get_program
@@ -31,7 +32,7 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
-    if needs_grad and f.grad.snode is None:
+    if needs_grad and f.grad is not None and f.grad.snode is None:
         gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
         gnode.place(f.grad, offset=offset)
     return f
@@ -41,6 +42,9 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
     """Every real field carries an (unplaced) gradient field, placed by needs_grad or ti.root.lazy_grad()."""
     f = make("")
     if not f.dtype.is_float:
+        if needs_grad or needs_dual:  # was an AttributeError on the missing gradient (Taichi refuses it too)
+            raise SimgradRuntimeError(f"{f.dtype} is not supported for a field with needs_grad=True or "
+                                      "needs_dual=True: gradients need a floating-point type")
         return f
     f.grad = make(".grad")
     for c, g in zip(f._components(), f.grad._components()):

@@ -90,7 +90,7 @@ class Instance:
 
 
 class Kernel:
-    def __init__(self, func):
+    def __init__(self, func) -> None:
         self.func = func
         self.name = func.__name__
         self.signature = inspect.signature(func)
@@ -262,7 +262,7 @@ class Kernel:
                 "tape_bound": getattr(ir, "tape_bound", None) if uses_tape else None}
         return ir, stable, meta
 
-    def _bind_params(self, comp, args):
+    def _bind_params(self, comp, args) -> tuple[tuple[list[SlotParam], int], tuple[int, int] | None]:
         from simgrad.lang.ndarray import ArrayArg
 
         b = comp.builder
@@ -291,6 +291,7 @@ class Kernel:
                     arr = a if hasattr(a, "dtype") else np.asarray(a)
                     t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
                     elem = ()
+                    want: dt.DataType | None
                     if isinstance(ann.dtype, MatrixType):
                         elem = ann.dtype.shape
                         want = ann.dtype.dtype

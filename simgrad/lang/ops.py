@@ -132,7 +132,7 @@ def _ipow(base: Expr, n: int) -> Expr:
         if not base.dtype.is_float:
             base = cast_expr(base, dt.Defaults.fp)
         return truediv(1.0, _ipow(base, -n))
-    result = None
+    result: Expr | None = None
     p = base
     while n:
         if n & 1:
@@ -140,6 +140,7 @@ def _ipow(base: Expr, n: int) -> Expr:
         n >>= 1
         if n:
             p = mul(p, p)
+    assert result is not None  # n > 0 here: some bit was set
     return result
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from simgrad.dtypes import DataType
 from simgrad.ir.nodes import Stmt
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
@@ -26,7 +27,7 @@ class Region:
     tree_id: int
     lo: int
     hi: int
-    dtype: object
+    dtype: DataType
     prefix: tuple  # ((index Stmt, stride in bytes), ...)
     keys: set = field(default_factory=set)  # (id(field), access_key) of the updates it takes
 
@@ -38,6 +39,7 @@ class Region:
 def _span(f: ScalarField, nprefix: int) -> tuple[int, int]:
     """[first byte, one past the last byte] of a dense field's elements in its tree, for fixed values of
     its first `nprefix` indices (their offset left out)."""
+    assert f.layout is not None  # kernels compile after their fields' trees are materialised
     _tree, const, terms, shape = f.layout
     top = const
     for t in terms:
@@ -59,6 +61,7 @@ def _prefix_len(f: ScalarField, ptrs: list[Stmt], loop: Stmt, inside: set) -> in
                                                           and p.operands[k] is not loop)):
             k += 1
         n = k
+    assert f.layout is not None
     terms = f.layout[2]
     for a in range(n):
         own = [t for t in terms if t.axis == a]
