@@ -123,6 +123,7 @@ class FunctionText:
         self.tid = "%tid" if in_task else "0"
         self.loop: Stmt | None = None  # the parallel loop whose iterations this function runs (a task)
         self._tape: tuple[str, str, str] | None = None
+        # what the target's task set up (codegen/cpu.py): per-thread sums and per-thread copies
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
         self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
