@@ -4,7 +4,12 @@ caret; each also subclasses the builtin exception a Python user would expect."""
 from __future__ import annotations
 
 import linecache
+import os
+import sys
 from dataclasses import dataclass
+from types import FrameType
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 
 
 @dataclass(frozen=True)
@@ -26,6 +31,21 @@ class Loc:
         indent = len(src) - len(stripped)
         caret = " " * max(0, self.col - indent) + "^"
         return f'File "{self.file}", line {self.line}:\n    {stripped}\n    {caret}'
+
+
+def caller_loc() -> Loc | None:
+    """The user's line that called into simgrad (the innermost frame outside the package), for errors
+    raised in Python scope."""
+    from simgrad.frontend import context
+
+    if context.in_kernel():
+        return None  # compiling a kernel: the statement being compiled is the place
+    frame: FrameType | None = sys._getframe(1)
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+        frame = frame.f_back
+    if frame is None:
+        return None
+    return Loc(frame.f_code.co_filename, frame.f_lineno)
 
 
 class SimgradError(Exception):
@@ -65,6 +85,14 @@ class SimgradNameError(SimgradError, NameError):
 
 
 class SimgradIndexError(SimgradError, IndexError):
+    pass
+
+
+class SimgradValueError(SimgradError, ValueError):
+    pass
+
+
+class SimgradOverflowError(SimgradError, OverflowError):
     pass
 
 

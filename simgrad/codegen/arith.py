@@ -6,7 +6,7 @@ from simgrad import dtypes as dt
 from simgrad.ir.ops import Op
 
 _INT_BIN = {Op.ADD: "add", Op.SUB: "sub", Op.MUL: "mul", Op.BIT_AND: "and", Op.BIT_OR: "or",
-            Op.BIT_XOR: "xor", Op.SHL: "shl"}
+            Op.BIT_XOR: "xor"}
 _FLT_BIN = {Op.ADD: "fadd", Op.SUB: "fsub", Op.MUL: "fmul", Op.DIV: "fdiv"}
 _ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op.NE: "ne"}
 _UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
@@ -93,11 +93,16 @@ def lower_binary(f, s) -> str:
         if op is Op.ATAN2:
             return _libm(f, "atan2", t, [x, y])
         raise NotImplementedError(op)
+    if op in (Op.SHL, Op.SHR):
+        # a shift by >= the width is poison in LLVM: take the amount modulo the width, as x86 does at
+        # run time, so a constant shift and a run-time one agree
+        amt = f.tmp("sh")
+        f.emit(f"{amt} = and {ty} {y}, {t.bits - 1}")
+        kind = "shl" if op is Op.SHL else "ashr" if t.is_signed else "lshr"
+        f.emit(f"{r} = {kind} {ty} {x}, {amt}")
+        return r
     if op in _INT_BIN:
         f.emit(f"{r} = {_INT_BIN[op]} {ty} {x}, {y}")
-        return r
-    if op is Op.SHR:
-        f.emit(f"{r} = {'ashr' if t.is_signed else 'lshr'} {ty} {x}, {y}")
         return r
     if op in (Op.MIN, Op.MAX):
         name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")
@@ -158,6 +163,8 @@ def lower_unary(f, s) -> str:
         f.emit(f"{r} = zext i1 {c} to i32")
         return r
     if op is Op.ABS and not t.is_float:
+        if not t.is_signed:
+            return x  # |u| = u; llvm.abs reads its operand as signed
         f.gen.module.declare(f"declare {ty} @llvm.abs.{ty}({ty}, i1)")
         f.emit(f"{r} = call {ty} @llvm.abs.{ty}({ty} {x}, i1 false)")
         return r
@@ -173,8 +180,12 @@ def lower_unary(f, s) -> str:
 def _conv(f, x: str, src: dt.DataType, dst: dt.DataType) -> str:
     if src is dst:
         return x
+    if dt.f16 in (src, dst) and dt.f32 not in (src, dst):
+        return _conv_f16(f, x, src, dst)
     r = f.tmp("cv")
-    if src.is_float and dst.is_float:
+    if src.is_float and dst is dt.u1:
+        f.emit(f"{r} = fcmp une {src.llvm} {x}, 0.0")  # truthiness, as an integer's icmp ne 0
+    elif src.is_float and dst.is_float:
         f.emit(f"{r} = {'fpext' if dst.bits > src.bits else 'fptrunc'} {src.llvm} {x} to {dst.llvm}")
     elif src.is_float:
         f.emit(f"{r} = {'fptosi' if dst.is_signed else 'fptoui'} {src.llvm} {x} to {dst.llvm}")
@@ -188,6 +199,38 @@ def _conv(f, x: str, src: dt.DataType, dst: dt.DataType) -> str:
         f.emit(f"{r} = trunc {src.llvm} {x} to {dst.llvm}")
     else:
         f.emit(f"{r} = {'sext' if src.is_signed else 'zext'} {src.llvm} {x} to {dst.llvm}")
+    return r
+
+
+def _conv_f16(f, x: str, src: dt.DataType, dst: dt.DataType) -> str:
+    """Every f16 conversion goes through f32, the only one x86 has instructions for (F16C): LLVM would
+    otherwise call compiler-rt's __truncdfhf2 & co., which the JIT cannot resolve (the process aborts).
+    Integers <-> f16 through f32 round once (an integer that f32 rounds is beyond f16's range anyway);
+    f64 -> f16 rounds to odd at f32 first, so the second rounding is exact (matches numpy)."""
+    if src is dt.f16:
+        return _conv(f, _conv(f, x, dt.f16, dt.f32), dt.f32, dst)
+    if src is dt.f64:
+        return _conv(f, _f64_to_f32_odd(f, x), dt.f32, dt.f16)
+    return _conv(f, _conv(f, x, src, dt.f32), dt.f32, dt.f16)
+
+
+def _f64_to_f32_odd(f, x: str) -> str:
+    """f64 -> f32 rounded to odd: truncate toward zero and set the last bit when inexact. With 24 >= 11 + 2
+    significand bits, rounding that to f16 equals rounding the f64 directly (no double rounding)."""
+    t, back, ax, ab, inexact, up, b, dec, b2, odd, b3, r = (f.tmp("ro") for _ in range(12))
+    f.gen.module.declare("declare double @llvm.fabs.f64(double)")
+    f.emit(f"{t} = fptrunc double {x} to float")
+    f.emit(f"{back} = fpext float {t} to double")
+    f.emit(f"{inexact} = fcmp one double {back}, {x}")  # false for NaN and exact values
+    f.emit(f"{ax} = call double @llvm.fabs.f64(double {x})")
+    f.emit(f"{ab} = call double @llvm.fabs.f64(double {back})")
+    f.emit(f"{up} = fcmp ogt double {ab}, {ax}")  # rounded away from zero: step back one ulp
+    f.emit(f"{b} = bitcast float {t} to i32")
+    f.emit(f"{dec} = zext i1 {up} to i32")
+    f.emit(f"{b2} = sub i32 {b}, {dec}")
+    f.emit(f"{odd} = zext i1 {inexact} to i32")
+    f.emit(f"{b3} = or i32 {b2}, {odd}")
+    f.emit(f"{r} = bitcast i32 {b3} to float")
     return r
 
 

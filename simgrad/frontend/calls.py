@@ -12,7 +12,7 @@ from simgrad.frontend.refs import MatrixRef, VarRef
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
-from simgrad.lang.field import Field
+from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
 
 
@@ -98,9 +98,16 @@ def call(comp, node: ast.Call):
                                  comp.loc(node))
     if not callable(fn):
         raise SimgradTypeError(f"'{type(fn).__name__}' object is not callable", comp.loc(node))
+    if getattr(fn, "__func__", None) in _FILLS:  # emits IR from the field's (keyed) layout: cacheable
+        from simgrad.frontend.loops import emit_fill
+
+        return emit_fill(fn.__self__, *args, **kwargs)
     if comp.guard is not None:
         comp.guard.call(fn)
     return fn(*args, **kwargs)
+
+
+_FILLS = (ScalarField.fill, MatrixField.fill)
 
 
 def _atomic(comp, node: ast.Call, kind: str):
@@ -122,7 +129,12 @@ def inline(comp, fn, args, kwargs, node):
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
+    from simgrad.lang.kernel import unexpected_keywords
+
     sig = fn.signature
+    unknown = unexpected_keywords(sig, kwargs)
+    if unknown:
+        raise SimgradTypeError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
     try:
         bound = sig.bind(*args, **kwargs)
     except TypeError as e:

@@ -90,15 +90,22 @@ def _unroll(comp, node: ast.For) -> None:
             comp.frame.scopes.pop()
 
 
+_I32_MAX = (1 << 31) - 1
+
+
 def _index_type(*vals) -> dt.DataType:
+    """i32 as in Taichi, i64 when a bound needs it (a 64-bit value, or a count beyond 2**31 - 1)."""
     for v in vals:
         if isinstance(v, Expr) and v.dtype in (dt.i64, dt.u64):
+            return dt.i64
+        if isinstance(v, int) and not -_I32_MAX - 1 <= v <= _I32_MAX:
             return dt.i64
     return dt.i32
 
 
-def _emit_loop(comp, node, begin, end, bind) -> None:
-    """One RANGE_FOR over [begin, end); parallel when it is the outermost loop of the kernel."""
+def _emit_loop(comp, begin, end, body) -> None:
+    """One RANGE_FOR over [begin, end); parallel when it is the outermost loop of the kernel. `body(i)`
+    binds the loop index and emits the loop's body."""
     cfg = comp.next_loop_config or {}
     comp.next_loop_config = None
     t = _index_type(begin, end)
@@ -113,10 +120,18 @@ def _emit_loop(comp, node, begin, end, bind) -> None:
     comp.loop_stack.append("parallel" if parallel else "serial")
     try:
         with comp.dynamic(loop.blocks[0]):
-            bind(Expr(loop))
-            comp.visit_block(node.body)
+            body(Expr(loop))
     finally:
         comp.loop_stack.pop()
+
+
+def _visit(comp, node, bind):
+    """The loop body of a `for` statement: bind the target names, then visit the statements."""
+    def body(i):
+        bind(i)
+        comp.visit_block(node.body)
+
+    return body
 
 
 def _range_for(comp, node, r) -> None:
@@ -124,12 +139,12 @@ def _range_for(comp, node, r) -> None:
         raise SimgradSyntaxError("a range-for takes one loop variable", comp.loc(node.target))
     name = node.target.id
     if r.step == 1:
-        _emit_loop(comp, node, r.start, r.stop, lambda i: comp.bind(name, i))
+        _emit_loop(comp, r.start, r.stop, _visit(comp, node, lambda i: comp.bind(name, i)))
         return
     step = r.step
     count = ops.floordiv(ops.sub(r.stop, r.start) + (step - 1 if step > 0 else step + 1), step)
     count = ops.max(count, 0)
-    _emit_loop(comp, node, 0, count, lambda k: comp.bind(name, ops.add(r.start, ops.mul(k, step))))
+    _emit_loop(comp, 0, count, _visit(comp, node, lambda k: comp.bind(name, ops.add(r.start, ops.mul(k, step)))))
 
 
 def _nd_for(comp, node, bounds, grouped_: bool) -> None:
@@ -141,13 +156,26 @@ def _nd_for(comp, node, bounds, grouped_: bool) -> None:
     elif len(names) != nd:
         raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
                                  comp.loc(node.target))
+
+    def bind(idx):
+        if grouped_:
+            comp.bind(names[0], Matrix(idx))
+        else:
+            for n, v in zip(names, idx):
+                comp.bind(n, v)
+
+    _nd_loop(comp, bounds, _visit(comp, node, bind))
+
+
+def _nd_loop(comp, bounds, body) -> None:
+    """One flat loop over the box `bounds` ((begin, end) per axis); `body(indices)` emits the body. The
+    flat index is i64 when the count exceeds i32 (ti.ndrange(70000, 70000)); the indices stay i32."""
+    nd = len(bounds)
     extents = [ops.max(ops.sub(e, b), 0) if isinstance(e, Expr) or isinstance(b, Expr) else max(e - b, 0)
                for b, e in bounds]
-    total = 1
-    for n in extents:
-        total = ops.mul(total, n)
+    total = _count(extents)
 
-    def bind(flat):
+    def flat_body(flat):
         idx = []
         rest = flat
         for k in range(nd - 1, -1, -1):
@@ -156,15 +184,38 @@ def _nd_for(comp, node, bounds, grouped_: bool) -> None:
             else:
                 digit = _raw(Op.RAW_MOD, rest, extents[k])
                 rest = _raw(Op.RAW_DIV, rest, extents[k])
+            if isinstance(digit, Expr) and digit.dtype is dt.i64 and _fits_i32(extents[k]):
+                digit = ops.cast_expr(digit, dt.i32)
             idx.append(ops.add(digit, bounds[k][0]) if not _is_zero(bounds[k][0]) else digit)
         idx.reverse()
-        if grouped_:
-            comp.bind(names[0], Matrix(idx))
-        else:
-            for n, v in zip(names, idx):
-                comp.bind(n, v)
+        body(idx)
 
-    _emit_loop(comp, node, 0, total, bind)
+    _emit_loop(comp, 0, total, flat_body)
+
+
+def _fits_i32(n) -> bool:
+    return n <= _I32_MAX if isinstance(n, int) else n.dtype is dt.i32
+
+
+def _count(extents):
+    """The product of the extents. Known ones multiply in Python; run-time i32 ones multiply in i64 and
+    a located check refuses a count beyond i32 rather than wrapping (the loop would run a wrong count)."""
+    if len(extents) == 1 or all(isinstance(n, int) for n in extents):
+        total = 1
+        for n in extents:
+            total = ops.mul(total, n)
+        return total
+    total = ops.to_expr(1, dt.i64)
+    for n in extents:
+        total = ops.mul(total, ops.cast_expr(ops.to_expr(n, dt.i64), dt.i64))
+    if not all(_fits_i32(n) for n in extents):
+        return total  # a 64-bit extent: a 64-bit loop
+    from simgrad.frontend import context
+
+    context.builder().emit(Op.ASSERT, None, (ops.le(total, _I32_MAX).stmt,), {
+        "message": "the loop's iteration count (the product of its extents) exceeds 2**31 - 1; give the "
+                   "bounds an i64 type"})
+    return ops.cast_expr(total, dt.i32)
 
 
 def _raw(op: Op, a: Expr, n):
@@ -188,3 +239,31 @@ def _target_names(comp, target) -> list[str]:
         if len(names) == len(target.elts):
             return names
     raise SimgradSyntaxError("loop variables must be plain names", comp.loc(target))
+
+
+def emit_fill(field, value) -> None:
+    """`x.fill(v)` inside a kernel: one loop over all elements, storing `v` (a scalar broadcast to every
+    entry, or a vector/matrix of the field's entry shape). Emitted into the kernel, so it runs at every
+    launch and `v` may be a run-time value; at the top level of a kernel the loop is parallel."""
+    from simgrad.frontend import context
+    from simgrad.frontend.refs import GlobalRef, MatrixRef
+    from simgrad.lang.field import MatrixField
+
+    comp = context.current()
+    field._ensure()
+    if isinstance(value, (list, tuple)):
+        value = Matrix(list(value))
+    if isinstance(value, Matrix) and not isinstance(field, MatrixField):
+        raise SimgradSyntaxError(f"fill: field {field.name} holds scalars, got a {value.shape} matrix",
+                                 context.current_loc())
+    comps = field._components()
+
+    def body(idx):
+        idx = [ops.cast_expr(ops.to_expr(i, dt.i32), dt.i32) for i in idx]
+        refs = [GlobalRef(c, idx, c.dtype) for c in comps]
+        if isinstance(field, MatrixField):
+            MatrixRef(refs, field.n, field.m).store(value)
+        else:
+            refs[0].store(value)
+
+    _nd_loop(comp, [(0, n) for n in field.shape], body)

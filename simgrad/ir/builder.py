@@ -7,6 +7,7 @@ from contextlib import contextmanager
 from simgrad import dtypes as dt
 from simgrad.dtypes import DataType
 from simgrad.errors import Loc, SimgradTypeError
+from simgrad.ir import numeric
 from simgrad.ir import ops as O
 from simgrad.ir.nodes import Block, Stmt
 from simgrad.ir.ops import Op
@@ -39,19 +40,16 @@ class Builder:
 
     # -- typed helpers ---------------------------------------------------------------------
     def const(self, value, type: DataType) -> Stmt:
-        if type.is_float:
-            value = float(value)
-        elif type is dt.u1:
-            value = int(bool(value))
-        else:
-            value = _wrap_int(int(value), type)
-        return self.emit(Op.CONST, type, (), {"value": value})
+        """A constant, its value wrapped or rounded to `type` (ir/numeric.py)."""
+        return self.emit(Op.CONST, type, (), {"value": numeric.const_value(value, type)})
 
     def cast(self, v: Stmt, type: DataType) -> Stmt:
         if v.type is type:
             return v
         if v.op is Op.CONST:
-            return self.const(v.attrs["value"], type)
+            folded = numeric.convert(v.attrs["value"], v.vtype, type)
+            if folded is not None:
+                return self.emit(Op.CONST, type, (), {"value": folded})
         return self.emit(Op.CAST, type, (v,))
 
     def binary(self, op: Op, a: Stmt, b: Stmt) -> Stmt:
@@ -76,12 +74,3 @@ class Builder:
         if a.type is not b.type:
             raise SimgradTypeError(f"internal: select on {a.type} and {b.type}", self.loc)
         return self.emit(Op.SELECT, a.type, (cond, a, b))
-
-
-def _wrap_int(v: int, t: DataType) -> int:
-    """Two's-complement wrap-around of a Python int into `t`'s range."""
-    mask = (1 << t.bits) - 1
-    v &= mask
-    if t.is_signed and v >> (t.bits - 1):
-        v -= 1 << t.bits
-    return v

@@ -2,8 +2,16 @@
 
 from __future__ import annotations
 
+import linecache
+import os
+import re
+import sys
+from types import FrameType
+
+import numpy as np
+
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradRuntimeError
+from simgrad.errors import SimgradRuntimeError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.runtime.program import get_program
@@ -11,11 +19,37 @@ from simgrad.runtime.program import get_program
 _counter = [0]
 
 
-def _name(name):
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+# frames between the user's call and _name: ti.field, ti.types..., ti.Vector.field/ti.Matrix.field (matrix.py)
+_FACTORY_FILES = {__file__, *(os.path.join(os.path.dirname(__file__), f) for f in ("types.py", "matrix.py"))}
+_ASSIGNED = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*(?::[^=]*)?=\s*[\w.]+\(")
+
+
+def _name(name) -> tuple[str, bool]:
+    """(name, whether a kernel may still rename it): the given name, else the variable the caller assigns
+    the new field to (`x = ti.field(...)` names it `x`, as Taichi infers it), else field<N>."""
     if name:
-        return name
+        return name, False
+    frame: FrameType | None = sys._getframe(1)
+    while frame is not None and frame.f_code.co_filename in _FACTORY_FILES:
+        frame = frame.f_back
+    if frame is not None and not frame.f_code.co_filename.startswith(_PACKAGE):  # the user's own line
+        m = _ASSIGNED.match(linecache.getline(frame.f_code.co_filename, frame.f_lineno))
+        if m:
+            return m.group(1), False
     _counter[0] += 1
-    return f"field{_counter[0]}"
+    return f"field{_counter[0]}", True
+
+
+def _check_shape(shape):
+    """A shape of non-negative integers, refused (located at the caller) before numpy sees it."""
+    if shape is None:
+        return None
+    dims = (shape,) if isinstance(shape, (int, np.integer)) else tuple(shape)
+    for d in dims:
+        if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
+            raise SimgradValueError(f"field shape must be non-negative integers, got {shape!r}", caller_loc())
+    return tuple(int(d) for d in dims)
 
 
 def _axes(ndim: int):
@@ -28,7 +62,6 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
         f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
         return f  # to be placed by the user with ti.root...place()
     tree = get_program().new_tree()
-    shape = (shape,) if isinstance(shape, int) else tuple(shape)
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
@@ -65,17 +98,19 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     if isinstance(dtype, MatrixType):
         return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
     t = dt.from_any(dtype)
-    base = _name(name)
+    shape = _check_shape(shape)
+    base, auto = _name(name)
     f = _with_grad(lambda suffix: ScalarField(t, base + suffix), needs_grad, needs_dual)
-    f._auto_name = not name
+    f._auto_name = auto
     return _place_new(f, shape, offset, needs_grad)
 
 
 def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
-    base = _name(name)
+    shape = _check_shape(shape)
+    base, auto = _name(name)
     f = _with_grad(lambda suffix: MatrixField(n, m, t, base + suffix), needs_grad, needs_dual)
-    f._auto_name = not name
+    f._auto_name = auto
     return _place_new(f, shape, offset, needs_grad)
 
 

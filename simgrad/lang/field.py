@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradError, SimgradIndexError
+from simgrad.errors import SimgradError, SimgradIndexError, SimgradOverflowError, caller_loc
 
 if TYPE_CHECKING:
     from simgrad.lang.snode import AccessTerm
@@ -19,13 +19,13 @@ if TYPE_CHECKING:
 Layout = tuple[int, int, tuple["AccessTerm", ...], tuple[int, ...]]
 
 
-def _norm_index(key, ndim: int) -> tuple:
+def _norm_index(key, ndim: int, name: str = "") -> tuple:
     if key is None:
         key = ()
     elif not isinstance(key, tuple):
         key = (key,)
     if len(key) != ndim:
-        raise SimgradIndexError(f"field has {ndim} indices, got {len(key)}")
+        raise SimgradIndexError(f"field {name} has {ndim} indices, got {len(key)}")
     return key
 
 
@@ -81,7 +81,7 @@ class Field:
         comps = self._components()
         for c in comps:
             if c.snode is None:
-                raise SimgradError(f"field {c.name} is not placed in any SNode tree (call ti.root...place())")
+                raise SimgradError(_unplaced_message(c), caller_loc())
         for c in comps:
             if c.view is None and c.gather is None:
                 c.snode.tree.materialize()
@@ -127,7 +127,7 @@ class ScalarField(Field):
     def shape(self) -> tuple[int, ...]:
         if self._shape is None:
             if self._snode is None:
-                raise SimgradError(f"field {self.name} is not placed in any SNode tree")
+                raise SimgradError(_unplaced_message(self), caller_loc())
             self._shape = self._snode.access_terms()[2]
         return self._shape
 
@@ -165,7 +165,7 @@ class ScalarField(Field):
     def __getitem__(self, key):
         if self.view is None:
             self._ensure()
-        key = self._shift(_norm_index(key, len(self.shape)))
+        key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.view is not None:
             return self.view[key].item()
@@ -175,8 +175,9 @@ class ScalarField(Field):
     def __setitem__(self, key, value):
         if self.view is None:
             self._ensure()
-        key = self._shift(_norm_index(key, len(self.shape)))
+        key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
+        _check_value(value, self.dtype, self.name)
         if self.view is not None:
             self.view[key] = value
         else:
@@ -204,7 +205,10 @@ class ScalarField(Field):
             flat[gather] = arr
 
     def fill(self, value) -> None:
+        if _in_kernel():
+            return _kernel_fill(self, value)
         self._ensure()
+        _check_value(value, self.dtype, self.name)
         if self.view is not None:
             self.view[...] = value
         else:
@@ -231,11 +235,33 @@ class ScalarField(Field):
         return f"<ScalarField {self.name} {self.dtype} shape={self.shape if self._snode else '?'}>"
 
 
+def _unplaced_message(c: ScalarField) -> str:
+    if not c.is_primal:
+        primal = c.name[:-5] if c.name.endswith(".grad") else c.name
+        return (f"field {primal} has no gradient: {c.name} exists only when the field is created with "
+                f"needs_grad=True (or placed and followed by ti.root.lazy_grad())")
+    return f"field {c.name} is not placed in any SNode tree (call ti.root...place())"
+
+
 def _check_bounds(key, shape, name):
     """Negative indices are out of bounds as in kernels (and with an offset they would silently alias)."""
     for k, n in zip(key, shape):
-        if not 0 <= k < n if isinstance(k, (int, np.integer)) else False:
-            raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}")
+        if not isinstance(k, (int, np.integer)):
+            raise SimgradIndexError(f"field {name} is indexed with {k!r} ({type(k).__name__}); Python-scope "
+                                    f"indices must be integers", caller_loc())
+        if not 0 <= k < n:
+            raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
+
+
+def _check_value(value, dtype: dt.DataType, name: str) -> None:
+    """An integer that does not fit an integer field is refused, not wrapped (numpy would raise its own
+    OverflowError for a Python int, and wrap a numpy one silently)."""
+    if dtype.is_float or isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return
+    info = np.iinfo(dtype.np)
+    if not info.min <= int(value) <= info.max:
+        raise SimgradOverflowError(f"value {int(value)} does not fit field {name} of type {dtype} "
+                                   f"(range [{info.min}, {info.max}])", caller_loc())
 
 
 class MatrixField(Field):
@@ -278,9 +304,18 @@ class MatrixField(Field):
             comp.from_numpy(flat[..., c])
 
     def fill(self, value) -> None:
-        vals = np.broadcast_to(np.asarray(value, dtype=self.dtype.np), self.entry_shape).reshape(-1)
-        for comp, v in zip(self.comps, vals):
+        if _in_kernel():
+            return _kernel_fill(self, value)
+        for comp, v in zip(self.comps, self._entries(value)):
             comp.fill(v)
+
+    def _entries(self, value) -> np.ndarray:
+        """`value` (a scalar, nested list, Matrix or array) broadcast to one entry per component."""
+        raw = _as_array(value)
+        if not self.dtype.is_float:
+            for v in np.asarray(raw, dtype=object).reshape(-1):
+                _check_value(v, self.dtype, self.name)
+        return np.broadcast_to(np.asarray(raw, dtype=self.dtype.np), self.entry_shape).reshape(-1)
 
     def copy_from(self, other: MatrixField) -> None:
         self.from_numpy(other.to_numpy())
@@ -288,14 +323,22 @@ class MatrixField(Field):
     def __getitem__(self, key):
         from simgrad.lang.matrix import Matrix
 
+        self._check_key(key)
         vals = [c[key] for c in self.comps]
         if self.m == 0:
             return Matrix(vals)
         return Matrix([vals[r * self.m : (r + 1) * self.m] for r in range(self.n)])
 
+    def _check_key(self, key) -> None:
+        """Index errors name this field, not its first component."""
+        if self.comps[0].view is None:
+            self._ensure()
+        key = self.comps[0]._shift(_norm_index(key, len(self.shape), self.name))
+        _check_bounds(key, self.shape, self.name)
+
     def __setitem__(self, key, value):
-        vals = np.broadcast_to(np.asarray(_as_array(value), dtype=self.dtype.np), self.entry_shape).reshape(-1)
-        for comp, v in zip(self.comps, vals):
+        self._check_key(key)
+        for comp, v in zip(self.comps, self._entries(value)):
             comp[key] = v
 
     def to_torch(self, device=None):
@@ -315,3 +358,16 @@ def _as_array(value):
     if hasattr(value, "to_numpy"):
         return value.to_numpy()
     return value
+
+
+def _in_kernel() -> bool:
+    from simgrad.frontend import context
+
+    return context.in_kernel()
+
+
+def _kernel_fill(field: Field, value) -> None:
+    """`x.fill(v)` inside a kernel: a loop over every element at each launch (v may be a run-time value)."""
+    from simgrad.frontend.loops import emit_fill
+
+    emit_fill(field, value)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradTypeError, caller_loc
 from simgrad.frontend import context
 from simgrad.frontend.source import get_source
 from simgrad.ir.nodes import Kernel as IRKernel
@@ -130,6 +130,9 @@ class Kernel:
         return launch(*args)
 
     def _bind(self, args, kwargs):
+        unknown = unexpected_keywords(self.signature, kwargs)
+        if unknown:
+            raise SimgradTypeError(f"kernel {self.name}: {unknown}", caller_loc())
         try:
             b = self.signature.bind(*args, **kwargs)
         except TypeError as e:
@@ -450,3 +453,16 @@ def func(fn=None, **kw):
 
 def pyfunc(fn):
     return Func(fn)
+
+
+def unexpected_keywords(sig: inspect.Signature, kwargs) -> str:
+    """Python's bind reports a missing parameter before an unknown keyword (`k(b=1)` for `k(a)` says
+    "missing 'a'"); the unknown keyword is the real mistake, so it is reported first."""
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
+        return ""
+    names = [p.name for p in sig.parameters.values() if p.kind is not inspect.Parameter.POSITIONAL_ONLY]
+    bad = [k for k in kwargs if k not in names]
+    if not bad:
+        return ""
+    return (f"got an unexpected keyword argument '{bad[0]}' (its parameters are: "
+            f"{', '.join(sig.parameters)})")

@@ -7,10 +7,35 @@ from simgrad.errors import SimgradSyntaxError
 
 
 def static(x, *xs):
-    """Compile-time evaluation: `if ti.static(c)` picks a branch, `for i in ti.static(range(n))` unrolls."""
+    """Compile-time evaluation: `if ti.static(c)` picks a branch, `for i in ti.static(range(n))` unrolls.
+    A run-time value (a kernel argument, a field element) has no compile-time value: refused, located."""
+    for v in (x, *xs):
+        _check_static(v)
     if xs:
         return (x, *xs)
     return x
+
+
+def _check_static(v) -> None:
+    from simgrad.frontend import context
+    from simgrad.lang.expr import Expr
+    from simgrad.lang.matrix import Matrix
+
+    if not context.in_kernel():
+        return
+    if isinstance(v, Matrix):
+        parts = v.entries
+    elif type(v).__name__ == "RangeSpec":
+        parts = [v.start, v.stop, v.step]
+    elif isinstance(v, ndrange):
+        parts = [e for bound in v.bounds for e in bound]
+    else:
+        parts = [v]
+    if any(isinstance(p, Expr) for p in parts):
+        raise SimgradSyntaxError("ti.static() needs a compile-time value, but this depends on a run-time value "
+                                 "(a kernel argument, a field element or a local variable); use a ti.template() "
+                                 "parameter or a Python constant, or drop ti.static for a run-time loop/branch",
+                                 context.current_loc())
 
 
 def static_assert(cond, msg: str = "static assertion failed"):

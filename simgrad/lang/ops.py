@@ -12,6 +12,7 @@ import math
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
 from simgrad.frontend import context
+from simgrad.ir import numeric
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 
@@ -49,12 +50,40 @@ def to_expr(v, like: dt.DataType | None = None) -> Expr:
     if isinstance(v, _PY_NUM) or _np_scalar(v):
         t = _literal_type(v, like)
         value = v.item() if _np_scalar(v) else v
+        if isinstance(value, int) and not isinstance(value, bool) and not t.is_float:
+            _check_literal(value, t)
         return Expr(context.builder().const(value, t))
     raise SimgradTypeError(f"cannot use a {type(v).__name__} value in a kernel expression", context.current_loc())
 
 
+def _check_literal(v: int, t: dt.DataType) -> None:
+    """An integer literal must fit its type (Taichi refuses too) rather than wrap silently; a negative
+    literal meeting an unsigned value is its two's complement (`u - (-1)`), as in Taichi."""
+    lo = -(1 << (t.bits - 1))
+    hi = (1 << (t.bits - 1 if t.is_signed else t.bits)) - 1
+    if not lo <= v <= hi:
+        hint = "default_ip" if t is dt.Defaults.ip else "its type"
+        raise SimgradTypeError(f"integer literal {v} exceeds the range of {hint} {t} ([{lo}, {hi}]); give it a "
+                               f"wider type, e.g. ti.i64({v}) or ti.u64({v}), or set default_ip in ti.init()",
+                               context.current_loc())
+
+
+def _int_literal(v: int) -> Expr:
+    """An explicitly cast Python int: the narrowest of default_ip, i64, u64 that holds it."""
+    for t in (dt.Defaults.ip, dt.i64, dt.u64):
+        if -(1 << (t.bits - 1)) <= v < (1 << (t.bits - 1 if t.is_signed else t.bits)):
+            return Expr(context.builder().const(v, t))
+    return to_expr(v, dt.u64)  # raises: no 64-bit type holds it
+
+
 def cast_expr(e: Expr, t: dt.DataType) -> Expr:
-    return Expr(context.builder().cast(e.stmt, t))
+    s = e.stmt
+    if s.op is Op.CONST and s.type.is_float and not t.is_float and t is not dt.u1 \
+            and numeric.convert(s.attrs["value"], s.type, t) is None:
+        raise SimgradTypeError(f"converting the constant {s.attrs['value']!r} to {t} is undefined (NaN, infinite "
+                               f"or out of {t}'s range); the machine result would be arbitrary",
+                               context.current_loc())
+    return Expr(context.builder().cast(s, t))
 
 
 def _pair(a, b) -> tuple[Expr, Expr]:
@@ -94,6 +123,12 @@ def _binary(pyfn, irfn):
     return op
 
 
+def _c_div(a: int, b: int) -> int:
+    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
+    q = builtins.abs(a) // builtins.abs(b)
+    return q if (a < 0) == (b < 0) else -q
+
+
 def _py_div(a, b):
     return a / b
 
@@ -119,9 +154,22 @@ def _ir_mod(a: Expr, b: Expr) -> Expr:
 def _ir_pow(a: Expr, b: Expr) -> Expr:
     if a.dtype.is_float:
         return _emit2(Op.POW, a, b)
-    # integer power with a runtime exponent: through f64 (exact for |result| < 2**53)
-    f = _emit2(Op.POW, cast_expr(a, dt.f64), cast_expr(b, dt.f64))
-    return cast_expr(f, a.dtype)
+    return _int_pow(a, b)
+
+
+def _int_pow(base: Expr, e: Expr) -> Expr:
+    """Integer power with a run-time exponent, as Taichi computes it: squaring over every bit of the
+    exponent, wrapping in the type (through f64 it was inexact beyond 2**53 and undefined beyond the
+    type); a negative exponent gives 1, as Taichi does outside debug mode. Branch-free: selects only."""
+    t = base.dtype
+    one = to_expr(1, t)
+    result, p = one, base
+    for k in range(t.bits - 1 if t.is_signed else t.bits):
+        bit = ne(bit_and(shr(e, k), 1), 0)
+        result = select(bit, mul(result, p), result)
+        if k < t.bits - 2:
+            p = mul(p, p)
+    return select(lt(e, 0), one, result) if t.is_signed else result
 
 
 def _ipow(base: Expr, n: int) -> Expr:
@@ -149,7 +197,8 @@ def pow(a, b):  # noqa: A001
         return _elementwise(pow, a, b)
     if not isinstance(a, Expr) and not isinstance(b, Expr):
         return a**b
-    if isinstance(a, Expr) and isinstance(b, int) and not isinstance(b, bool) and builtins.abs(b) <= 32:
+    if isinstance(a, Expr) and isinstance(b, int) and not isinstance(b, bool) and \
+            (builtins.abs(b) <= 32 or (not a.dtype.is_float and b > 0)):
         return _ipow(a, b)
     return _ir_pow(*_pair(a, b))
 
@@ -164,7 +213,7 @@ mul = _binary(lambda a, b: a * b, lambda a, b: _emit2(Op.MUL, a, b))
 truediv = _binary(_py_div, _ir_truediv)
 floordiv = _binary(lambda a, b: a // b, _ir_floordiv)
 mod = _binary(lambda a, b: a % b, _ir_mod)
-raw_div = _binary(lambda a, b: int(a / b) if isinstance(a, int) and isinstance(b, int) else a / b,
+raw_div = _binary(lambda a, b: _c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
                   lambda a, b: _emit2(Op.RAW_DIV if not a.dtype.is_float else Op.DIV, a, b))
 raw_mod = _binary(lambda a, b: math.fmod(a, b) if isinstance(a, float) or isinstance(b, float)
                   else int(math.fmod(a, b)), lambda a, b: _emit2(Op.RAW_MOD, a, b))
@@ -222,8 +271,8 @@ def _minmax(pyfn, op: Op):
     return f
 
 
-max = _minmax(builtins.max, Op.MAX)  # noqa: A001
-min = _minmax(builtins.min, Op.MIN)  # noqa: A001
+max = _minmax(lambda a, b: numeric.minmax(builtins.max, a, b), Op.MAX)  # noqa: A001
+min = _minmax(lambda a, b: numeric.minmax(builtins.min, a, b), Op.MIN)  # noqa: A001
 
 
 def neg(a):
@@ -239,6 +288,8 @@ def abs(a):  # noqa: A001
         return _elementwise(abs, a)
     if not isinstance(a, Expr):
         return builtins.abs(a)
+    if not a.dtype.is_float and not a.dtype.is_signed:
+        return a  # an unsigned value is its own absolute value (llvm.abs would read it as signed)
     return _emit1(Op.ABS, a)
 
 
@@ -350,6 +401,8 @@ def cast(x, dtype):
     t = dt.from_any(dtype)
     if not isinstance(x, Expr):
         if context.in_kernel() and (isinstance(x, _PY_NUM) or _np_scalar(x)):
+            if isinstance(x, int) and not isinstance(x, bool):  # ti.cast(2**40, ti.i32) wraps, explicitly
+                return cast_expr(_int_literal(x), t)
             return cast_expr(to_expr(x, t), t)
         import numpy as np
 

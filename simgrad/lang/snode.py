@@ -12,7 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from simgrad.errors import SimgradError
+import numpy as np
+
+from simgrad.errors import SimgradError, SimgradValueError, caller_loc
 
 if TYPE_CHECKING:
     from simgrad.lang.field import ScalarField
@@ -71,6 +73,9 @@ class SNode:
         ax = tuple(a.index for a in indices)
         if isinstance(dimensions, int):
             dimensions = (dimensions,) * len(ax)
+        if any(isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0 for d in dimensions):
+            raise SimgradValueError(f"dense(): sizes must be non-negative integers, got {dimensions!r}",
+                                    caller_loc())
         dims = tuple(int(d) for d in dimensions)
         if len(dims) != len(ax):
             raise SimgradError(f"dense(): {len(ax)} axes but {len(dims)} sizes")

@@ -1,4 +1,8 @@
-"""Local simplification: constant folding, algebraic identities, common subexpressions, dead code."""
+"""Local simplification: constant folding, algebraic identities, common subexpressions, dead code.
+
+A fold must give exactly what the instruction computes at its type (ir/numeric.py): integers wrap,
+f32/f16 arithmetic is left to the hardware, float min/max return the non-NaN operand (llvm.minnum),
+and identities keep the sign of zero (x + 0.0 is not x when x is -0.0)."""
 
 from __future__ import annotations
 
@@ -7,13 +11,14 @@ from collections.abc import Callable
 from typing import Any
 
 from simgrad.ir import ops as O
-from simgrad.ir.builder import _wrap_int
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.numeric import minmax, wrap_int
 from simgrad.ir.ops import Op
 
 _FOLD: dict[Op, Callable[[Any, Any], Any]] = {
     Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
-    Op.MIN: min, Op.MAX: max, Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
+    Op.MIN: lambda a, b: minmax(min, a, b), Op.MAX: lambda a, b: minmax(max, a, b),
+    Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
     Op.BIT_XOR: lambda a, b: a ^ b, Op.LT: lambda a, b: int(a < b), Op.LE: lambda a, b: int(a <= b),
     Op.GT: lambda a, b: int(a > b), Op.GE: lambda a, b: int(a >= b), Op.EQ: lambda a, b: int(a == b),
     Op.NE: lambda a, b: int(a != b),
@@ -43,7 +48,7 @@ def _fold(s: Stmt):
         if s.vtype.is_float and s.vtype.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
             return None  # leave f32 rounding to the hardware
         v = _FOLD[s.op](a, b)
-        return v if s.vtype.is_float else _wrap_int(int(v), s.vtype)
+        return v if s.vtype.is_float else wrap_int(int(v), s.vtype)
     return None
 
 
@@ -57,10 +62,9 @@ def _identity(s: Stmt):
     if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
         a, b = s.operands
         cb, ca = _const(b), _const(a)
-        if s.op in (Op.ADD, Op.SUB) and cb == 0 and not (s.vtype.is_float and s.op is Op.ADD and
-                                                          math.copysign(1, cb) < 0):
+        if s.op in (Op.ADD, Op.SUB) and cb == 0 and (not s.vtype.is_float or _keeps_sign(s.op, cb)):
             return a
-        if s.op is Op.ADD and ca == 0 and not s.vtype.is_float:
+        if s.op is Op.ADD and ca == 0 and (not s.vtype.is_float or _keeps_sign(s.op, ca)):
             return b
         if s.op is Op.MUL and cb == 1:
             return a
@@ -69,6 +73,12 @@ def _identity(s: Stmt):
     if s.op is Op.CAST and s.operands[0].type is s.type:
         return s.operands[0]
     return None
+
+
+def _keeps_sign(op: Op, zero: float) -> bool:
+    """x + (-0.0) and x - 0.0 are x for every x; x + 0.0 is +0.0 for x = -0.0."""
+    negative = math.copysign(1.0, zero) < 0
+    return negative if op is Op.ADD else not negative
 
 
 def _key(s: Stmt, repl):

@@ -56,6 +56,10 @@ class Jit:
         self.cache_enabled = True
         self.cache_dir = default_cache_dir()
         self.stats = {"compiled": 0, "cache_hits": 0, "kernel_hits": 0}
+        from simgrad.codegen import half
+
+        if half.needed(self.triple, self.features):  # x86 without F16C: f16 code calls these
+            self.load(half.IR, half.SYMBOLS)
 
     # -- compilation -------------------------------------------------------------------------
     def _optimize(self, module: llvm.ModuleRef) -> None:

@@ -354,3 +354,90 @@ def test_integer_division_by_zero_in_parallel_loop_does_not_crash():
     k(7)
     i = np.arange(1, n + 1)
     np.testing.assert_array_equal(a.to_numpy(), i // 7 + i % 7)
+
+
+# -- Python-scope errors name the real cause -----------------------------------------------------------
+
+
+def test_unknown_keyword_is_reported_before_missing_parameter():
+    @ti.kernel
+    def k(a: ti.i32) -> ti.i32:
+        return a
+
+    @ti.func
+    def f(a):
+        return a
+
+    @ti.kernel
+    def calls_func() -> ti.i32:
+        return f(b=1)
+
+    with pytest.raises(TypeError, match=r"kernel k: got an unexpected keyword argument 'b' \(its parameters "
+                                        r"are: a\)") as e:
+        k(b=1)
+    assert FILE in str(e.value) and "k(b=1)" in str(e.value)
+    _raises_located(calls_func, match=r"ti.func f: got an unexpected keyword argument 'b'",
+                    line_text="return f(b=1)", exc=TypeError)
+    assert k(a=2) == 2
+
+
+@pytest.mark.parametrize("shape", [(3, -2), -1, (2.5,)])
+def test_bad_field_shape_is_refused_at_creation(shape):
+    with pytest.raises(ValueError, match=r"field shape must be non-negative integers") as e:
+        ti.field(ti.f32, shape=shape)
+    assert FILE in str(e.value) and "ti.field(ti.f32, shape=shape)" in str(e.value)
+    with pytest.raises(ValueError, match=r"field shape must be non-negative integers"):
+        ti.Vector.field(2, ti.f32, shape=shape)
+    x = ti.field(ti.f32, shape=3)  # the program is still usable
+    x[2] = 1.0
+    assert x[2] == 1.0
+
+
+def test_gradient_of_field_without_needs_grad_says_so():
+    x = ti.field(ti.f32, shape=4)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            x.grad[i] = 1.0
+
+    with pytest.raises(ti.SimgradError, match=r"field x has no gradient: .*needs_grad=True") as e:
+        x.grad[0] = 1.0
+    assert "x.grad[0] = 1.0" in str(e.value)
+    _raises_located(k, match=r"field x has no gradient", line_text="x.grad[i] = 1.0", exc=ti.SimgradError)
+
+
+def test_float_index_in_python_scope_names_field():
+    x = ti.field(ti.f32, shape=4)
+    v = ti.Vector.field(2, ti.f32, shape=(2, 2))
+    with pytest.raises(IndexError, match=r"field x is indexed with 1.5 \(float\); Python-scope indices must "
+                                         r"be integers") as e:
+        x[1.5]
+    assert "x[1.5]" in str(e.value)
+    with pytest.raises(IndexError, match=r"field v is indexed with 0.5"):
+        v[0.5, 1] = [1.0, 2.0]
+    with pytest.raises(IndexError, match=r"index 7 out of bounds for field v of shape \(2, 2\)"):
+        v[7, 0]
+
+
+def test_python_scope_errors_name_the_users_variable():
+    density = ti.field(ti.f32, shape=3)
+    self_like = type("S", (), {})()
+    self_like.vel = ti.Vector.field(2, ti.f32, shape=3)
+    named = ti.field(ti.f32, shape=3, name="given")
+    with pytest.raises(IndexError, match=r"field density of shape"):
+        density[5]
+    with pytest.raises(IndexError, match=r"field self_like.vel of shape"):
+        self_like.vel[5]
+    with pytest.raises(IndexError, match=r"field given of shape"):
+        named[5]
+    fields = [ti.field(ti.f32, shape=2) for _ in range(2)]  # no single variable: a generated name
+    with pytest.raises(IndexError, match=r"field field\d+ of shape"):
+        fields[0][5]
+
+
+def test_negative_dense_size_is_refused():
+    x = ti.field(ti.f32)
+    with pytest.raises(ValueError, match=r"dense\(\): sizes must be non-negative integers, got \(4, -1\)") as e:
+        ti.root.dense(ti.ij, (4, -1)).place(x)
+    assert "ti.root.dense(ti.ij, (4, -1)).place(x)" in str(e.value)
