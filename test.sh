@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the test suite; on a fresh machine it first creates .venv and installs simgrad with its test extras.
+# Runs the checks and the test suite: ruff, mypy, then pytest (arguments go to pytest). On a fresh machine it
+# first creates .venv and installs simgrad with its test extras (which include ruff and mypy).
 set -euo pipefail
 cd "$(dirname "$0")"
 if [ ! -x .venv/bin/python ] || [ pyproject.toml -nt .venv/.installed ]; then
@@ -7,4 +8,6 @@ if [ ! -x .venv/bin/python ] || [ pyproject.toml -nt .venv/.installed ]; then
   .venv/bin/python -m pip install --quiet -e ".[test]"
   touch .venv/.installed
 fi
+.venv/bin/python -m ruff check simgrad tests
+.venv/bin/python -m mypy simgrad
 exec .venv/bin/python -m pytest -q -n 2 "$@"

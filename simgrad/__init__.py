@@ -73,8 +73,6 @@ uint8, uint16, uint32, uint64 = u8, u16, u32, u64
 float16, float32, float64 = f16, f32, f64
 ScalarField = ScalarField
 MatrixField = MatrixField
-Vector.field = staticmethod(__import__("simgrad.lang.factories", fromlist=["x"]).vector_field)
-Matrix.field = staticmethod(__import__("simgrad.lang.factories", fromlist=["x"]).matrix_field)
 
 
 def sync():

@@ -27,6 +27,8 @@ could never reach a .grad field, and LLVM does not remove them once they run thr
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from simgrad import dtypes as dt
 from simgrad.autodiff.rules import NEEDS_VALUES, REVERSE, ZERO_GRADIENT
 from simgrad.autodiff.structurize import structurize
@@ -83,7 +85,7 @@ class Reverse:
         self.adj: dict[int, Stmt] = {}  # old statement -> adjoint local (ALLOCA)
         self.anchors: list[tuple[int, Block, Stmt | None]] = []
         self.push: dict[int, list[Stmt]] = {}  # old statement -> forward values to push after it
-        self.uses = {}
+        self.uses: dict[int, int] = {}
         for s in walk(kernel.body):
             for o in s.operands:
                 self.uses[id(o)] = self.uses.get(id(o), 0) + 1
@@ -146,7 +148,7 @@ class Reverse:
         """Adjoint locals at the top of their task, set to zero at every entry (every iteration)."""
         decls = []
         for a in task.decls:
-            zero = Stmt(Op.CONST, a.type, (), {"value": 0.0 if a.type.is_float else 0}, a.loc)
+            zero = Stmt(Op.CONST, a.type, (), {"value": 0.0 if a.vtype.is_float else 0}, a.loc)
             st = Stmt(Op.LOCAL_STORE, None, (a, zero), {}, a.loc)
             for x in (a, zero, st):
                 x.block = task.block
@@ -273,7 +275,7 @@ class Reverse:
             into[id(o)] = self.b.emit(Op.TAPE_POP, value.type, (), {"message": self._overflow_text(s)})
         begin, end = (o if o.op is Op.CONST else self.v(o) for o in s.operands)
         n = _trip(self.b, begin, end)
-        t = n.type
+        t = n.vtype
         loop = Stmt(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True}, s.loc)
         body = Block(loop)
         loop.blocks = (body,)
@@ -343,7 +345,7 @@ class Reverse:
         a = self.adj[id(s)]
         g = self.b.emit(Op.LOCAL_LOAD, a.type, (a,))
         if self.owner.get(id(s)) is self.task:
-            self.b.emit(Op.LOCAL_STORE, None, (a, self.b.const(0, a.type)))
+            self.b.emit(Op.LOCAL_STORE, None, (a, self.b.const(0, a.vtype)))
         return Expr(g)
 
     # -- values in the backward walk ---------------------------------------------------------------------
@@ -395,15 +397,15 @@ class Reverse:
         elif op is Op.WHILE:
             self._backward_loop(s, None)
         elif op is Op.LOCAL_LOAD:
-            if self.has_adj(s) and s.type.is_float:
+            if self.has_adj(s) and s.vtype.is_float:
                 self.acc(s.operands[0], self.take(s))
         elif op is Op.LOCAL_STORE:
             a, w = s.operands
             if self.has_adj(a) and a.type.is_float:
-                g = self.b.emit(Op.LOCAL_LOAD, a.type, (self.adj[id(a)],))
+                ga = self.b.emit(Op.LOCAL_LOAD, a.type, (self.adj[id(a)],))
                 if self.owner.get(id(a)) is self.task:
-                    self.b.emit(Op.LOCAL_STORE, None, (self.adj[id(a)], self.b.const(0, a.type)))
-                self.acc(w, Expr(g))
+                    self.b.emit(Op.LOCAL_STORE, None, (self.adj[id(a)], self.b.const(0, a.vtype)))
+                self.acc(w, Expr(ga))
         elif op is Op.ATOMIC:
             self._backward_atomic(s)
         elif op is Op.GLOBAL_LOAD:
@@ -414,7 +416,7 @@ class Reverse:
             if self.has_adj(s):
                 g = self.take(s)
                 src = s.operands[0]
-                if src.type.is_float and s.type.is_float:
+                if src.vtype.is_float and s.vtype.is_float:
                     self.acc(src, ops.cast_expr(g, src.type))
         elif op in REVERSE and s.type is not None and s.type.is_float:
             if self.has_adj(s):
@@ -430,7 +432,7 @@ class Reverse:
                     if c is not None:
                         self.acc(o, c)
         elif self.has_adj(s):
-            if op in ZERO_GRADIENT or not s.type.is_float:
+            if op in ZERO_GRADIENT or not s.vtype.is_float:
                 self.take(s)
             else:
                 raise GradientError(f"no derivative rule for the operation '{op.name.lower()}' on {s.type}",
@@ -483,7 +485,7 @@ class Reverse:
             n = self.b.binary(Op.SUB, end, begin)
         else:
             (n,) = self.values(s, [s])
-        t = n.type
+        t = n.vtype
         loop = self.b.emit(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True},
                            nblocks=1)
         with self.b.inside(loop.blocks[0]):
@@ -495,7 +497,7 @@ class Reverse:
         for x in body.stmts:
             x.block = loop.blocks[0]
 
-    def _grad_ptr(self, s: Stmt, ptr: Stmt, extra: list[Stmt] = ()):
+    def _grad_ptr(self, s: Stmt, ptr: Stmt, extra: Sequence[Stmt] = ()):
         """(pointer to the gradient element, values of `extra`) for a field access, or (None, ...)."""
         target = ptr.attrs["target"]
         grad = _grad_of(target)
@@ -507,7 +509,7 @@ class Reverse:
         return gp, idx, rest
 
     def _backward_global_load(self, s: Stmt) -> None:
-        if not self.has_adj(s) or not s.type.is_float:
+        if not self.has_adj(s) or not s.vtype.is_float:
             return
         g = self.take(s)
         gp, _, _ = self._grad_ptr(s, s.operands[0])
@@ -613,7 +615,7 @@ def _active(body: Block) -> set[int]:
 def _trip(b: Builder, begin: Stmt, end: Stmt) -> Stmt:
     """end - begin, folded when both are constants (so tape_bound can read it)."""
     if begin.op is Op.CONST and end.op is Op.CONST:
-        return b.const(end.attrs["value"] - begin.attrs["value"], end.type)
+        return b.const(end.attrs["value"] - begin.attrs["value"], end.vtype)
     return b.binary(Op.SUB, end, begin)
 
 
@@ -653,9 +655,10 @@ def tape_bound(block: Block) -> int | None:
         if not s.blocks:
             continue
         inner = [tape_bound(b) for b in s.blocks]
-        if any(n is None for n in inner):
+        known = [n for n in inner if n is not None]
+        if len(known) < len(inner):
             return None
-        n = max(inner)
+        n = max(known)
         if n == 0:
             continue
         if s.op is Op.RANGE_FOR and s.attrs.get("parallel"):

@@ -9,6 +9,8 @@ Any float op without an entry here makes the transform raise a GradientError nam
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from simgrad.ir.ops import Op
 from simgrad.lang import ops as o
 
@@ -43,7 +45,8 @@ def _abs(g, a):
     return (o.select(o.gt(a, 0.0), g, o.select(o.lt(a, 0.0), o.neg(g), 0.0)),)
 
 
-REVERSE = {
+# (g, *operands) -> one contribution (or None) per operand
+REVERSE: dict[Op, Callable[..., tuple]] = {
     Op.ADD: lambda g, a, b: (g, g),
     Op.SUB: lambda g, a, b: (g, o.neg(g)),
     Op.MUL: lambda g, a, b: (o.mul(g, b), o.mul(g, a)),

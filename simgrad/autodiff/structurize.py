@@ -54,6 +54,7 @@ def _range_to_while(loop: Stmt) -> Stmt:
     the break; as a while loop, the adjoint replays exactly the iterations that ran (its trip count is on
     the tape) and the tape holds nothing for the skipped ones."""
     outer, loc, t = loop.block, loop.loc, loop.type
+    assert outer is not None, "internal: a loop outside any block"
     begin, end = loop.operands
     idx = _new(Op.ALLOCA, t, (), outer, loc)
     init = _new(Op.LOCAL_STORE, None, (idx, begin), outer, loc)
@@ -88,6 +89,7 @@ def _rewrite_loop(loop: Stmt) -> None:
     body = loop.blocks[0]
     # a parallel loop (continue only) gets a flag per iteration; one outside would be shared by threads
     outer = body if loop.attrs.get("parallel") else loop.block
+    assert outer is not None, "internal: a loop outside any block"
     flag = _new(Op.ALLOCA, dt.i32, (), outer, loc)
     init = _new(Op.LOCAL_STORE, None, (flag, _const(0, outer, loc)), outer, loc)
     _replace_jumps(body, flag)
@@ -119,7 +121,7 @@ def _rewrite_loop(loop: Stmt) -> None:
 
 
 def _is_header_exit(s: Stmt) -> bool:
-    return s.op is Op.IF and len(s.blocks[0].stmts) == 1 and s.blocks[0].stmts[0].attrs.get("header")
+    return s.op is Op.IF and len(s.blocks[0].stmts) == 1 and bool(s.blocks[0].stmts[0].attrs.get("header"))
 
 
 def _is_pure(s: Stmt) -> bool:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 
-from simgrad.errors import GradientError
+from simgrad.errors import GradientError, Loc
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
@@ -30,7 +30,7 @@ def _user_name(target) -> str:
 
 def check_access_rules(kernel: Kernel) -> None:
     """Raise a located GradientError where the IR proves a read-then-overwrite of the same element."""
-    read: dict[tuple, object] = {}
+    read: dict[tuple, Loc | None] = {}
     for s in walk(kernel.body):
         if s.op not in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE):
             continue

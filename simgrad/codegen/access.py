@@ -4,7 +4,9 @@ checks in debug mode."""
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.ir.ops import Op
 from simgrad.lang.field import ScalarField
+from simgrad.passes.digits import digit_chain
 
 
 def _i64(f, idx_name: str, t: dt.DataType) -> str:
@@ -39,6 +41,7 @@ def lower_global_ptr(gen, f, s) -> str:
     target = s.attrs["target"]
     idx = [_i64(f, f.v(o), o.type) for o in s.operands]
     if isinstance(target, ScalarField):
+        assert target.layout is not None  # kernels compile after their fields' trees are materialised
         tree_id, const, terms, shape = target.layout
         if gen.debug:
             offset = target.offset or (0,) * len(shape)
@@ -102,28 +105,16 @@ def _linear_stride(f, s, terms) -> int | None:
     """The byte stride `st` when the element address is `const + L * st` for the task's loop index L:
     the indices are the digits `(L // d) % m` of a flattened struct-for (the loop starting at 0) and the
     field's strides follow the same digits (a dense field iterated in its own order). Else None."""
-    from simgrad.codegen.llvm import _digit_of
-    from simgrad.ir.ops import Op
-
-    loop = getattr(f, "loop", None)
+    loop = f.loop
     if loop is None or loop.operands[0].op is not Op.CONST or loop.operands[0].attrs["value"] != 0:
         return None
     if len(terms) != len(s.operands) or any(t.divisor != 1 or t.modulus for t in terms):
         return None
-    digits = {}
-    for t in terms:
-        d = _digit_of(s.operands[t.axis], loop)
-        if d is None or d[0] in digits:
-            return None
-        digits[d[0]] = (d[1], t.stride)
-    place, unit = 1, None
-    while place in digits:
-        mod, stride = digits.pop(place)
-        if unit is None:
-            unit = stride
-        if stride != place * unit:
-            return None
-        if mod == 0:
-            return unit if not digits else None
-        place *= mod
-    return None
+    values = [s.operands[t.axis] for t in terms]
+    chain = digit_chain(values, loop)
+    if chain is None or len(chain) != len(terms):  # every index one digit of the chain
+        return None
+    unit = terms[chain[0][0]].stride
+    if any(terms[k].stride != divisor * unit for k, divisor, _mod in chain):
+        return None
+    return unit

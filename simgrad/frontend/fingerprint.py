@@ -109,7 +109,7 @@ def trusted_callable(fn) -> bool:
 class KeyBuilder:
     """Describes values and functions as nested tuples of plain values; `digest` hashes the result."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.covered: dict = {}  # Python function -> the global/closure/builtin names its key describes
         self._order: dict = {}  # Python function -> its index, for recursion between ti.funcs
         self._budget = _BUDGET
@@ -133,7 +133,7 @@ class KeyBuilder:
         local = set(fn.__code__.co_varnames)  # found in the frontend's scopes; the Guard checks it
         names = [n for n in _names(src) if n not in local]
         self.covered[fn] = set(names)
-        resolved = []
+        resolved: list[tuple] = []
         for name in names:
             if name in src.closure:
                 v = src.closure[name]

@@ -234,8 +234,10 @@ def _is_zero(v) -> bool:
 def _target_names(comp, target) -> list[str]:
     if isinstance(target, ast.Name):
         return [target.id]
-    if isinstance(target, ast.Tuple) and all(isinstance(e, ast.Name) for e in target.elts):
-        return [e.id for e in target.elts]
+    if isinstance(target, ast.Tuple):
+        names = [e.id for e in target.elts if isinstance(e, ast.Name)]
+        if len(names) == len(target.elts):
+            return names
     raise SimgradSyntaxError("loop variables must be plain names", comp.loc(target))
 
 

@@ -498,7 +498,7 @@ class Compiler:
                 raise SimgradTypeError("both sides of a run-time choice must be matrices of one shape",
                                        self.builder.loc)
             t = dt.promote(dtype_of(a), dtype_of(b))
-            ref = MatrixRef([VarRef(t) for _ in a.entries], a.n, a.m)
+            ref: MatrixRef | VarRef = MatrixRef([VarRef(t) for _ in a.entries], a.n, a.m)
         else:
             ref = VarRef(_choice_type(a, b))
         new = parent.stmts[at + 1:]  # the result's ALLOCAs go before the IF
@@ -656,13 +656,14 @@ def global_ref(comp: Compiler, base, index, node):
     """Ref of `field[index]` / `array[index]`, with indices cast to i32 and shifted by field offsets."""
     from simgrad.lang.ndarray import ArrayArg
 
+    idx: tuple
     if index is None:
         idx = ()
     elif isinstance(index, tuple):
         idx = index
     else:
         idx = (index,)
-    flat = []
+    flat: list = []
     for i in idx:
         if isinstance(i, Matrix):
             flat.extend(i.entries)

@@ -61,6 +61,7 @@ class FormattedString:
             if isinstance(part, ast.Constant):
                 fmt += str(part.value).replace("%", "%%")
             else:
+                assert isinstance(part, ast.FormattedValue)  # the only other part of an f-string
                 v = comp.eval(part.value)
                 spec = comp.eval(part.format_spec).fmt if part.format_spec is not None else ""
                 f, vals = _format(v, spec)

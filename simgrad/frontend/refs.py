@@ -168,6 +168,7 @@ class DynamicElementRef:
                 if isinstance(k, Expr):
                     hit = ops.eq(k, c)
                     cond = hit if cond is None else ops.bit_and(cond, hit)
+            assert cond is not None  # some index is a run-time value, else the element is known
             stmt = b.emit(Op.IF, None, (cond.stmt,), nblocks=2)
             with b.inside(stmt.blocks[0]):
                 update(self.base.index(combo))

@@ -14,7 +14,7 @@ from simgrad.errors import Loc, SimgradSyntaxError
 class FunctionSource:
     func: object
     file: str
-    tree: ast.FunctionDef
+    tree: ast.FunctionDef | ast.AsyncFunctionDef
     globals: dict
     closure: dict
     text: str = ""  # the source as written, and its first line: part of the kernel cache key

@@ -73,7 +73,7 @@ def _points(p) -> np.ndarray:
 
 def _per_item(value, n, name) -> np.ndarray:
     """A scalar or an (n,) array as an (n,) float64 array."""
-    if isinstance(value, numbers.Number):
+    if isinstance(value, numbers.Real):
         return np.full(n, float(value))
     arr = to_numpy(value).astype(np.float64).reshape(-1)
     if arr.shape == (1,):

@@ -47,7 +47,7 @@ class Builder:
         if v.type is type:
             return v
         if v.op is Op.CONST:
-            folded = numeric.convert(v.attrs["value"], v.type, type)
+            folded = numeric.convert(v.attrs["value"], v.vtype, type)
             if folded is not None:
                 return self.emit(Op.CONST, type, (), {"value": folded})
         return self.emit(Op.CAST, type, (v,))
@@ -55,17 +55,17 @@ class Builder:
     def binary(self, op: Op, a: Stmt, b: Stmt) -> Stmt:
         if a.type is not b.type:
             raise SimgradTypeError(f"internal: {op.name} on {a.type} and {b.type}", self.loc)
-        if op in O.FLOAT_ONLY and not a.type.is_float:
+        if op in O.FLOAT_ONLY and not a.vtype.is_float:
             raise SimgradTypeError(f"{op.name.lower()} needs floating-point operands, got {a.type}", self.loc)
-        if op in O.INT_ONLY and a.type.is_float:
+        if op in O.INT_ONLY and a.vtype.is_float:
             raise SimgradTypeError(f"{op.name.lower()} needs integer operands, got {a.type}", self.loc)
         result = dt.i32 if op in O.COMPARE else a.type
         return self.emit(op, result, (a, b))
 
     def unary(self, op: Op, a: Stmt) -> Stmt:
-        if op in O.FLOAT_ONLY and not a.type.is_float:
+        if op in O.FLOAT_ONLY and not a.vtype.is_float:
             raise SimgradTypeError(f"{op.name.lower()} needs a floating-point operand, got {a.type}", self.loc)
-        if op in O.INT_ONLY and a.type.is_float:
+        if op in O.INT_ONLY and a.vtype.is_float:
             raise SimgradTypeError(f"{op.name.lower()} needs an integer operand, got {a.type}", self.loc)
         result = dt.i32 if op is Op.LOGICAL_NOT else a.type
         return self.emit(op, result, (a,))

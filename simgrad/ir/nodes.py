@@ -42,6 +42,14 @@ class Stmt:
         Stmt._counter += 1
         self.id = Stmt._counter
 
+    @property
+    def vtype(self) -> DataType:
+        """The type of the value this statement defines; asking a store or a branch is an internal error."""
+        t = self.type
+        if t is None:
+            raise AssertionError(f"internal: {self!r} defines no value")
+        return t
+
     def __repr__(self) -> str:
         return f"%{self.id}:{self.type}={self.op.name.lower()}"
 
@@ -62,3 +70,6 @@ class Kernel:
         self.body = Block()
         self.args: list = []  # runtime argument descriptors, in slot order (lang.kernel fills these)
         self.returns: list[DataType] = []
+        self.ret_slot = 0  # the first context slot after the arguments: return values go there
+        self.uses_tape = False  # an adjoint that pushes values on the per-thread tape (autodiff sets it)
+        self.tape_bound: int | None = None  # tape entries a thread needs, when the loop bounds prove it

@@ -11,7 +11,7 @@ def _atomic(kind: str):
                                  "ndarray element or local variable as its first argument")
 
     fn.__name__ = f"atomic_{kind}"
-    fn.atomic_kind = kind
+    fn.atomic_kind = kind  # type: ignore[attr-defined]  # read back by frontend/calls.py
     return fn
 
 

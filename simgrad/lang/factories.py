@@ -6,11 +6,12 @@ import linecache
 import os
 import re
 import sys
+from types import FrameType
 
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradValueError, caller_loc
+from simgrad.errors import SimgradRuntimeError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.runtime.program import get_program
@@ -19,7 +20,8 @@ _counter = [0]
 
 
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
-_FACTORY_FILES = {__file__, os.path.join(os.path.dirname(__file__), "types.py")}
+# frames between the user's call and _name: ti.field, ti.types..., ti.Vector.field/ti.Matrix.field (matrix.py)
+_FACTORY_FILES = {__file__, *(os.path.join(os.path.dirname(__file__), f) for f in ("types.py", "matrix.py"))}
 _ASSIGNED = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*(?::[^=]*)?=\s*[\w.]+\(")
 
 
@@ -28,7 +30,7 @@ def _name(name) -> tuple[str, bool]:
     the new field to (`x = ti.field(...)` names it `x`, as Taichi infers it), else field<N>."""
     if name:
         return name, False
-    frame = sys._getframe(1)
+    frame: FrameType | None = sys._getframe(1)
     while frame is not None and frame.f_code.co_filename in _FACTORY_FILES:
         frame = frame.f_back
     if frame is not None and not frame.f_code.co_filename.startswith(_PACKAGE):  # the user's own line
@@ -63,7 +65,7 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
-    if needs_grad and f.grad.snode is None:
+    if needs_grad and f.grad is not None and f.grad.snode is None:
         gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
         gnode.place(f.grad, offset=offset)
     return f
@@ -73,6 +75,9 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
     """Every real field carries an (unplaced) gradient field, placed by needs_grad or ti.root.lazy_grad()."""
     f = make("")
     if not f.dtype.is_float:
+        if needs_grad or needs_dual:  # was an AttributeError on the missing gradient (Taichi refuses it too)
+            raise SimgradRuntimeError(f"{f.dtype} is not supported for a field with needs_grad=True or "
+                                      "needs_dual=True: gradients need a floating-point type")
         return f
     f.grad = make(".grad")
     for c, g in zip(f._components(), f.grad._components()):

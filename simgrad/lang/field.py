@@ -5,10 +5,18 @@ Python-scope access goes straight to the tree's memory through numpy views (no k
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradError, SimgradIndexError, SimgradOverflowError, caller_loc
+
+if TYPE_CHECKING:
+    from simgrad.lang.snode import AccessTerm
+
+# Where a dense field's elements are: (tree id, constant byte offset, access terms, shape)
+Layout = tuple[int, int, tuple["AccessTerm", ...], tuple[int, ...]]
 
 
 def _norm_index(key, ndim: int, name: str = "") -> tuple:
@@ -28,6 +36,7 @@ class Field:
     dtype: dt.DataType
     grad: Field | None
     dual: Field | None
+    _needs_grad: bool  # ti.field(needs_grad=...): placing the field places its gradient (lang/factories.py)
 
     def _components(self) -> list[ScalarField]:
         raise NotImplementedError
@@ -99,7 +108,7 @@ class ScalarField(Field):
         self.view: np.ndarray | None = None  # strided numpy view of the elements, when one exists
         self.gather: np.ndarray | None = None  # flat element indices, for layouts that are not strided
         self.flat: np.ndarray | None = None
-        self.layout = None  # (tree id, const offset, access terms, shape)
+        self.layout: Layout | None = None  # set when its tree is materialised
         self._shape: tuple[int, ...] | None = None
         self.is_primal = True
 
@@ -138,7 +147,7 @@ class ScalarField(Field):
             self.view = np.ndarray(shape, self.dtype.np, buffer=buf, offset=const, strides=strides)
         else:
             offs = np.full(shape, const, dtype=np.int64)
-            idx = np.indices(shape, dtype=np.int64) if shape else []
+            idx: np.ndarray | list = np.indices(shape, dtype=np.int64) if shape else []
             for t in terms:
                 digit = idx[t.axis] // t.divisor
                 if t.modulus:
@@ -160,7 +169,8 @@ class ScalarField(Field):
         _check_bounds(key, self.shape, self.name)
         if self.view is not None:
             return self.view[key].item()
-        return self.flat[self.gather[key]].item()
+        flat, gather = self._indirect()
+        return flat[gather[key]].item()
 
     def __setitem__(self, key, value):
         if self.view is None:
@@ -171,11 +181,16 @@ class ScalarField(Field):
         if self.view is not None:
             self.view[key] = value
         else:
-            self.flat[self.gather[key]] = value
+            flat, gather = self._indirect()
+            flat[gather[key]] = value
 
     def to_numpy(self, dtype=None) -> np.ndarray:
         self._ensure()
-        out = np.array(self.view) if self.view is not None else self.flat[self.gather]
+        if self.view is not None:
+            out = np.array(self.view)
+        else:
+            flat, gather = self._indirect()
+            out = flat[gather]
         return out.astype(dtype) if dtype is not None else out
 
     def from_numpy(self, arr) -> None:
@@ -186,7 +201,8 @@ class ScalarField(Field):
         if self.view is not None:
             self.view[...] = arr
         else:
-            self.flat[self.gather] = arr
+            flat, gather = self._indirect()
+            flat[gather] = arr
 
     def fill(self, value) -> None:
         if _in_kernel():
@@ -196,7 +212,13 @@ class ScalarField(Field):
         if self.view is not None:
             self.view[...] = value
         else:
-            self.flat[self.gather] = value
+            flat, gather = self._indirect()
+            flat[gather] = value
+
+    def _indirect(self) -> tuple[np.ndarray, np.ndarray]:
+        """(flat buffer, element index array) of a layout without a strided numpy view."""
+        assert self.flat is not None and self.gather is not None, f"field {self.name} is not materialised"
+        return self.flat, self.gather
 
     def copy_from(self, other: ScalarField) -> None:
         self.from_numpy(other.to_numpy())

@@ -90,7 +90,7 @@ class Instance:
 
 
 class Kernel:
-    def __init__(self, func):
+    def __init__(self, func) -> None:
         self.func = func
         self.name = func.__name__
         self.signature = inspect.signature(func)
@@ -238,7 +238,7 @@ class Kernel:
 
     def _build(self, prog: Program, args, transform, name_suffix, guard=None):
         """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
-        from simgrad.codegen.llvm import KernelCodegen
+        from simgrad.codegen.cpu import CpuCodegen
         from simgrad.frontend.lower import Compiler
         from simgrad.passes.manager import run_pipeline
 
@@ -253,9 +253,9 @@ class Kernel:
         if guard is not None and len(prog.trees) != trees:
             guard.taint("fields were created while compiling")
         ir.ret_slot = slots[1]
-        run_pipeline(ir, transform)
+        run_pipeline(ir, transform, debug=prog.config.debug)
         symbol = f"sg_{self.name}{name_suffix}_{id(ir):x}"
-        cg = KernelCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
         text = cg.generate()
         # the disk cache is keyed by the IR text with the symbol name made stable
         stable = text.replace(symbol, "sg_kernel")
@@ -265,7 +265,7 @@ class Kernel:
                 "tape_bound": getattr(ir, "tape_bound", None) if uses_tape else None}
         return ir, stable, meta
 
-    def _bind_params(self, comp, args):
+    def _bind_params(self, comp, args) -> tuple[tuple[list[SlotParam], int], tuple[int, int] | None]:
         from simgrad.lang.ndarray import ArrayArg
 
         b = comp.builder
@@ -294,6 +294,7 @@ class Kernel:
                     arr = a if hasattr(a, "dtype") else np.asarray(a)
                     t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
                     elem = ()
+                    want: dt.DataType | None
                     if isinstance(ann.dtype, MatrixType):
                         elem = ann.dtype.shape
                         want = ann.dtype.dtype
@@ -332,13 +333,12 @@ def _make_launcher(prog: Program, meta: dict, entries: dict):
     from simgrad.runtime.launch import Launcher
 
     launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog)
+                        meta["errors"], prog, meta["ret_matrix"])
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]
         launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
     ret_matrix = meta["ret_matrix"]
-    launcher.ret_matrix = ret_matrix
     if ret_matrix is not None:
         inner = launcher.launch
         n, m = ret_matrix

@@ -487,6 +487,13 @@ class Matrix:
     def cols(cols):
         return Matrix.rows(cols).transpose()
 
+    @staticmethod
+    def field(*args, **kwargs):
+        """`ti.Matrix.field(n, m, dtype, shape=...)`: a field of n x m matrices (lang/factories.py)."""
+        from simgrad.lang.factories import matrix_field
+
+        return matrix_field(*args, **kwargs)
+
 
 class _VectorMeta(type):
     def __instancecheck__(cls, obj):
@@ -499,6 +506,13 @@ class Vector(Matrix, metaclass=_VectorMeta):
 
     def __new__(cls, arr=None, dt=None, **kw):
         return Matrix(arr, dt=dt)
+
+    @staticmethod
+    def field(*args, **kwargs):
+        """`ti.Vector.field(n, dtype, shape=...)`: a field of n-vectors (lang/factories.py)."""
+        from simgrad.lang.factories import vector_field
+
+        return vector_field(*args, **kwargs)
 
 
 def _is_zero(v) -> bool:

@@ -180,7 +180,7 @@ def _ipow(base: Expr, n: int) -> Expr:
         if not base.dtype.is_float:
             base = cast_expr(base, dt.Defaults.fp)
         return truediv(1.0, _ipow(base, -n))
-    result = None
+    result: Expr | None = None
     p = base
     while n:
         if n & 1:
@@ -188,6 +188,7 @@ def _ipow(base: Expr, n: int) -> Expr:
         n >>= 1
         if n:
             p = mul(p, p)
+    assert result is not None  # n > 0 here: some bit was set
     return result
 
 

@@ -10,10 +10,14 @@ touches one of its fields; after that it is frozen and `ti.root` starts a fresh 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simgrad.errors import SimgradError, SimgradValueError, caller_loc
+
+if TYPE_CHECKING:
+    from simgrad.lang.field import ScalarField
 
 
 @dataclass(frozen=True)
@@ -48,7 +52,7 @@ class SNode:
         self.axes = axes_
         self.sizes = sizes
         self.children: list[SNode] = []
-        self.field = None  # for 'place' nodes
+        self.field: ScalarField | None = None  # for 'place' nodes
         self.tree: SNodeTree | None = parent.tree if parent else None
         self.cell_size = 0
         self.offset_in_parent = 0
@@ -124,6 +128,7 @@ class SNode:
     def _layout(self) -> int:
         """Assign offsets bottom-up; returns this node's total size in bytes."""
         if self.kind == "place":
+            assert self.field is not None
             size = self.field.dtype.nbytes
             self.align = size
             return size

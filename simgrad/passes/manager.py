@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from functools import partial
 
 from simgrad.ir.nodes import Kernel
 from simgrad.ir.printer import print_kernel
@@ -19,15 +21,19 @@ def _verify_enabled() -> bool:
     return os.environ.get("SIMGRAD_VERIFY", "0") not in ("", "0") or _debug() > 0
 
 
-def run_pipeline(kernel: Kernel, transform=None) -> None:
-    from simgrad.passes import hoist, promote, simplify, verify
+def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
+    """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics)."""
+    from simgrad.passes import hoist, parallel_strategy, promote, simplify, verify
 
     level = _debug()
-    steps = [("promote", promote.promote),  # locals assigned once become their values
-             ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
+    steps: list[tuple[str, Callable[[Kernel], object]]] = [
+        ("promote", promote.promote),  # locals assigned once become their values
+        ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
     if transform is not None:  # e.g. the reverse-mode adjoint, then a clean-up of what it produced
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
     steps.append(("hoist", hoist.hoist))  # loop-invariant index arithmetic out of parallel loops
+    # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
+    steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass
         steps = [("verify", verify.verify)] + [x for st in steps for x in (st, ("verify", verify.verify))]
     for name, fn in steps:

@@ -7,13 +7,15 @@ and identities keep the sign of zero (x + 0.0 is not x when x is -0.0)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 from simgrad.ir import ops as O
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.numeric import minmax, wrap_int
 from simgrad.ir.ops import Op
 
-_FOLD = {
+_FOLD: dict[Op, Callable[[Any, Any], Any]] = {
     Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
     Op.MIN: lambda a, b: minmax(min, a, b), Op.MAX: lambda a, b: minmax(max, a, b),
     Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
@@ -43,10 +45,10 @@ def _fold(s: Stmt):
         a, b = (_const(o) for o in s.operands)
         if a is None or b is None:
             return None
-        if s.type.is_float and s.type.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
+        if s.vtype.is_float and s.vtype.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
             return None  # leave f32 rounding to the hardware
         v = _FOLD[s.op](a, b)
-        return v if s.type.is_float else wrap_int(int(v), s.type)
+        return v if s.vtype.is_float else wrap_int(int(v), s.vtype)
     return None
 
 
@@ -60,9 +62,9 @@ def _identity(s: Stmt):
     if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
         a, b = s.operands
         cb, ca = _const(b), _const(a)
-        if s.op in (Op.ADD, Op.SUB) and cb == 0 and (not s.type.is_float or _keeps_sign(s.op, cb)):
+        if s.op in (Op.ADD, Op.SUB) and cb == 0 and (not s.vtype.is_float or _keeps_sign(s.op, cb)):
             return a
-        if s.op is Op.ADD and ca == 0 and (not s.type.is_float or _keeps_sign(s.op, ca)):
+        if s.op is Op.ADD and ca == 0 and (not s.vtype.is_float or _keeps_sign(s.op, ca)):
             return b
         if s.op is Op.MUL and cb == 1:
             return a

@@ -18,7 +18,9 @@ _COMPILER_VERSION = "simgrad-jit-1"
 
 
 def debug_level() -> int:
-    """SIMGRAD_DEBUG: 1 names passes, 2 prints IR after each, 3 the LLVM IR, 4 the assembly."""
+    """SIMGRAD_DEBUG: 1 names passes, 2 prints IR after each, 3 the optimised LLVM IR, 4 the assembly.
+    Any level > 0 bypasses the kernel cache (lang/kernel.py) so the passes run and print; the object
+    cache still serves native code, and 3/4 print on its hits too."""
     try:
         return int(os.environ.get("SIMGRAD_DEBUG", "0"))
     except ValueError:
@@ -80,27 +82,35 @@ class Jit:
         return h.hexdigest()[:40]
 
     def object_for(self, ir_text: str, cache_key: str | None = None) -> bytes:
-        """Native object code for `ir_text`, from the disk cache when present."""
+        """Native object code for `ir_text`, from the disk cache when present. SIMGRAD_DEBUG >= 3 prints
+        the optimised LLVM IR (4: and the assembly) either way: a cache hit optimises it just to print it."""
         key = cache_key or self._cache_key(ir_text)
         path = self.cache_dir / f"{key}.o"
+        level = debug_level()
         if self.cache_enabled and path.exists():
             self.stats["cache_hits"] += 1
+            if level >= 3:
+                self._optimized(ir_text, level)
             return path.read_bytes()
-        module = llvm.parse_assembly(ir_text)
-        module.triple = self.triple
-        module.data_layout = self.data_layout
-        module.verify()
-        self._optimize(module)
-        level = debug_level()
-        if level >= 3:
-            print(str(module))
-        if level >= 4:
-            print(self.target_machine.emit_assembly(module))
+        module = self._optimized(ir_text, level)
         obj = self.target_machine.emit_object(module)
         self.stats["compiled"] += 1
         if self.cache_enabled:
             self._write(path, obj)
         return obj
+
+    def _optimized(self, ir_text: str, level: int) -> llvm.ModuleRef:
+        """Parse, verify and optimise; print what the debug level asks for."""
+        module = llvm.parse_assembly(ir_text)
+        module.triple = self.triple
+        module.data_layout = self.data_layout
+        module.verify()
+        self._optimize(module)
+        if level >= 3:
+            print(str(module))
+        if level >= 4:
+            print(self.target_machine.emit_assembly(module))
+        return module
 
     def _write(self, path: Path, data: bytes) -> None:
         try:

@@ -8,8 +8,8 @@ import ctypes
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.codegen.llvm import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
 from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
+from simgrad.runtime.abi import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, HEADER_SLOTS
 
 _VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
 
@@ -18,14 +18,15 @@ class Launcher:
     """Holds the context buffer of one kernel instantiation and the generated `launch` function."""
 
     def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
-                 error_table: list, program):
+                 error_table: list, program, ret_matrix: tuple[int, int] | None = None):
         self.kernel_name = kernel_name
+        self.ret_matrix = ret_matrix  # (n, m) when the kernel returns a matrix: values come back as a tuple
         self.error_table = error_table
         self.program = program
         self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
-        self.buf[:4] = program.context_header()
+        self.buf[list(HEADER_SLOTS)] = program.context_header()
         self.buf[CTX_NTHREADS] = program.pool.num_threads
-        self.tape = None
+        self.tape: np.ndarray | None = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
         self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
@@ -34,10 +35,10 @@ class Launcher:
     def attach_tape(self, entries: int) -> None:
         """A private tape for this adjoint kernel: one region per thread plus one for the serial part."""
         regions = self.program.pool.num_threads + 1
-        self.tape = np.zeros(regions * entries, dtype=np.int64)
-        self.buf[CTX_TAPE] = self.tape.ctypes.data
+        tape = self.tape = np.zeros(regions * entries, dtype=np.int64)
+        self.buf[CTX_TAPE] = tape.ctypes.data
         self.buf[CTX_TAPE_CAP] = entries
-        self.buf[CTX_TAPE_SERIAL] = self.tape.ctypes.data + 8 * entries * (regions - 1)
+        self.buf[CTX_TAPE_SERIAL] = tape.ctypes.data + 8 * entries * (regions - 1)
 
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
@@ -77,7 +78,7 @@ class Launcher:
                 scale = 8 // t.nbytes
                 env[f"_v_{t.name}"] = self.views[t.name]
                 rets.append(f"_v_{t.name}[{(self.ret_slot + k) * scale}].item()")
-            if len(returns) == 1 and not getattr(self, "ret_matrix", None):
+            if len(returns) == 1 and self.ret_matrix is None:
                 lines.append(f"    return {rets[0]}")
             else:
                 lines.append(f"    return ({', '.join(rets)},)")

@@ -33,7 +33,7 @@ class Config:
 class Profiler:
     """Per-kernel launch count and wall time (ti.profiler)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.records: dict[str, list[float]] = {}
 
     def add(self, name: str, seconds: float) -> None:
@@ -57,7 +57,7 @@ class Profiler:
 class Program:
     generation = 0
 
-    def __init__(self, **kw):
+    def __init__(self, **kw) -> None:
         Program.generation += 1
         self.generation = Program.generation
         self.config = Config(**kw)
@@ -69,7 +69,7 @@ class Program:
         self.profiler = Profiler()
         self.error = np.zeros(4, dtype=np.int64)
         self._pool = None
-        self._rng = None
+        self._rng: np.ndarray | None = None
         from simgrad.runtime.jit import get_jit
 
         self.jit = get_jit()

@@ -1,0 +1,141 @@
+"""The CPU target: each top-level parallel loop is outlined into a task function
+`void task(ptr closure, i64 lo, i64 hi, i32 tid)` that the runtime's parallel_for (runtime/threadpool.py)
+splits across threads. The closure (an i64 array on the caller's stack) holds the context pointer, then
+every value the loop body uses from outside, then the per-thread copies of privatised regions.
+
+What each task sets up (per-thread sums, per-thread copies) follows the loop's LoopStrategy
+(passes/parallel_strategy.py); the variant over copies is chosen at run time (codegen/privatize.py).
+"""
+
+from __future__ import annotations
+
+from simgrad.codegen.llvm import FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
+from simgrad.codegen.privatize import emit_private_launch, slice_shift
+from simgrad.ir.nodes import Block, Stmt, walk
+from simgrad.ir.ops import Op
+from simgrad.passes.parallel_strategy import LoopStrategy
+from simgrad.passes.privatize import Region
+from simgrad.runtime import abi
+
+Capture = tuple[int, str, bool]  # (closure slot, LLVM type, passed by value)
+
+
+class CpuCodegen(KernelCodegen):
+    """LLVM IR for the host CPU: parallel loops run on the native thread pool."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.ntasks = 0
+
+    def parallel_loop(self, f: FunctionText, s: Stmt) -> None:
+        plan: LoopStrategy = s.attrs["strategy"]
+        captured = _free_values(s)
+        regions = plan.regions
+        clo = f.tmp("clo")
+        f.prologue.append(f"  {clo} = alloca [{len(captured) + len(regions) + 1} x i64], align 8")
+        f.emit(f"store ptr %ctx, ptr {clo}")
+        stored = {id(x.operands[0]) for x in walk(s.blocks[0]) if x.op in (Op.LOCAL_STORE, Op.ATOMIC)}
+        slots: list[Capture] = []
+        for k, v in enumerate(captured, start=1):
+            by_value = v.op is Op.ALLOCA and id(v) not in stored  # read-only local: a private copy
+            is_ptr = v.op is Op.GLOBAL_PTR or (v.op is Op.ALLOCA and not by_value)
+            ty = "ptr" if is_ptr else llvm_type(v.vtype)
+            src = f.v(v)
+            if by_value:
+                src = f.tmp("ld")
+                f.emit(f"{src} = load {ty}, ptr {f.v(v)}")
+            p = f.tmp("cap")
+            f.emit(f"{p} = getelementptr i64, ptr {clo}, i64 {k}")
+            f.emit(f"store {ty} {src}, ptr {p}")
+            slots.append((k, ty, by_value))
+        self.ntasks += 1
+        tname = f"{self.symbol}_task{self.ntasks}"
+        self._emit_task(s, plan, tname, captured, slots, [])
+        ty = llvm_type(s.vtype)
+        b64, e64 = f.tmp("b"), f.tmp("e")
+        ext = "sext" if ty != "i64" else None
+        for dst, src_stmt in ((b64, s.operands[0]), (e64, s.operands[1])):
+            f.emit(f"{dst} = {ext} {ty} {f.v(src_stmt)} to i64" if ext else f"{dst} = add i64 {f.v(src_stmt)}, 0")
+        pfor = f.ctx_slot(abi.CTX_PFOR, "ptr")
+        grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
+        if not regions:
+            f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
+            return
+        pname = f"{tname}_private"
+        self._emit_task(s, plan, pname, captured, slots, regions, first_slot=len(captured) + 1)
+        nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
+        emit_private_launch(f, regions, plan.weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64,
+                            e64, grain)
+
+    def _emit_task(self, s: Stmt, plan: LoopStrategy, tname: str, captured: list[Stmt], slots: list[Capture],
+                   regions: list[Region], first_slot: int = 0) -> None:
+        """The outlined loop: `task(closure, lo, hi, tid)`; with `regions`, the variant that adds into this
+        thread's private copies of those regions (closure slots from `first_slot` hold the copies)."""
+        t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
+        t.loop = s
+        t.prologue.append("  %ctx = load ptr, ptr %clo")
+        for v, (k, ty, by_value) in zip(captured, slots):
+            q, val = t.tmp("cap"), t.tmp("capv")
+            t.prologue.append(f"  {q} = getelementptr i64, ptr %clo, i64 {k}")
+            t.prologue.append(f"  {val} = load {ty}, ptr {q}")
+            if by_value:
+                copy = t.tmp("var")
+                t.prologue.append(f"  {copy} = alloca {ty}")
+                t.prologue.append(f"  store {ty} {val}, ptr {copy}")
+                val = copy
+            t.names[v] = val
+        for k, r in enumerate(regions):
+            _private_root(t, r, first_slot + k)
+        ty = llvm_type(s.vtype)
+        lo, hi = t.tmp("lo"), t.tmp("hi")
+        t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
+        t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
+        for _place, adds in plan.reductions.values():  # each thread sums into its own variable first
+            acc = t.tmp("red")
+            rty = llvm_type(adds[0].vtype)
+            t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].vtype)}, ptr {acc}"]
+            for a in adds:
+                t.reduction_of[id(a)] = acc
+        self.serial_loop(t, s, lo, hi)
+        for place, adds in plan.reductions.values():  # ... and adds it to the shared place once per chunk
+            rty = llvm_type(adds[0].vtype)
+            total = t.tmp("sum")
+            t.emit(f"{total} = load {rty}, ptr {t.reduction_of[id(adds[0])]}")
+            if place.op is Op.GLOBAL_PTR:
+                lower_global_ptr(self, t, place)
+            op = "fadd" if adds[0].vtype.is_float else "add"
+            t.emit(f"{t.tmp('old')} = atomicrmw {op} ptr {t.v(place)}, {rty} {total} monotonic")
+        t.emit("ret void")
+        self.module.functions.append(t.text())
+
+
+def _private_root(t: FunctionText, region: Region, slot: int) -> None:
+    """Point the region's updates at this thread's zeroed copy (closure slot `slot`), shifted so that
+    the fields' usual byte offsets land inside it."""
+    q, buf, t64, off, base, root = (t.tmp("pr") for _ in range(6))
+    lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
+             f"{t64} = zext i32 %tid to i64", f"{off} = mul i64 {t64}, {region.hi - region.lo}",
+             f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
+    shift = slice_shift(lines, lambda: t.tmp("sh"), t.v, region)
+    neg = t.tmp("pr")
+    lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{root} = getelementptr i8, ptr {base}, i64 {neg}"]
+    t.prologue += ["  " + line for line in lines]
+    for tid, key in region.keys:
+        t.private_roots[(tid, key)] = root
+        t.private_prefix[tid] = len(key)  # every update of a field uses the same number of prefix axes
+
+
+def _free_values(loop: Stmt) -> list[Stmt]:
+    """Values used inside `loop` but defined outside it (constants excepted), in first-use order."""
+    inside = {id(s) for s in walk(loop.blocks[0])}
+    inside.add(id(loop))
+    seen: dict[int, Stmt] = {}
+    for s in walk(loop.blocks[0]):
+        for o in s.operands:
+            if id(o) not in inside and o.op is not Op.CONST and id(o) not in seen:
+                seen[id(o)] = o
+    return list(seen.values())
+
+
+def _cost(block: Block) -> int:
+    return sum(1 for _ in walk(block))

@@ -1,0 +1,183 @@
+"""Decide how parallel loops update memory, before any code is emitted.
+
+Every top-level parallel RANGE_FOR gets `attrs["strategy"]`, a `LoopStrategy` (which places it sums per
+thread, which regions it may copy per thread), and every ATOMIC gets `attrs["strategy"]`, the cheapest
+form that is still correct:
+
+- `plain`: a read-modify-write without atomic instructions: serial code, a local of the iteration, or an
+  element the iteration owns (its indices an injective function of the loop index, and no other iteration
+  writes that field at elements it does not own);
+- `reduce`: an add into one loop-invariant place (`total[None] += v`, `s += v` on a kernel-scope local),
+  summed per thread first and added once per chunk;
+- `pair`: two neighbouring f32 components updated together (`grid_v[I] += v` on a 2-vector field), one
+  64-bit compare-and-swap (both statements of the pair carry it);
+- `atomic`: a real atomic instruction;
+- `private|atomic`, `private|pair`: the field is added into a per-thread copy when the target decides the
+  copies pay off (see passes/privatize.py), else the form after the bar.
+
+Targets emit what is written here; none of this depends on how a target runs a parallel loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from simgrad import dtypes as dt
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.ops import Op
+from simgrad.lang.field import ScalarField
+from simgrad.passes.digits import digit_chain, digit_of
+from simgrad.passes.privatize import Region, access_key, private_regions
+
+PLAIN, REDUCE, PAIR, ATOMIC, PRIVATE = "plain", "reduce", "pair", "atomic", "private|"
+
+
+@dataclass
+class LoopStrategy:
+    """What a parallel loop's tasks set up: per-thread sums and per-thread copies."""
+
+    # {place key: (the pointer statement, [the ATOMIC statements adding into it])}
+    reductions: dict[tuple, tuple[Stmt, list[Stmt]]] = field(default_factory=dict)
+    regions: list[Region] = field(default_factory=list)  # candidates for per-thread copies
+    weight: int = 0  # updates per iteration into the regions (serial loops of constant trip multiply)
+
+    def ir_name(self) -> str:
+        """The IR printer's text: `tasks(reduce=[%7], private=[tree 2 [0, 4096) prefix 1], weight=9)`."""
+        parts = []
+        if self.reductions:
+            parts.append("reduce=[" + ", ".join(f"%{place.id}" for place, _ in self.reductions.values()) + "]")
+        if self.regions:
+            parts.append("private=[" + ", ".join(f"tree {r.tree_id} [{r.lo}, {r.hi}) prefix {len(r.prefix)}"
+                                                 for r in self.regions) + f"], weight={self.weight}")
+        return "tasks(" + ", ".join(parts) + ")"
+
+
+def parallel_strategy(kernel: Kernel, debug: bool = False) -> bool:
+    """Annotate every parallel loop and every atomic of the kernel. In debug mode no pairs (each update
+    is bounds-checked on its own) and no slices of copies (an out-of-bounds slice index must be reported,
+    not summed into)."""
+    uses: dict[int, int] = {}
+    for x in walk(kernel.body):
+        for o in x.operands:
+            uses[id(o)] = uses.get(id(o), 0) + 1
+    _serial(kernel.body, uses, debug)
+    return False
+
+
+def _serial(block: Block, uses: dict, debug: bool) -> None:
+    """Code outside parallel loops: every atomic is plain; parallel loops are decided on their own."""
+    for s in block.stmts:
+        if s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
+            _loop(s, uses, debug)
+            continue
+        if s.op is Op.ATOMIC:
+            s.attrs["strategy"] = PLAIN
+        for b in s.blocks:
+            _serial(b, uses, debug)
+
+
+def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
+    inside = {id(x) for x in walk(loop.blocks[0])}
+    # fields some iteration writes at an element it does not own keep every update atomic
+    shared = {id(x.operands[0].attrs["target"]) for x in walk(loop.blocks[0])
+              if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
+              and not injective_in(loop, x.operands[0], inside)}
+    reductions = _reductions(loop, inside, uses)
+    reduced = {key[0] for key in reductions}
+    regions, weight = private_regions(loop, inside, uses, shared, reduced, debug)
+    loop.attrs["strategy"] = LoopStrategy(reductions, regions, weight)
+    reducing = {id(a) for _place, adds in reductions.values() for a in adds}
+    private = {k for r in regions for k in r.keys}  # (id(field), slice key) of the updates copied
+    nprefix = {tid: len(key) for tid, key in private}  # every update of a field has as many prefix axes
+    for x in walk(loop.blocks[0]):
+        if x.op is not Op.ATOMIC:
+            continue
+        p = x.operands[0]
+        if id(x) in reducing:
+            form = REDUCE
+        elif p.op is Op.ALLOCA:  # a local: shared only when declared outside the loop
+            form = ATOMIC if id(p) not in inside else PLAIN
+        elif p.op is Op.GLOBAL_PTR and id(p.attrs["target"]) not in shared and injective_in(loop, p, inside):
+            form = PLAIN
+        else:
+            form = ATOMIC
+        tid = id(p.attrs["target"]) if p.op is Op.GLOBAL_PTR else None
+        if tid in nprefix and (tid, access_key(p, nprefix[tid])) in private:
+            form = PRIVATE + form
+        x.attrs["strategy"] = form
+    if not debug:
+        _pairs(loop.blocks[0], uses)
+
+
+def _pairs(block: Block, uses: dict) -> None:
+    """Mark `a; p2; b` sequences (ATOMIC, GLOBAL_PTR, ATOMIC) that one 64-bit compare-and-swap can do."""
+    stmts = block.stmts
+    for k in range(len(stmts) - 2):
+        a, p2, b = stmts[k:k + 3]
+        if _pairable(a, p2, b, uses):
+            prefix = PRIVATE if a.attrs["strategy"].startswith(PRIVATE) else ""
+            a.attrs["strategy"] = b.attrs["strategy"] = prefix + PAIR
+    for s in stmts:
+        for inner in s.blocks:
+            _pairs(inner, uses)
+
+
+def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
+    """`v[I] += w` on an f32 2-vector (or two neighbouring components): both atomic adds of unused
+    result, 8-byte aligned neighbours of one tree, both really atomic (or both privatised)."""
+    if a.op is not Op.ATOMIC or b.op is not Op.ATOMIC or b.operands[0] is not p2 or a.type is not dt.f32 \
+            or b.type is not dt.f32:
+        return False
+    if a.attrs["kind"] != "add" or b.attrs["kind"] != "add" or uses.get(id(a)) or uses.get(id(b)):
+        return False
+    if a.attrs["strategy"] not in (ATOMIC, PRIVATE + ATOMIC) or b.attrs["strategy"] != a.attrs["strategy"]:
+        return False
+    p1 = a.operands[0]
+    if p1.op is not Op.GLOBAL_PTR or p2.op is not Op.GLOBAL_PTR or p1.operands != p2.operands:
+        return False
+    t1, t2 = p1.attrs["target"], p2.attrs["target"]
+    if not isinstance(t1, ScalarField) or not isinstance(t2, ScalarField) or t1.layout is None or t2.layout is None:
+        return False
+    (tree1, c1, terms1, _), (tree2, c2, terms2, _) = t1.layout, t2.layout
+    return tree1 == tree2 and terms1 == terms2 and c2 == c1 + 4 and c1 % 8 == 0 \
+        and all(t.stride % 8 == 0 for t in terms1)
+
+
+def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
+    """True when the element's indices determine the loop index: apart from loop-invariant values they
+    are digits `(index // d) % m` of it that chain from d = 1 up to a digit without modulus."""
+    if any(o.op is not Op.CONST and id(o) in inside and digit_of(o, loop) is None for o in ptr.operands):
+        return False  # an index computed in the iteration some other way
+    return digit_chain(ptr.operands, loop) is not None
+
+
+def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
+    """Places a parallel loop only accumulates into: every access is an atomic add whose old value is
+    unused, at loop-invariant indices. {key: (a pointer statement, [the ATOMIC statements])}."""
+    groups: dict[tuple, tuple[Stmt, list[Stmt]]] = {}
+    spoiled: set[int] = set()
+    inside = inside | {id(loop)}  # the loop index varies too
+    for x in walk(loop.blocks[0]):
+        for k, o in enumerate(x.operands):
+            is_place = (o.op is Op.ALLOCA and id(o) not in inside) or o.op is Op.GLOBAL_PTR
+            if not is_place:
+                continue
+            key: tuple
+            if o.op is Op.GLOBAL_PTR:
+                if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):
+                    spoiled.add(id(o.attrs["target"]))
+                    continue
+                key = (id(o.attrs["target"]), tuple(id(i) if i.op is not Op.CONST else ("c", i.attrs["value"])
+                                                    for i in o.operands))
+            else:
+                key = (id(o),)
+            reducing = x.op is Op.ATOMIC and k == 0 and x.attrs["kind"] == "add" and not uses.get(id(x))
+            if not reducing:
+                spoiled.add(key[0])
+                continue
+            place, adds = groups.setdefault(key, (o, []))
+            adds.append(x)
+    by_target: dict[int, list[tuple]] = {}
+    for key in groups:
+        by_target.setdefault(key[0], []).append(key)
+    return {key: groups[key] for key in groups if key[0] not in spoiled and len(by_target[key[0]]) == 1}

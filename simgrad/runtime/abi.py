@@ -1,0 +1,23 @@
+"""The kernel context ABI: what each 8-byte slot of the buffer passed to `entry(ptr ctx)` holds.
+
+Generated code (codegen/) reads these slots and the launcher (runtime/launch.py) and the program
+(runtime/program.py) fill them, so the numbers live here, in one place both sides import.
+"""
+
+from __future__ import annotations
+
+CTX_ROOTS = 0  # the roots table: one base address per SNode tree
+CTX_ERR = 1  # the error buffer: [code, value] of the first error a kernel reports
+CTX_RNG = 2  # per-thread random states (16 bytes each)
+CTX_PFOR = 3  # the thread pool's parallel_for(task, closure, begin, end, grain)
+CTX_TAPE = 4  # the autodiff tape of the parallel tasks (one region per pool thread)
+CTX_TAPE_CAP = 5  # tape capacity per thread, in entries
+CTX_TAPE_SERIAL = 6  # the tape of the serial part of the kernel
+CTX_NTHREADS = 7  # number of pool threads
+CTX_ARGS = 8  # first argument slot; return values follow the arguments
+
+# Slots the program fills identically for every kernel (Program.context_header), in slot order.
+HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR)
+
+# Closure of an outlined task: slot 0 holds the context pointer, captured values follow.
+CLOSURE_CTX = 0

@@ -1,0 +1,358 @@
+declare noalias ptr @calloc(i64, i64)
+declare void @free(ptr)
+!0 = !{}
+define internal void @sg_kernel_task1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
+entry:
+  %ctx = load ptr, ptr %clo
+  %lo.1 = trunc i64 %lo to i32
+  %hi.2 = trunc i64 %hi to i32
+  %red.3 = alloca float
+  store float 0x0000000000000000, ptr %red.3
+  %cp.29 = getelementptr i64, ptr %ctx, i64 0
+  %cv.30 = load ptr, ptr %cp.29
+  %rp.31 = getelementptr ptr, ptr %cv.30, i64 0
+  %root.32 = load ptr, ptr %rp.31, !invariant.load !0
+  %cp.55 = getelementptr i64, ptr %ctx, i64 0
+  %cv.56 = load ptr, ptr %cp.55
+  %rp.57 = getelementptr ptr, ptr %cv.56, i64 1
+  %root.58 = load ptr, ptr %rp.57, !invariant.load !0
+  %cp.61 = getelementptr i64, ptr %ctx, i64 0
+  %cv.62 = load ptr, ptr %cp.61
+  %rp.63 = getelementptr ptr, ptr %cv.62, i64 2
+  %root.64 = load ptr, ptr %rp.63, !invariant.load !0
+  br label %pre.4
+pre.4:
+  br label %head.5
+head.5:
+  %i.9 = phi i32 [%lo.1, %pre.4], [%inext.10, %latch.7]
+  %c.11 = icmp slt i32 %i.9, %hi.2
+  br i1 %c.11, label %body.6, label %done.8
+body.6:
+  %m1.13 = icmp eq i32 8, -1
+  %z.14 = icmp eq i32 8, 0
+  %bad.15 = or i1 %m1.13, %z.14
+  %d.16 = select i1 %bad.15, i32 1, i32 8
+  %q.17 = sdiv i32 %i.9, %d.16
+  %m.18 = srem i32 %i.9, %d.16
+  %t.19 = icmp ne i32 %m.18, 0
+  %t.20 = icmp slt i32 %m.18, 0
+  %t.21 = icmp slt i32 %d.16, 0
+  %t.22 = xor i1 %t.20, %t.21
+  %t.23 = and i1 %t.19, %t.22
+  %t.24 = select i1 %t.23, i32 %d.16, i32 0
+  %v.12 = add i32 %m.18, %t.24
+  %ix.25 = sext i32 %v.12 to i64
+  %of.26 = mul nuw nsw i64 %ix.25, 8
+  %of.27 = add nuw nsw i64 0, %of.26
+  %ptr.28 = getelementptr inbounds i8, ptr %root.32, i64 %of.27
+  %ix.33 = sext i32 %v.12 to i64
+  %of.34 = mul nuw nsw i64 %ix.33, 8
+  %of.35 = add nuw nsw i64 0, %of.34
+  %ptr.36 = getelementptr inbounds i8, ptr %root.32, i64 %of.35
+  %pv.37 = insertelement <2 x float> poison, float 0x3FF0000000000000, i32 0
+  %pv.38 = insertelement <2 x float> %pv.37, float 0x4000000000000000, i32 1
+  %pinc.39 = bitcast <2 x float> %pv.38 to i64
+  %cur.43 = load atomic i64, ptr %ptr.36 monotonic, align 8
+  br label %cas.40
+cas.40:
+  br label %casloop.41
+casloop.41:
+  %c.44 = phi i64 [%cur.43, %cas.40], [%c.49, %casloop.41]
+  %c.45 = bitcast i64 %c.44 to <2 x float>
+  %c.47 = fadd <2 x float> %c.45, %pv.38
+  %c.46 = bitcast <2 x float> %c.47 to i64
+  %c.48 = cmpxchg ptr %ptr.36, i64 %c.44, i64 %c.46 monotonic monotonic, align 8
+  %c.49 = extractvalue { i64, i1 } %c.48, 0
+  %c.50 = extractvalue { i64, i1 } %c.48, 1
+  br i1 %c.50, label %casdone.42, label %casloop.41
+casdone.42:
+  %ix.51 = sext i32 %v.12 to i64
+  %of.52 = mul nuw nsw i64 %ix.51, 4
+  %of.53 = add nuw nsw i64 0, %of.52
+  %ptr.54 = getelementptr inbounds i8, ptr %root.58, i64 %of.53
+  %old.59 = atomicrmw fadd ptr %ptr.54, float 0x3FF0000000000000 monotonic
+  %ptr.60 = getelementptr inbounds i8, ptr %root.64, i64 0
+  %old.65 = load float, ptr %red.3
+  %new.66 = fadd nsz float %old.65, 0x3FF0000000000000
+  store float %new.66, ptr %red.3
+  br label %latch.7
+latch.7:
+  %inext.10 = add i32 %i.9, 1
+  br label %head.5
+done.8:
+  %sum.67 = load float, ptr %red.3
+  %ptr.68 = getelementptr inbounds i8, ptr %root.64, i64 0
+  %old.69 = atomicrmw fadd ptr %ptr.68, float %sum.67 monotonic
+  ret void
+}
+define internal void @sg_kernel_task1_private(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
+entry:
+  %ctx = load ptr, ptr %clo
+  %pr.1 = getelementptr i64, ptr %clo, i64 1
+  %pr.2 = load ptr, ptr %pr.1
+  %pr.3 = zext i32 %tid to i64
+  %pr.4 = mul i64 %pr.3, 64
+  %pr.5 = getelementptr inbounds i8, ptr %pr.2, i64 %pr.4
+  %pr.7 = sub i64 0, 0
+  %pr.6 = getelementptr i8, ptr %pr.5, i64 %pr.7
+  %pr.8 = getelementptr i64, ptr %clo, i64 2
+  %pr.9 = load ptr, ptr %pr.8
+  %pr.10 = zext i32 %tid to i64
+  %pr.11 = mul i64 %pr.10, 32
+  %pr.12 = getelementptr inbounds i8, ptr %pr.9, i64 %pr.11
+  %pr.14 = sub i64 0, 0
+  %pr.13 = getelementptr i8, ptr %pr.12, i64 %pr.14
+  %lo.15 = trunc i64 %lo to i32
+  %hi.16 = trunc i64 %hi to i32
+  %red.17 = alloca float
+  store float 0x0000000000000000, ptr %red.17
+  %cp.58 = getelementptr i64, ptr %ctx, i64 0
+  %cv.59 = load ptr, ptr %cp.58
+  %rp.60 = getelementptr ptr, ptr %cv.59, i64 2
+  %root.61 = load ptr, ptr %rp.60, !invariant.load !0
+  br label %pre.18
+pre.18:
+  br label %head.19
+head.19:
+  %i.23 = phi i32 [%lo.15, %pre.18], [%inext.24, %latch.21]
+  %c.25 = icmp slt i32 %i.23, %hi.16
+  br i1 %c.25, label %body.20, label %done.22
+body.20:
+  %m1.27 = icmp eq i32 8, -1
+  %z.28 = icmp eq i32 8, 0
+  %bad.29 = or i1 %m1.27, %z.28
+  %d.30 = select i1 %bad.29, i32 1, i32 8
+  %q.31 = sdiv i32 %i.23, %d.30
+  %m.32 = srem i32 %i.23, %d.30
+  %t.33 = icmp ne i32 %m.32, 0
+  %t.34 = icmp slt i32 %m.32, 0
+  %t.35 = icmp slt i32 %d.30, 0
+  %t.36 = xor i1 %t.34, %t.35
+  %t.37 = and i1 %t.33, %t.36
+  %t.38 = select i1 %t.37, i32 %d.30, i32 0
+  %v.26 = add i32 %m.32, %t.38
+  %ix.39 = sext i32 %v.26 to i64
+  %of.40 = mul nuw nsw i64 %ix.39, 8
+  %of.41 = add nuw nsw i64 0, %of.40
+  %ptr.42 = getelementptr i8, ptr %pr.6, i64 %of.41
+  %old.43 = load float, ptr %ptr.42
+  %new.44 = fadd nsz float %old.43, 0x3FF0000000000000
+  store float %new.44, ptr %ptr.42
+  %ix.45 = sext i32 %v.26 to i64
+  %of.46 = mul nuw nsw i64 %ix.45, 8
+  %of.47 = add nuw nsw i64 4, %of.46
+  %ptr.48 = getelementptr i8, ptr %pr.6, i64 %of.47
+  %old.49 = load float, ptr %ptr.48
+  %new.50 = fadd nsz float %old.49, 0x4000000000000000
+  store float %new.50, ptr %ptr.48
+  %ix.51 = sext i32 %v.26 to i64
+  %of.52 = mul nuw nsw i64 %ix.51, 4
+  %of.53 = add nuw nsw i64 0, %of.52
+  %ptr.54 = getelementptr i8, ptr %pr.13, i64 %of.53
+  %old.55 = load float, ptr %ptr.54
+  %new.56 = fadd nsz float %old.55, 0x3FF0000000000000
+  store float %new.56, ptr %ptr.54
+  %ptr.57 = getelementptr inbounds i8, ptr %root.61, i64 0
+  %old.62 = load float, ptr %red.17
+  %new.63 = fadd nsz float %old.62, 0x3FF0000000000000
+  store float %new.63, ptr %red.17
+  br label %latch.21
+latch.21:
+  %inext.24 = add i32 %i.23, 1
+  br label %head.19
+done.22:
+  %sum.64 = load float, ptr %red.17
+  %ptr.65 = getelementptr inbounds i8, ptr %root.61, i64 0
+  %old.66 = atomicrmw fadd ptr %ptr.65, float %sum.64 monotonic
+  ret void
+}
+define internal void @sg_kernel_task1_private_sum0(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
+entry:
+  %buf = load ptr, ptr %clo
+  %realp = getelementptr i64, ptr %clo, i64 1
+  %real = load ptr, ptr %realp
+  %ntp = getelementptr i64, ptr %clo, i64 2
+  %nt = load i64, ptr %ntp
+  br label %thead
+thead:
+  %t = phi i64 [0, %entry], [%tnext, %kdone]
+  %tc = icmp slt i64 %t, %nt
+  br i1 %tc, label %tbody, label %done
+tbody:
+  %base = mul i64 %t, 16
+  %copy = getelementptr inbounds float, ptr %buf, i64 %base
+  br label %khead
+khead:
+  %k = phi i64 [%lo, %tbody], [%knext, %kbody]
+  %kc = icmp slt i64 %k, %hi
+  br i1 %kc, label %kbody, label %kdone
+kbody:
+  %src = getelementptr inbounds float, ptr %copy, i64 %k
+  %dst = getelementptr inbounds float, ptr %real, i64 %k
+  %part = load float, ptr %src
+  %old = load float, ptr %dst
+  %added = fadd float %old, %part
+  %zero = fcmp oeq float %part, 0.0
+  %new = select i1 %zero, float %old, float %added
+  store float %new, ptr %dst
+  %knext = add i64 %k, 1
+  br label %khead
+kdone:
+  %tnext = add i64 %t, 1
+  br label %thead
+done:
+  ret void
+}
+define internal void @sg_kernel_task1_private_sum1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
+entry:
+  %buf = load ptr, ptr %clo
+  %realp = getelementptr i64, ptr %clo, i64 1
+  %real = load ptr, ptr %realp
+  %ntp = getelementptr i64, ptr %clo, i64 2
+  %nt = load i64, ptr %ntp
+  br label %thead
+thead:
+  %t = phi i64 [0, %entry], [%tnext, %kdone]
+  %tc = icmp slt i64 %t, %nt
+  br i1 %tc, label %tbody, label %done
+tbody:
+  %base = mul i64 %t, 8
+  %copy = getelementptr inbounds float, ptr %buf, i64 %base
+  br label %khead
+khead:
+  %k = phi i64 [%lo, %tbody], [%knext, %kbody]
+  %kc = icmp slt i64 %k, %hi
+  br i1 %kc, label %kbody, label %kdone
+kbody:
+  %src = getelementptr inbounds float, ptr %copy, i64 %k
+  %dst = getelementptr inbounds float, ptr %real, i64 %k
+  %part = load float, ptr %src
+  %old = load float, ptr %dst
+  %added = fadd float %old, %part
+  %zero = fcmp oeq float %part, 0.0
+  %new = select i1 %zero, float %old, float %added
+  store float %new, ptr %dst
+  %knext = add i64 %k, 1
+  br label %khead
+kdone:
+  %tnext = add i64 %t, 1
+  br label %thead
+done:
+  ret void
+}
+define void @sg_kernel(ptr %ctx) {
+entry:
+  %clo.1 = alloca [3 x i64], align 8
+  %cp.4 = getelementptr i64, ptr %ctx, i64 3
+  %cv.5 = load ptr, ptr %cp.4
+  %cp.6 = getelementptr i64, ptr %ctx, i64 7
+  %cv.7 = load i64, ptr %cp.6
+  %cp.33 = getelementptr i64, ptr %ctx, i64 0
+  %cv.34 = load ptr, ptr %cp.33
+  %rp.35 = getelementptr ptr, ptr %cv.34, i64 0
+  %root.36 = load ptr, ptr %rp.35, !invariant.load !0
+  %sclo.32 = alloca [3 x i64], align 8
+  %cp.43 = getelementptr i64, ptr %ctx, i64 0
+  %cv.44 = load ptr, ptr %cp.43
+  %rp.45 = getelementptr ptr, ptr %cv.44, i64 1
+  %root.46 = load ptr, ptr %rp.45, !invariant.load !0
+  %sclo.42 = alloca [3 x i64], align 8
+  store ptr %ctx, ptr %clo.1
+  %b.2 = sext i32 0 to i64
+  %e.3 = sext i32 64 to i64
+  %pv.8 = sub i64 %e.3, %b.2
+  %pv.9 = mul i64 %pv.8, 24
+  %pv.10 = mul i64 %cv.7, 24
+  %pv.11 = icmp sge i64 %pv.9, %pv.10
+  %pv.12 = icmp sgt i64 %cv.7, 1
+  %pv.14 = mul i64 %cv.7, 96
+  %pv.15 = icmp ule i64 %pv.14, 268435456
+  %pv.16 = and i1 %pv.11, %pv.12
+  %pv.13 = and i1 %pv.16, %pv.15
+  br i1 %pv.13, label %alloc.18, label %atomic.17
+alloc.18:
+  %priv.21 = call ptr @calloc(i64 %cv.7, i64 64)
+  %pslot.22 = getelementptr i64, ptr %clo.1, i64 1
+  store ptr %priv.21, ptr %pslot.22
+  %pnn.23 = icmp ne ptr %priv.21, null
+  %pok.24 = and i1 true, %pnn.23
+  %priv.25 = call ptr @calloc(i64 %cv.7, i64 32)
+  %pslot.26 = getelementptr i64, ptr %clo.1, i64 2
+  store ptr %priv.25, ptr %pslot.26
+  %pnn.27 = icmp ne ptr %priv.25, null
+  %pok.28 = and i1 %pok.24, %pnn.27
+  br i1 %pok.28, label %private.19, label %nomem.29
+nomem.29:
+  call void @free(ptr %priv.21)
+  call void @free(ptr %priv.25)
+  br label %atomic.17
+private.19:
+  call void %cv.5(ptr @sg_kernel_task1_private, ptr %clo.1, i64 %b.2, i64 %e.3, i64 455)
+  %real.31 = getelementptr i8, ptr %root.36, i64 0
+  %real.30 = getelementptr i8, ptr %real.31, i64 0
+  %sslot.37 = getelementptr i64, ptr %sclo.32, i64 0
+  store ptr %priv.21, ptr %sslot.37
+  %sslot.38 = getelementptr i64, ptr %sclo.32, i64 1
+  store ptr %real.30, ptr %sslot.38
+  %sslot.39 = getelementptr i64, ptr %sclo.32, i64 2
+  store i64 %cv.7, ptr %sslot.39
+  call void %cv.5(ptr @sg_kernel_task1_private_sum0, ptr %sclo.32, i64 0, i64 16, i64 8192)
+  call void @free(ptr %priv.21)
+  %real.41 = getelementptr i8, ptr %root.46, i64 0
+  %real.40 = getelementptr i8, ptr %real.41, i64 0
+  %sslot.47 = getelementptr i64, ptr %sclo.42, i64 0
+  store ptr %priv.25, ptr %sslot.47
+  %sslot.48 = getelementptr i64, ptr %sclo.42, i64 1
+  store ptr %real.40, ptr %sslot.48
+  %sslot.49 = getelementptr i64, ptr %sclo.42, i64 2
+  store i64 %cv.7, ptr %sslot.49
+  call void %cv.5(ptr @sg_kernel_task1_private_sum1, ptr %sclo.42, i64 0, i64 8, i64 8192)
+  call void @free(ptr %priv.25)
+  br label %scatterdone.20
+atomic.17:
+  call void %cv.5(ptr @sg_kernel_task1, ptr %clo.1, i64 %b.2, i64 %e.3, i64 455)
+  br label %scatterdone.20
+scatterdone.20:
+  ret void
+}
+
+define internal void @sg_report(ptr %ctx, i64 %code, i64 %value) noinline {
+  %ep = getelementptr i64, ptr %ctx, i64 1
+  %err = load ptr, ptr %ep
+  %r = cmpxchg ptr %err, i64 0, i64 %code monotonic monotonic
+  %ok = extractvalue { i64, i1 } %r, 1
+  br i1 %ok, label %store, label %done
+store:
+  %vp = getelementptr i64, ptr %err, i64 1
+  store i64 %value, ptr %vp
+  br label %done
+done:
+  ret void
+}
+
+define internal i32 @sg_rand_u32(ptr %ctx, i32 %tid) {
+  %rp = getelementptr i64, ptr %ctx, i64 2
+  %base = load ptr, ptr %rp
+  %off = mul i32 %tid, 16
+  %s = getelementptr i8, ptr %base, i32 %off
+  %p1 = getelementptr i32, ptr %s, i32 1
+  %p2 = getelementptr i32, ptr %s, i32 2
+  %p3 = getelementptr i32, ptr %s, i32 3
+  %x = load i32, ptr %s
+  %y = load i32, ptr %p1
+  %z = load i32, ptr %p2
+  %w = load i32, ptr %p3
+  %t0 = shl i32 %x, 11
+  %t = xor i32 %x, %t0
+  %t1 = lshr i32 %t, 8
+  %t2 = xor i32 %t, %t1
+  %w1 = lshr i32 %w, 19
+  %w2 = xor i32 %w, %w1
+  %n = xor i32 %w2, %t2
+  store i32 %y, ptr %s
+  store i32 %z, ptr %p1
+  store i32 %w, ptr %p2
+  store i32 %n, ptr %p3
+  ret i32 %n
+}
+

@@ -1,0 +1,182 @@
+"""Each pass on IR built with the Builder: what it must do (asserted) and its whole output (golden text,
+tests/passes/golden; rewrite with `pytest tests/passes --update-golden` and review the diff)."""
+
+import pytest
+from irkit import atomic_add, load, new_kernel, parallel_for, ptr, serial_for, store
+
+import simgrad as ti
+from simgrad import dtypes as dt
+from simgrad.ir.builder import Builder
+from simgrad.ir.nodes import walk
+from simgrad.ir.ops import Op
+from simgrad.passes.hoist import hoist
+from simgrad.passes.parallel_strategy import LoopStrategy, parallel_strategy
+from simgrad.passes.promote import promote
+from simgrad.passes.simplify import simplify
+from simgrad.passes.verify import IRVerifyError, verify
+
+
+def _ops(k):
+    return [s.op for s in walk(k.body)]
+
+
+def _before_after(golden, k, fn):
+    before = golden.ir(k)
+    fn(k)
+    verify(k)
+    return f"before:\n{before}after:\n{golden.ir(k)}"
+
+
+def test_simplify_folds_identities_cse_and_dead_code(golden):
+    k, b = new_kernel("simplify")
+    i = b.emit(Op.ARG, dt.i32, (), {"slot": 0})
+    x = b.emit(Op.ARG, dt.f32, (), {"slot": 1})
+    five = b.binary(Op.ADD, b.const(2, dt.i32), b.const(3, dt.i32))  # folds to 5
+    same = b.binary(Op.MUL, b.binary(Op.ADD, i, b.const(0, dt.i32)), b.const(1, dt.i32))  # i
+    p, q = b.binary(Op.MUL, same, five), b.binary(Op.MUL, same, five)  # one of them after CSE
+    b.binary(Op.MUL, x, x)  # unused: removed
+    f32_sum = b.binary(Op.ADD, b.const(0.1, dt.f32), b.const(0.2, dt.f32))  # f32 rounding: not folded
+    f64_sum = b.binary(Op.ADD, b.const(0.5, dt.f64), b.const(0.25, dt.f64))  # folds to 0.75
+    b.emit(Op.RET_STORE, None, (b.binary(Op.ADD, p, q),), {"slot": 0})
+    b.emit(Op.RET_STORE, None, (f32_sum,), {"slot": 1})
+    b.emit(Op.RET_STORE, None, (f64_sum,), {"slot": 2})
+    text = _before_after(golden, k, simplify)
+    muls = [s for s in walk(k.body) if s.op is Op.MUL]
+    assert len(muls) == 1 and muls[0].operands[0] is i and muls[0].operands[1].attrs["value"] == 5
+    assert f32_sum.op is Op.ADD and f64_sum.op is Op.CONST and f64_sum.attrs["value"] == 0.75
+    golden.check("simplify.txt", text)
+
+
+def test_promote_replaces_loads_of_once_stored_locals(golden):
+    ti.init(arch=ti.cpu)
+    f = ti.field(ti.f32, shape=(4, 8), name="f")
+    k, b = new_kernel("promote")
+    t = b.emit(Op.ARG, dt.i32, (), {"slot": 0})
+    once = b.emit(Op.ALLOCA, dt.i32)
+    store(b, once, b.binary(Op.MUL, t, b.const(2, dt.i32)))
+    twice = b.emit(Op.ALLOCA, dt.f32)  # stored twice: stays a local
+    store(b, twice, b.const(1.0, dt.f32))
+    store(b, twice, b.const(2.0, dt.f32))
+    loop = parallel_for(b, 8)
+    with b.inside(loop.blocks[0]):
+        store(b, ptr(b, f, load(b, once), loop), load(b, twice))
+    text = _before_after(golden, k, promote)
+    loads = [s for s in walk(k.body) if s.op is Op.LOCAL_LOAD]
+    assert [s.operands[0] for s in loads] == [twice]
+    assert once not in list(walk(k.body))  # nobody reads it any more: gone with its store
+    golden.check("promote.txt", text)
+
+
+def test_hoist_moves_safe_invariant_integer_arithmetic_only(golden):
+    ti.init(arch=ti.cpu)
+    f = ti.field(ti.f32, shape=(64, 8), name="f")
+    k, b = new_kernel("hoist")
+    t = b.emit(Op.ARG, dt.i32, (), {"slot": 0})
+    d = b.emit(Op.ARG, dt.i32, (), {"slot": 1})
+    x = b.emit(Op.ARG, dt.f32, (), {"slot": 2})
+    loop = parallel_for(b, 8)
+    with b.inside(loop.blocks[0]):
+        row = b.binary(Op.ADD, b.binary(Op.MUL, t, b.const(3, dt.i32)), b.const(1, dt.i32))  # moves (2 stmts)
+        half = b.binary(Op.FLOORDIV, t, b.const(2, dt.i32))  # division by a safe constant: moves
+        risky = b.binary(Op.FLOORDIV, t, d)  # may divide by zero in a loop that runs 0 times: stays
+        scaled = b.binary(Op.MUL, x, x)  # floats stay
+        col = b.binary(Op.ADD, loop, half)  # depends on the loop index: stays
+        store(b, ptr(b, f, row, col), scaled)
+        store(b, ptr(b, f, risky, loop), scaled)
+    text = _before_after(golden, k, hoist)
+    top = k.body.stmts
+    assert all(s in top for s in (row, half)) and row.operands[0] in top
+    assert all(s in loop.blocks[0].stmts for s in (risky, scaled, col))
+    golden.check("hoist.txt", text)
+
+
+def test_verify_reports_scope_and_type_errors():
+    k, b = new_kernel("bad_scope")
+    loop = serial_for(b, b.const(0, dt.i32), b.const(4, dt.i32))
+    with b.inside(loop.blocks[0]):
+        inner = b.binary(Op.MUL, loop, loop)
+    b.emit(Op.RET_STORE, None, (inner,), {"slot": 0})  # a value of the loop body used after the loop
+    with pytest.raises(IRVerifyError, match="outside its scope"):
+        verify(k)
+
+    k, b = new_kernel("bad_types")
+    b.emit(Op.ADD, dt.i32, (b.const(1, dt.i32), b.const(1.0, dt.f32)))  # emit itself does not check
+    with pytest.raises(IRVerifyError, match="mixes i32 and f32"):
+        verify(k)
+
+
+def _strategy_kernel(read_grid_m: bool):
+    """One parallel loop with every kind of update, over fields of a fresh program."""
+    ti.init(arch=ti.cpu)
+    y = ti.field(ti.f32, shape=64, name="y")
+    total = ti.field(ti.f32, shape=(), name="total")
+    grid_v = ti.Vector.field(2, ti.f32, shape=16, name="grid_v")
+    grid_m = ti.field(ti.f32, shape=16, name="grid_m")
+    gx, gy = grid_v.comps
+    k, b = new_kernel("strategies")
+    s = b.emit(Op.ALLOCA, dt.f32)  # a kernel-scope local every iteration adds into
+    one = b.const(1.0, dt.f32)
+    loop = parallel_for(b, 64)
+    with b.inside(loop.blocks[0]):
+        atomic_add(b, ptr(b, y, loop), one)  # owned: plain
+        atomic_add(b, ptr(b, total), one)  # one loop-invariant place: per-thread sum
+        atomic_add(b, s, one)  # likewise
+        mine = b.emit(Op.ALLOCA, dt.f32)
+        atomic_add(b, mine, one)  # a local of the iteration: plain
+        cell = b.binary(Op.MOD, loop, b.const(16, dt.i32))  # many iterations per cell
+        atomic_add(b, ptr(b, gx, cell), one)  # two neighbouring f32 components: a pair
+        atomic_add(b, ptr(b, gy, cell), one)
+        atomic_add(b, ptr(b, grid_m, cell), one)  # only added into: per-thread copy, else atomic
+        if read_grid_m:
+            store(b, ptr(b, y, loop), load(b, ptr(b, grid_m, cell)))
+    return k, loop
+
+
+@pytest.mark.parametrize("read_grid_m", [False, True])
+def test_parallel_strategy_annotations(golden, read_grid_m):
+    k, loop = _strategy_kernel(read_grid_m)
+    parallel_strategy(k)
+    forms = [s.attrs["strategy"] for s in walk(k.body) if s.op is Op.ATOMIC]
+    plan = loop.attrs["strategy"]
+    assert isinstance(plan, LoopStrategy) and len(plan.reductions) == 2
+    if read_grid_m:  # y is also stored at elements the iteration owns: still plain
+        assert forms == ["plain", "reduce", "reduce", "plain", "private|pair", "private|pair", "atomic"]
+        assert len(plan.regions) == 1 and plan.weight == 2  # grid_v's two components, one region
+    else:
+        assert forms == ["plain", "reduce", "reduce", "plain", "private|pair", "private|pair", "private|atomic"]
+        assert len(plan.regions) == 2 and plan.weight == 3
+    golden.check(f"strategy_read{int(read_grid_m)}.txt", golden.ir(k))
+
+
+def test_parallel_strategy_debug_mode_has_no_pairs_and_serial_code_is_plain():
+    k, loop = _strategy_kernel(read_grid_m=True)
+    b = Builder(k.body)
+    late = b.emit(Op.ALLOCA, dt.f32)
+    atomic_add(b, late, b.const(2.0, dt.f32))  # serial code after the loop
+    parallel_strategy(k, debug=True)
+    forms = [s.attrs["strategy"] for s in walk(k.body) if s.op is Op.ATOMIC]
+    assert forms == ["plain", "reduce", "reduce", "plain", "private|atomic", "private|atomic", "atomic", "plain"]
+
+
+def test_owned_through_the_digits_of_a_flattened_loop():
+    """`for i, j in g` is one loop over L with i = L // 8 and j = L % 8: g[i, j] is owned, h[j, i] too
+    (still injective), r[i] is not (8 iterations share it), and neither is g[i % 4, j]: the chain of
+    digits must end in one without modulus."""
+    ti.init(arch=ti.cpu)
+    g = ti.field(ti.f32, shape=(4, 8), name="g")
+    h = ti.field(ti.f32, shape=(8, 4), name="h")
+    r = ti.field(ti.f32, shape=4, name="r")
+    q = ti.field(ti.f32, shape=(4, 8), name="q")
+    k, b = new_kernel("digits")
+    one = b.const(1.0, dt.f32)
+    loop = parallel_for(b, 32)
+    with b.inside(loop.blocks[0]):
+        i = b.binary(Op.RAW_DIV, loop, b.const(8, dt.i32))
+        j = b.binary(Op.RAW_MOD, loop, b.const(8, dt.i32))
+        atomic_add(b, ptr(b, g, i, j), one)
+        atomic_add(b, ptr(b, h, j, i), one)
+        atomic_add(b, ptr(b, r, i), one)
+        atomic_add(b, ptr(b, q, b.binary(Op.RAW_MOD, i, b.const(4, dt.i32)), j), one)
+    parallel_strategy(k)
+    forms = [s.attrs["strategy"] for s in walk(k.body) if s.op is Op.ATOMIC]
+    assert forms == ["plain", "plain", "private|atomic", "private|atomic"]
