@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import pickle
+import threading
 import time
 
 import numpy as np
@@ -18,6 +19,11 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.types import MatrixType, NdarrayType, is_template
 from simgrad.runtime.program import Program, get_program
+
+
+# Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
+# a second thread asking for the same instantiation waits and then finds it in the cache.
+COMPILE_LOCK = threading.RLock()
 
 
 class Param:
@@ -164,16 +170,23 @@ class Kernel:
         cache = self._grad_instances if grad else self._instances
         inst = cache.get(key)
         if inst is None:
-            if grad:
-                from simgrad.autodiff.validate import check_and_adjoint
+            with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
+                inst = cache.get(key)
+                if inst is None:
+                    inst = self._compile_instance(args, grad, key, keep, cache)
+        return inst
 
-                inst = self.instantiate(args, transform=check_and_adjoint, name_suffix="_grad")
-            else:
-                inst = self.instantiate(args)
-                if self._simple:
-                    self._simple_launch = inst.launch
-            cache[key] = inst
-            self._keep.extend(keep)
+    def _compile_instance(self, args, grad: bool, key, keep: list, cache: dict) -> Instance:
+        if grad:
+            from simgrad.autodiff.validate import check_and_adjoint
+
+            inst = self.instantiate(args, transform=check_and_adjoint, name_suffix="_grad")
+        else:
+            inst = self.instantiate(args)
+            if self._simple:
+                self._simple_launch = inst.launch
+        cache[key] = inst
+        self._keep.extend(keep)
         return inst
 
     def _key_part(self, p: Param, a, keep):

@@ -4,12 +4,18 @@ arguments into the context buffer and makes one native call. No generic per-argu
 from __future__ import annotations
 
 import ctypes
+import threading
 
 import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
 from simgrad.runtime.abi import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, HEADER_SLOTS
+
+# One launch at a time in the process: ctypes releases the GIL during the native call, and the context and
+# error buffers and the thread pool's job slot are shared by every launch. Uncontended it costs ~0.1 us;
+# a kernel is parallel inside, so serialising launches from several Python threads loses little.
+LAUNCH_LOCK = threading.Lock()
 
 _VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
 
@@ -42,7 +48,8 @@ class Launcher:
 
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
-               "_fail": self.fail, "_array": _array_info, "_bad": _bad_arg}
+               "_fail": self.fail, "_array": _array_info, "_bad": _bad_arg,
+               "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         lines = []
         names = []
         for p in params:
@@ -82,7 +89,8 @@ class Launcher:
                 lines.append(f"    return {rets[0]}")
             else:
                 lines.append(f"    return ({', '.join(rets)},)")
-        src = f"def launch({', '.join(names)}):\n" + "\n".join(lines) + "\n"
+        body = "\n".join("    " + ln for ln in lines)
+        src = f"def launch({', '.join(names)}):\n    _acquire()\n    try:\n{body}\n    finally:\n        _release()\n"
         exec(compile(src, f"<launcher {self.kernel_name}>", "exec"), env)
         return env["launch"]
 
