@@ -41,7 +41,8 @@ def caller_loc() -> Loc | None:
     if context.in_kernel():
         return None  # compiling a kernel: the statement being compiled is the place
     frame: FrameType | None = sys._getframe(1)
-    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+    while frame is not None and (frame.f_code.co_filename.startswith("<launcher")  # generated launchers
+                                 or os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE)):
         frame = frame.f_back
     if frame is None:
         return None

@@ -20,7 +20,6 @@ from simgrad.lang.matrix import Matrix
 from simgrad.lang.types import MatrixType, NdarrayType, is_template
 from simgrad.runtime.program import Program, get_program
 
-
 # Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
 # a second thread asking for the same instantiation waits and then finds it in the cache.
 COMPILE_LOCK = threading.RLock()
@@ -99,6 +98,7 @@ class Kernel:
     def __init__(self, func) -> None:
         self.func = func
         self.name = func.__name__
+        self.__name__, self.__qualname__, self.__module__ = func.__name__, func.__qualname__, func.__module__
         self.signature = inspect.signature(func)
         self.signature = _resolved_signature(func)
         self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]

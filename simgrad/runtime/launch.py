@@ -9,7 +9,7 @@ import threading
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError
+from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.runtime.abi import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, HEADER_SLOTS
 
 # One launch at a time in the process: ctypes releases the GIL during the native call, and the context and
@@ -49,6 +49,7 @@ class Launcher:
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_array": _array_info, "_bad": _bad_arg,
+               "_check_float": _check_float, "_check_int": _check_int,
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         lines = []
         names = []
@@ -58,9 +59,11 @@ class Launcher:
                 t = p.dtype
                 scale = 8 // t.nbytes
                 env[f"_v_{t.name}"] = self.views[t.name]
-                if not t.is_float:  # Taichi refuses a float for an integer parameter rather than truncating
-                    lines.append(f"    if {p.name}.__class__ is float: _bad({self.kernel_name!r}, {p.name!r}, "
-                                 f"{p.name}, {t.name!r})")
+                # exact Python numbers pass with one class test; anything else is checked (Taichi refuses None,
+                # strings, arrays, and floats of any kind for an integer parameter rather than truncating)
+                exact, check = ("float", "_check_float") if t.is_float else ("int", "_check_int")
+                lines.append(f"    if {p.name}.__class__ is not {exact}: {check}({self.kernel_name!r}, {p.name!r}, "
+                             f"{p.name}, {t.name!r})")
                 lines.append(f"    try: _v_{t.name}[{(CTX_ARGS + p.slot) * scale}] = {p.name}")
                 lines.append(f"    except (TypeError, ValueError, OverflowError): _bad({self.kernel_name!r}, "
                              f"{p.name!r}, {p.name}, {t.name!r})")
@@ -111,9 +114,20 @@ class Launcher:
 
 def _bad_arg(kernel, param, value, type_name):
     if isinstance(value, int):
-        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' = {value} is out of range for {type_name}")
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' = {value} is out of range for {type_name}",
+                               caller_loc())
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a {type_name} scalar, got "
-                           f"{type(value).__name__}")
+                           f"{type(value).__name__}", caller_loc())
+
+
+def _check_float(kernel, param, value, type_name):
+    if not isinstance(value, (int, float, np.integer, np.floating)):  # bool is an int
+        _bad_arg(kernel, param, value, type_name)
+
+
+def _check_int(kernel, param, value, type_name):
+    if not isinstance(value, (int, np.integer)):
+        _bad_arg(kernel, param, value, type_name)
 
 
 def _flat_matrix(value, count, kernel, param):

@@ -38,7 +38,7 @@ def test_scalar_args_and_return_values_stay_per_launch():
     @ti.kernel
     def affine(a: ti.i32, b: ti.i32) -> ti.i32:
         s = 0
-        for i in range(64):  # a parallel loop, so the launch goes through the pool
+        for _i in range(64):  # a parallel loop, so the launch goes through the pool
             s += 1
         return a * 1000 + b + s - 64
 
