@@ -225,6 +225,8 @@ class KeyBuilder:
 
     def field(self, f) -> tuple:
         """A field by where it lives and how it is laid out: its contents are not compiled in."""
+        if f.released():
+            raise LookupError("a field of a released program is never keyed: compiling reports it")
         comps = tuple(_component(c) for c in f._components())
         grad = self.field(f.grad) if f.grad is not None else None
         dual = self.field(f.dual) if getattr(f, "dual", None) is not None else None

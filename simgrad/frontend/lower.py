@@ -674,6 +674,8 @@ def global_ref(comp: Compiler, base, index, node):
         what = f"field {base.name}" if isinstance(base, Field) else f"ndarray '{base.name}'"
         raise SimgradIndexError(f"{what} has {ndim} dimension(s) but is indexed with {len(flat)} index(es)"
                                 + (" (use x[None] for a 0-d field)" if ndim == 0 else ""), comp.loc(node))
+    if isinstance(base, Field):
+        base.check_alive(comp.loc(node))
     offset = base._components()[0].offset if isinstance(base, Field) else None
     exprs = []
     for k, i in enumerate(flat):

@@ -13,7 +13,7 @@ from simgrad.frontend import context
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
-from simgrad.lang.matrix import _SWIZZLE, Matrix
+from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index
 
 
 class VarRef:
@@ -160,6 +160,7 @@ class DynamicElementRef:
         if len(self.key) > len(dims):
             raise SimgradTypeError(f"{len(self.key)} indices for a matrix of shape {dims}",
                                    context.current_loc())
+        check_dynamic_index(self.key, dims)  # debug mode: out of range is an error, not a dropped store
         choices = [range(d) if isinstance(k, Expr) else [int(k)] for k, d in zip(self.key, dims)]
         b = context.builder()
         for combo in itertools.product(*choices):

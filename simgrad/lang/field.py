@@ -77,11 +77,22 @@ class Field:
     def snode_tree(self):
         return self._components()[0].snode.tree
 
+    def released(self) -> bool:
+        """Whether the program this field was placed in was dropped by ti.reset() or a later ti.init()."""
+        node = self._components()[0].snode
+        return node is not None and node.tree is not None and node.tree.program.released
+
+    def check_alive(self, loc=None) -> None:
+        if self.released():
+            raise SimgradError(f"field {self.name} belongs to a program that ti.reset() or a later ti.init() "
+                               "released: create the fields again after ti.init()", loc or caller_loc())
+
     def _ensure(self) -> None:
         comps = self._components()
         for c in comps:
             if c.snode is None:
                 raise SimgradError(_unplaced_message(c), caller_loc())
+        self.check_alive()
         for c in comps:
             if c.view is None and c.gather is None:
                 c.snode.tree.materialize()

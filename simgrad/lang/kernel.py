@@ -209,7 +209,7 @@ class Kernel:
             entry = _read_entry(prog, key)
             if entry is not None:
                 meta, obj = entry
-                launcher = _make_launcher(prog, meta, prog.jit.link(obj, ["sg_kernel"]))
+                launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
                 light = tuple(np.empty((0,) * a.ndim, a.dtype) if isinstance(a, np.ndarray) else a for a in args)
                 return Instance(launcher, None, None, meta["ret_matrix"],
                                 rebuild=lambda: self._build(prog, light, transform, name_suffix))
@@ -220,7 +220,7 @@ class Kernel:
                 prog.jit.write_entry(key, pickle.dumps((meta, obj), protocol=pickle.HIGHEST_PROTOCOL))
             except (pickle.PicklingError, TypeError, AttributeError):
                 pass  # metadata that does not pickle only costs us the cache
-        launcher = _make_launcher(prog, meta, prog.jit.link(obj, ["sg_kernel"]))
+        launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
         return Instance(launcher, ir, text, meta["ret_matrix"])
 
     def _cache_key(self, prog: Program, args, transform, name_suffix):

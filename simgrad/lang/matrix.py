@@ -10,6 +10,7 @@ import numbers
 import numpy as np
 
 from simgrad import dtypes as dt
+from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 
@@ -144,7 +145,9 @@ class Matrix:
         return Matrix([e for r in rows for e in r])
 
     def _dynamic_get(self, key):
-        """Index with kernel values: a chain of selects over the candidates."""
+        """Index with kernel values: a chain of selects over the candidates (in debug mode an index out of
+        range is a located error, not the last candidate)."""
+        check_dynamic_index(key, (self.n,) if self.m == 0 or len(key) == 1 else (self.n, self.m))
         if self.m and len(key) == 1:
             rows = [self._row(r) for r in range(self.n)]
             out = rows[-1]
@@ -535,3 +538,16 @@ def dtype_of(m: Matrix) -> dt.DataType:
         if isinstance(e, Expr):
             return e.dtype
     return dt.Defaults.fp if any(isinstance(e, float) for e in m.entries) else dt.Defaults.ip
+
+
+def check_dynamic_index(key, dims) -> None:
+    from simgrad.frontend import context
+
+    comp = context.current()
+    if comp is None or not getattr(comp, "debug", False):
+        return
+    for k, d in zip(key, dims):
+        if isinstance(k, Expr):
+            ok = ops.logical_and(ops.ge(k, 0), ops.lt(k, d))
+            comp.builder.emit(Op.ASSERT, None, (ops.ne(ok, 0).stmt,),
+                              {"message": f"index out of range for a local vector/matrix dimension of size {d}"})

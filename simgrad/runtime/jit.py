@@ -48,18 +48,10 @@ class Jit:
             cpu=self.cpu, features=self.features, opt=3, reloc="default", codemodel="jitdefault", jit=True
         )
         self.data_layout = str(self.target_machine.target_data)
-        # An empty module anchors the engine; every compiled object is added to it.
-        anchor = llvm.parse_assembly("")
-        anchor.triple = self.triple
-        self.engine = llvm.create_mcjit_compiler(anchor, self.target_machine)
-        self._lock = threading.Lock()
         self.cache_enabled = True
         self.cache_dir = default_cache_dir()
         self.stats = {"compiled": 0, "cache_hits": 0, "kernel_hits": 0}
-        from simgrad.codegen import half
-
-        if half.needed(self.triple, self.features):  # x86 without F16C: f16 code calls these
-            self.load(half.IR, half.SYMBOLS)
+        self.code = CodeSpace(self)  # native code for the life of the process (the thread pool)
 
     # -- compilation -------------------------------------------------------------------------
     def _optimize(self, module: llvm.ModuleRef) -> None:
@@ -92,16 +84,19 @@ class Jit:
             if level >= 3:
                 self._optimized(ir_text, level)
             return path.read_bytes()
-        module = self._optimized(ir_text, level)
+        context = llvm.create_context()  # constants and types LLVM interns die with it, not with the process
+        module = self._optimized(ir_text, level, context)
         obj = self.target_machine.emit_object(module)
+        module.close()
+        del module, context
         self.stats["compiled"] += 1
         if self.cache_enabled:
             self._write(path, obj)
         return obj
 
-    def _optimized(self, ir_text: str, level: int) -> llvm.ModuleRef:
+    def _optimized(self, ir_text: str, level: int, context=None) -> llvm.ModuleRef:
         """Parse, verify and optimise; print what the debug level asks for."""
-        module = llvm.parse_assembly(ir_text)
+        module = llvm.parse_assembly(ir_text, context=context)
         module.triple = self.triple
         module.data_layout = self.data_layout
         module.verify()
@@ -142,8 +137,37 @@ class Jit:
         return self.link(self.object_for(ir_text, cache_key), symbols)
 
     def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:
-        """Add native object code to the process and return the addresses of `symbols`."""
-        with self._lock:
+        """Add native object code for the life of the process and return the addresses of `symbols`."""
+        return self.code.link(obj, symbols)
+
+    def new_target_machine(self) -> llvm.TargetMachine:
+        """A target machine for one more execution engine (an engine takes ownership of its machine)."""
+        return llvm.Target.from_triple(self.triple).create_target_machine(
+            cpu=self.cpu, features=self.features, opt=3, reloc="default", codemodel="jitdefault", jit=True
+        )
+
+
+class CodeSpace:
+    """An MCJIT execution engine and the native code linked into it. MCJIT cannot unload one object, but
+    closing the engine frees all of them: each ti.init program links its kernels into a CodeSpace of its
+    own, closed by ti.reset / the next ti.init (~90 KB of code and LLVM state per kernel otherwise stay
+    for the life of the process)."""
+
+    def __init__(self, jit: Jit) -> None:
+        from simgrad.codegen import half
+
+        anchor = llvm.parse_assembly("")  # an empty module anchors the engine; objects are added to it
+        anchor.triple = jit.triple
+        self.engine: llvm.ExecutionEngine | None = llvm.create_mcjit_compiler(anchor, jit.new_target_machine())
+        self.lock = threading.Lock()
+        if half.needed(jit.triple, jit.features):  # x86 without F16C: f16 code of this space calls these
+            self.link(jit.object_for(half.IR), half.SYMBOLS)
+
+    def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:
+        """Add native object code and return the addresses of `symbols`."""
+        with self.lock:
+            if self.engine is None:
+                raise RuntimeError("this program's native code was released (ti.reset / ti.init)")
             self.engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
             self.engine.finalize_object()
             addrs = {name: self.engine.get_function_address(name) for name in symbols}
@@ -151,6 +175,13 @@ class Jit:
         if missing:
             raise RuntimeError(f"native symbols not found after linking: {missing}")
         return addrs
+
+    def close(self) -> None:
+        """Free every object linked here. Nothing may call into this code afterwards."""
+        with self.lock:
+            if self.engine is not None:
+                self.engine.close()
+                self.engine = None
 
 
 _jit: Jit | None = None

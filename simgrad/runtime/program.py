@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import os
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.runtime.memory import Memory
+
+if TYPE_CHECKING:
+    from simgrad.runtime.jit import CodeSpace
 
 DEFAULT_TAPE_ENTRIES = 1 << 16
 
@@ -56,6 +60,7 @@ class Profiler:
 
 class Program:
     generation = 0
+    released = False
 
     def __init__(self, **kw) -> None:
         Program.generation += 1
@@ -73,6 +78,7 @@ class Program:
         from simgrad.runtime.jit import get_jit
 
         self.jit = get_jit()
+        self._code: CodeSpace | None = None  # this program's kernels' native code (runtime/jit.py CodeSpace), made on first link
         self.jit.cache_enabled = self.config.offline_cache
         if self.config.offline_cache_file_path:
             from pathlib import Path
@@ -100,6 +106,27 @@ class Program:
                 t.materialize()
 
     # -- native services ---------------------------------------------------------------------------
+    def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:
+        """Link a kernel's object code into this program's code space; addresses of `symbols`."""
+        if self._code is None:
+            from simgrad.runtime.jit import CodeSpace
+
+            self._code = CodeSpace(self.jit)
+        return self._code.link(obj, symbols)
+
+    def release(self) -> None:
+        """Free this program's native code (ti.reset / the next ti.init). Kernels notice the new program
+        generation and compile again; fields of this program refuse further use."""
+        self.released = True
+        for tree in self.trees:  # Python-scope access of its fields goes the checked way from now on
+            for node in tree.root._walk():
+                if node.kind == "place":
+                    node.field.view = None
+                    node.field.gather = None
+        if self._code is not None:
+            self._code.close()
+            self._code = None
+
     @property
     def pool(self):
         if self._pool is None:
@@ -150,6 +177,8 @@ def init(arch=None, **kw) -> Program:
     if unknown:
         warnings.warn(f"ti.init: ignoring unknown arguments {unknown}", stacklevel=3)
     kw["arch"] = archs.resolve(arch)
+    if _program is not None:
+        _program.release()
     if kw.get("check_out_of_bound"):
         kw["debug"] = True
     _program = Program(**kw)
@@ -158,4 +187,6 @@ def init(arch=None, **kw) -> Program:
 
 def reset() -> None:
     global _program
+    if _program is not None:
+        _program.release()
     _program = None
