@@ -78,7 +78,7 @@ class Program:
         from simgrad.runtime.jit import get_jit
 
         self.jit = get_jit()
-        self._code: CodeSpace | None = None  # this program's kernels' native code (runtime/jit.py CodeSpace), made on first link
+        self._code: CodeSpace | None = None  # its kernels' native code, made on first link
         self.jit.cache_enabled = self.config.offline_cache
         if self.config.offline_cache_file_path:
             from pathlib import Path
