@@ -123,6 +123,7 @@ class FunctionText:
         self.tid = "%tid" if in_task else "0"
         self.loop: Stmt | None = None  # the parallel loop whose iterations this function runs (a task)
         self._tape: tuple[str, str, str] | None = None
+        self._cancel: str | None = None
         # what the target's task set up (codegen/cpu.py): per-thread sums and per-thread copies
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
         self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
@@ -149,6 +150,26 @@ class FunctionText:
 
     def start_block(self, label: str) -> None:
         self.body.append(f"{label}:")
+
+    def cancel_flag(self) -> str:
+        """Pointer to the process's cancel flag (set by Ctrl-C), loaded once per function."""
+        if self._cancel is None:
+            self._cancel = self.ctx_slot(abi.CTX_CANCEL, "ptr")
+        return self._cancel
+
+    def cancel_point(self) -> None:
+        """Leave the function when Ctrl-C was pressed: a task simply returns (the pool hands out no more
+        chunks); the kernel's entry function reports the interruption first."""
+        v, c = self.tmp("cancel"), self.tmp("cancelled")
+        self.emit(f"{v} = load atomic i32, ptr {self.cancel_flag()} monotonic, align 4")
+        self.emit(f"{c} = icmp ne i32 {v}, 0")
+        stop, go = self.label("stop"), self.label("go")
+        self.emit(f"br i1 {c}, label %{stop}, label %{go}")
+        self.start_block(stop)
+        if not self.in_task:
+            self.emit(f"call void @sg_report(ptr %ctx, i64 {abi.ERR_INTERRUPTED}, i64 0)")
+        self.emit("ret void")
+        self.start_block(go)
 
     def ctx_slot(self, slot: int, ty: str) -> str:
         p = self.tmp("cp")
@@ -225,7 +246,10 @@ class KernelCodegen:
 
     def generate(self) -> str:
         f = FunctionText(self, self.symbol, f"void @{self.symbol}(ptr %ctx)", in_task=False)
+        # a new launch starts uncancelled (a Ctrl-C that came before it is Python's to raise)
+        f.prologue.append(f"  store atomic i32 0, ptr {f.cancel_flag()} monotonic, align 4")
         self.lower_block(f, self.kernel.body)
+        f.cancel_point()  # a parallel loop may have been cut short: say so
         f.emit("ret void")
         self.module.functions.append(f.text())
         self.module.globals.append("!0 = !{}")
@@ -322,6 +346,7 @@ def lower_while(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     head, end = f.label("while"), f.label("endwhile")
     f.emit(f"br label %{head}")
     f.start_block(head)
+    f.cancel_point()  # an endless while must still stop on Ctrl-C
     f.loops.append((end, head))
     g.lower_block(f, s.blocks[0])
     f.loops.pop()

@@ -14,10 +14,14 @@ CTX_TAPE = 4  # the autodiff tape of the parallel tasks (one region per pool thr
 CTX_TAPE_CAP = 5  # tape capacity per thread, in entries
 CTX_TAPE_SERIAL = 6  # the tape of the serial part of the kernel
 CTX_NTHREADS = 7  # number of pool threads
-CTX_ARGS = 8  # first argument slot; return values follow the arguments
+CTX_CANCEL = 8  # the process's cancel flag (i32, set by Ctrl-C; runtime/threadpool.py)
+CTX_ARGS = 9  # first argument slot; return values follow the arguments
+
+# The error code a kernel reports when the cancel flag stopped it (the launcher raises KeyboardInterrupt).
+ERR_INTERRUPTED = -1
 
 # Slots the program fills identically for every kernel (Program.context_header), in slot order.
-HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR)
+HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_CANCEL)
 
 # Closure of an outlined task: slot 0 holds the context pointer, captured values follow.
 CLOSURE_CTX = 0

@@ -176,6 +176,11 @@ class CodeSpace:
             raise RuntimeError(f"native symbols not found after linking: {missing}")
         return addrs
 
+    def global_address(self, name: str) -> int:
+        with self.lock:
+            assert self.engine is not None
+            return self.engine.get_global_value_address(name)
+
     def close(self) -> None:
         """Free every object linked here. Nothing may call into this code afterwards."""
         with self.lock:

@@ -10,7 +10,15 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
-from simgrad.runtime.abi import CTX_ARGS, CTX_NTHREADS, CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL, HEADER_SLOTS
+from simgrad.runtime.abi import (
+    CTX_ARGS,
+    CTX_NTHREADS,
+    CTX_TAPE,
+    CTX_TAPE_CAP,
+    CTX_TAPE_SERIAL,
+    ERR_INTERRUPTED,
+    HEADER_SLOTS,
+)
 
 # One launch at a time in the process: ctypes releases the GIL during the native call, and the context and
 # error buffers and the thread pool's job slot are shared by every launch. Uncontended it costs ~0.1 us;
@@ -49,7 +57,7 @@ class Launcher:
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_array": _array_info, "_bad": _bad_arg,
-               "_check_float": _check_float, "_check_int": _check_int,
+               "_interrupted": self.clear_interrupt, "_check_float": _check_float, "_check_int": _check_int,
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         lines = []
         names = []
@@ -93,13 +101,23 @@ class Launcher:
             else:
                 lines.append(f"    return ({', '.join(rets)},)")
         body = "\n".join("    " + ln for ln in lines)
-        src = f"def launch({', '.join(names)}):\n    _acquire()\n    try:\n{body}\n    finally:\n        _release()\n"
+        # Python raises a Ctrl-C's KeyboardInterrupt right after the native call returns, before the error
+        # check: the interrupted kernel's report must not be left for the next launch
+        src = (f"def launch({', '.join(names)}):\n    _acquire()\n    try:\n{body}\n"
+               "    except KeyboardInterrupt:\n        _interrupted()\n        raise\n"
+               "    finally:\n        _release()\n")
         exec(compile(src, f"<launcher {self.kernel_name}>", "exec"), env)
         return env["launch"]
+
+    def clear_interrupt(self) -> None:
+        if self.program.error[0] == ERR_INTERRUPTED:
+            self.program.error[:] = 0
 
     def fail(self):
         code, value = int(self.program.error[0]), int(self.program.error[1])
         self.program.error[:] = 0
+        if code == ERR_INTERRUPTED:
+            raise KeyboardInterrupt(f"kernel {self.kernel_name} was interrupted")
         kind, loc, detail = self.error_table[code - 1] if 0 < code <= len(self.error_table) else ("?", None, "")
         if kind == "index":
             name, dim, shape = detail

@@ -145,9 +145,9 @@ class Program:
         return self._rng
 
     def context_header(self) -> list[int]:
-        """Slots 0-3 of every kernel context (the tape slots 4-6 belong to each launcher)."""
+        """The header slots of every kernel context (abi.HEADER_SLOTS; the tape slots belong to each launcher)."""
         return [self.memory.roots_address, self.error.ctypes.data, self.rng_states.ctypes.data,
-                self.pool.parallel_for_address]
+                self.pool.parallel_for_address, self.pool.cancel_address]
 
     @property
     def tape_capacity(self) -> int:

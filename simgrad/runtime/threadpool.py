@@ -31,6 +31,9 @@ _FUTEX_WAIT, _FUTEX_WAKE = 128, 129  # the _PRIVATE variants
 #: job state word: bit 30 = closed (no more joiners), low bits = workers inside the job
 _CLOSED, _JOINED = 1 << 30, (1 << 30) - 1
 _INT_MAX = 2**31 - 1
+#: most iterations one task call runs: between chunks the pool looks at the cancel flag (Ctrl-C); a
+#: chunk this long costs far more than handing it out (one atomic add)
+CHUNK_CAP = 1 << 16
 #: how long workers (and the caller) spin before sleeping; long enough to stay hot across
 #: back-to-back kernel launches from Python, short enough not to burn a core when idle.
 DEFAULT_SPIN_NS = 50_000
@@ -42,6 +45,7 @@ _SYMBOLS = [
     "simgrad_pool_shutdown",
     "simgrad_pool_reset",
     "simgrad_pool_set_spin_ns",
+    "simgrad_install_sigint",
 ]
 
 
@@ -55,6 +59,8 @@ def pool_ir(futex_nr: int, machine: str) -> str:
         pause_decl, pause = "", ""
     a8, a4 = "align 8", "align 4"
     return f"""
+@simgrad_cancel = global i32 0, align 64   ; set by SIGINT: tasks stop taking chunks, while loops exit
+@sg_prev_sigint = internal global ptr null
 @sg_task = internal global ptr null, align 64
 @sg_closure = internal global ptr null
 @sg_end = internal global i64 0
@@ -72,6 +78,7 @@ def pool_ir(futex_nr: int, machine: str) -> str:
 declare i64 @syscall(i64, ...)
 declare i32 @clock_gettime(i32, ptr)
 declare i32 @sched_yield()
+declare ptr @signal(i32, ptr)
 {pause_decl}
 
 define internal i64 @sg_now() {{
@@ -124,6 +131,10 @@ entry:
   %chunk = load atomic i64, ptr @sg_chunk monotonic, {a8}
   br label %loop
 loop:
+  %stop = load atomic i32, ptr @simgrad_cancel monotonic, {a4}
+  %stopped = icmp ne i32 %stop, 0
+  br i1 %stopped, label %done, label %take
+take:
   %lo = atomicrmw add ptr @sg_next, i64 %chunk monotonic, {a8}
   %more = icmp slt i64 %lo, %end
   br i1 %more, label %body, label %done
@@ -140,7 +151,10 @@ done:
 define void @simgrad_parallel_for(ptr %task, ptr %clo, i64 %begin, i64 %end, i64 %grain) {{
 entry:
   %n = sub i64 %end, %begin
-  %empty = icmp sle i64 %n, 0
+  %nothing = icmp sle i64 %n, 0
+  %cv = load atomic i32, ptr @simgrad_cancel monotonic, {a4}
+  %cancelled = icmp ne i32 %cv, 0
+  %empty = or i1 %nothing, %cancelled
   br i1 %empty, label %ret, label %check
 check:
   %nt0 = load atomic i32, ptr @sg_nthreads monotonic, {a4}
@@ -148,9 +162,19 @@ check:
   %small = icmp sle i64 %n, %grain
   %serial = or i1 %single, %small
   br i1 %serial, label %direct, label %lock
-direct:
-  call void %task(ptr %clo, i64 %begin, i64 %end, i32 0)
-  br label %ret
+direct:                    ; on this thread, in chunks of at most CHUNK_CAP so Ctrl-C is seen
+  br label %dloop
+dloop:
+  %dlo = phi i64 [%begin, %direct], [%dhi, %dnext]
+  %dhi0 = add i64 %dlo, {CHUNK_CAP}
+  %dlt = icmp slt i64 %dhi0, %end
+  %dhi = select i1 %dlt, i64 %dhi0, i64 %end
+  call void %task(ptr %clo, i64 %dlo, i64 %dhi, i32 0)
+  br i1 %dlt, label %dnext, label %ret
+dnext:
+  %dcv = load atomic i32, ptr @simgrad_cancel monotonic, {a4}
+  %dstop = icmp ne i32 %dcv, 0
+  br i1 %dstop, label %ret, label %dloop
 lock:                      ; another launch in flight (other thread, or nested in a task): run inline
   %pair = cmpxchg ptr @sg_busy, i32 0, i32 1 acquire monotonic, {a4}
   %got = extractvalue {{ i32, i1 }} %pair, 1
@@ -169,7 +193,9 @@ publish:
   %gpos = icmp sgt i64 %grain, 1
   %g1 = select i1 %gpos, i64 %grain, i64 1
   %cbig = icmp sgt i64 %c0, %g1
-  %chunk = select i1 %cbig, i64 %c0, i64 %g1
+  %chunk0 = select i1 %cbig, i64 %c0, i64 %g1
+  %ccap = icmp sgt i64 %chunk0, {CHUNK_CAP}
+  %chunk = select i1 %ccap, i64 {CHUNK_CAP}, i64 %chunk0
   store atomic ptr %task, ptr @sg_task monotonic, {a8}
   store atomic ptr %clo, ptr @sg_closure monotonic, {a8}
   store atomic i64 %end, ptr @sg_end monotonic, {a8}
@@ -311,6 +337,32 @@ define void @simgrad_pool_reset() {{
   ret void
 }}
 
+; SIGINT: mark the running kernel cancelled, then chain to the handler that was installed (Python's,
+; which makes the interpreter raise KeyboardInterrupt once the kernel has returned).
+define internal void @sg_on_sigint(i32 %sig) {{
+  store atomic i32 1, ptr @simgrad_cancel seq_cst, {a4}
+  %prev = load ptr, ptr @sg_prev_sigint
+  %pi = ptrtoint ptr %prev to i64
+  %real = icmp ugt i64 %pi, 1               ; not SIG_DFL (0) or SIG_IGN (1)
+  br i1 %real, label %chain, label %out
+chain:
+  call void %prev(i32 %sig)
+  br label %out
+out:
+  ret void
+}}
+
+define void @simgrad_install_sigint() {{
+  %old = call ptr @signal(i32 2, ptr @sg_on_sigint)
+  %mine = icmp eq ptr %old, @sg_on_sigint
+  br i1 %mine, label %out, label %keep
+keep:
+  store ptr %old, ptr @sg_prev_sigint
+  br label %out
+out:
+  ret void
+}}
+
 define void @simgrad_pool_set_spin_ns(i64 %ns) {{
   store atomic i64 %ns, ptr @sg_spin_ns monotonic, {a8}
   ret void
@@ -339,6 +391,23 @@ class _Native:
         self.shutdown = ctypes.CFUNCTYPE(None)(addrs["simgrad_pool_shutdown"])
         self.reset = ctypes.CFUNCTYPE(None)(addrs["simgrad_pool_reset"])
         self.set_spin_ns = ctypes.CFUNCTYPE(None, ctypes.c_int64)(addrs["simgrad_pool_set_spin_ns"])
+        self.install_sigint = ctypes.CFUNCTYPE(None)(addrs["simgrad_install_sigint"])
+        #: the cancel flag every kernel reads (context slot CTX_CANCEL): 1 after Ctrl-C
+        self.cancel_address = get_jit().code.global_address("simgrad_cancel")
+        self._sigint_installed = False
+
+    def watch_sigint(self) -> None:
+        """Let Ctrl-C stop a running kernel: a native SIGINT handler sets the cancel flag and chains to
+        Python's. Only while Python's own handler is the default one (a user's handler is left alone), and
+        only from the main thread (where Python delivers signals)."""
+        import signal
+
+        if self._sigint_installed or threading.current_thread() is not threading.main_thread():
+            return
+        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            return
+        self.install_sigint()
+        self._sigint_installed = True
 
 
 _native: _Native | None = None
@@ -370,6 +439,8 @@ class ThreadPool:
                 _active.shutdown()
             self.num_threads = n
             self.parallel_for_address: int = native.parallel_for_address
+            self.cancel_address: int = native.cancel_address
+            native.watch_sigint()
             #: ctypes callable parallel_for(task_addr, closure_addr, begin, end, grain)
             self.parallel_for = native.parallel_for
             self._native = native

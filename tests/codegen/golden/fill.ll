@@ -36,16 +36,26 @@ done.9:
 define void @sg_kernel(ptr %ctx) {
 entry:
   %cp.1 = getelementptr i64, ptr %ctx, i64 8
-  %cv.2 = load float, ptr %cp.1
-  %clo.3 = alloca [2 x i64], align 8
-  %cp.7 = getelementptr i64, ptr %ctx, i64 3
-  %cv.8 = load ptr, ptr %cp.7
-  store ptr %ctx, ptr %clo.3
-  %cap.4 = getelementptr i64, ptr %clo.3, i64 1
-  store float %cv.2, ptr %cap.4
-  %b.5 = sext i32 0 to i64
-  %e.6 = sext i32 16 to i64
-  call void %cv.8(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.5, i64 %e.6, i64 1024)
+  %cv.2 = load ptr, ptr %cp.1
+  store atomic i32 0, ptr %cv.2 monotonic, align 4
+  %cp.3 = getelementptr i64, ptr %ctx, i64 9
+  %cv.4 = load float, ptr %cp.3
+  %clo.5 = alloca [2 x i64], align 8
+  %cp.9 = getelementptr i64, ptr %ctx, i64 3
+  %cv.10 = load ptr, ptr %cp.9
+  store ptr %ctx, ptr %clo.5
+  %cap.6 = getelementptr i64, ptr %clo.5, i64 1
+  store float %cv.4, ptr %cap.6
+  %b.7 = sext i32 0 to i64
+  %e.8 = sext i32 16 to i64
+  call void %cv.10(ptr @sg_kernel_task1, ptr %clo.5, i64 %b.7, i64 %e.8, i64 1024)
+  %cancel.11 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.12 = icmp ne i32 %cancel.11, 0
+  br i1 %cancelled.12, label %stop.13, label %go.14
+stop.13:
+  call void @sg_report(ptr %ctx, i64 -1, i64 0)
+  ret void
+go.14:
   ret void
 }
 

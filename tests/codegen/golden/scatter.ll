@@ -242,77 +242,87 @@ done:
 }
 define void @sg_kernel(ptr %ctx) {
 entry:
-  %clo.1 = alloca [3 x i64], align 8
-  %cp.4 = getelementptr i64, ptr %ctx, i64 3
-  %cv.5 = load ptr, ptr %cp.4
-  %cp.6 = getelementptr i64, ptr %ctx, i64 7
-  %cv.7 = load i64, ptr %cp.6
-  %cp.33 = getelementptr i64, ptr %ctx, i64 0
-  %cv.34 = load ptr, ptr %cp.33
-  %rp.35 = getelementptr ptr, ptr %cv.34, i64 0
-  %root.36 = load ptr, ptr %rp.35, !invariant.load !0
-  %sclo.32 = alloca [3 x i64], align 8
-  %cp.43 = getelementptr i64, ptr %ctx, i64 0
-  %cv.44 = load ptr, ptr %cp.43
-  %rp.45 = getelementptr ptr, ptr %cv.44, i64 1
-  %root.46 = load ptr, ptr %rp.45, !invariant.load !0
-  %sclo.42 = alloca [3 x i64], align 8
-  store ptr %ctx, ptr %clo.1
-  %b.2 = sext i32 0 to i64
-  %e.3 = sext i32 64 to i64
-  %pv.8 = sub i64 %e.3, %b.2
-  %pv.9 = mul i64 %pv.8, 24
-  %pv.10 = mul i64 %cv.7, 24
-  %pv.11 = icmp sge i64 %pv.9, %pv.10
-  %pv.12 = icmp sgt i64 %cv.7, 1
-  %pv.14 = mul i64 %cv.7, 96
-  %pv.15 = icmp ule i64 %pv.14, 268435456
-  %pv.16 = and i1 %pv.11, %pv.12
-  %pv.13 = and i1 %pv.16, %pv.15
-  br i1 %pv.13, label %alloc.18, label %atomic.17
-alloc.18:
-  %priv.21 = call ptr @calloc(i64 %cv.7, i64 64)
-  %pslot.22 = getelementptr i64, ptr %clo.1, i64 1
-  store ptr %priv.21, ptr %pslot.22
-  %pnn.23 = icmp ne ptr %priv.21, null
-  %pok.24 = and i1 true, %pnn.23
-  %priv.25 = call ptr @calloc(i64 %cv.7, i64 32)
-  %pslot.26 = getelementptr i64, ptr %clo.1, i64 2
-  store ptr %priv.25, ptr %pslot.26
-  %pnn.27 = icmp ne ptr %priv.25, null
-  %pok.28 = and i1 %pok.24, %pnn.27
-  br i1 %pok.28, label %private.19, label %nomem.29
-nomem.29:
-  call void @free(ptr %priv.21)
-  call void @free(ptr %priv.25)
-  br label %atomic.17
-private.19:
-  call void %cv.5(ptr @sg_kernel_task1_private, ptr %clo.1, i64 %b.2, i64 %e.3, i64 455)
-  %real.31 = getelementptr i8, ptr %root.36, i64 0
-  %real.30 = getelementptr i8, ptr %real.31, i64 0
-  %sslot.37 = getelementptr i64, ptr %sclo.32, i64 0
-  store ptr %priv.21, ptr %sslot.37
-  %sslot.38 = getelementptr i64, ptr %sclo.32, i64 1
-  store ptr %real.30, ptr %sslot.38
-  %sslot.39 = getelementptr i64, ptr %sclo.32, i64 2
-  store i64 %cv.7, ptr %sslot.39
-  call void %cv.5(ptr @sg_kernel_task1_private_sum0, ptr %sclo.32, i64 0, i64 16, i64 8192)
-  call void @free(ptr %priv.21)
-  %real.41 = getelementptr i8, ptr %root.46, i64 0
-  %real.40 = getelementptr i8, ptr %real.41, i64 0
-  %sslot.47 = getelementptr i64, ptr %sclo.42, i64 0
-  store ptr %priv.25, ptr %sslot.47
-  %sslot.48 = getelementptr i64, ptr %sclo.42, i64 1
-  store ptr %real.40, ptr %sslot.48
-  %sslot.49 = getelementptr i64, ptr %sclo.42, i64 2
-  store i64 %cv.7, ptr %sslot.49
-  call void %cv.5(ptr @sg_kernel_task1_private_sum1, ptr %sclo.42, i64 0, i64 8, i64 8192)
-  call void @free(ptr %priv.25)
-  br label %scatterdone.20
-atomic.17:
-  call void %cv.5(ptr @sg_kernel_task1, ptr %clo.1, i64 %b.2, i64 %e.3, i64 455)
-  br label %scatterdone.20
-scatterdone.20:
+  %cp.1 = getelementptr i64, ptr %ctx, i64 8
+  %cv.2 = load ptr, ptr %cp.1
+  store atomic i32 0, ptr %cv.2 monotonic, align 4
+  %clo.3 = alloca [3 x i64], align 8
+  %cp.6 = getelementptr i64, ptr %ctx, i64 3
+  %cv.7 = load ptr, ptr %cp.6
+  %cp.8 = getelementptr i64, ptr %ctx, i64 7
+  %cv.9 = load i64, ptr %cp.8
+  %cp.35 = getelementptr i64, ptr %ctx, i64 0
+  %cv.36 = load ptr, ptr %cp.35
+  %rp.37 = getelementptr ptr, ptr %cv.36, i64 0
+  %root.38 = load ptr, ptr %rp.37, !invariant.load !0
+  %sclo.34 = alloca [3 x i64], align 8
+  %cp.45 = getelementptr i64, ptr %ctx, i64 0
+  %cv.46 = load ptr, ptr %cp.45
+  %rp.47 = getelementptr ptr, ptr %cv.46, i64 1
+  %root.48 = load ptr, ptr %rp.47, !invariant.load !0
+  %sclo.44 = alloca [3 x i64], align 8
+  store ptr %ctx, ptr %clo.3
+  %b.4 = sext i32 0 to i64
+  %e.5 = sext i32 64 to i64
+  %pv.10 = sub i64 %e.5, %b.4
+  %pv.11 = mul i64 %pv.10, 24
+  %pv.12 = mul i64 %cv.9, 24
+  %pv.13 = icmp sge i64 %pv.11, %pv.12
+  %pv.14 = icmp sgt i64 %cv.9, 1
+  %pv.16 = mul i64 %cv.9, 96
+  %pv.17 = icmp ule i64 %pv.16, 268435456
+  %pv.18 = and i1 %pv.13, %pv.14
+  %pv.15 = and i1 %pv.18, %pv.17
+  br i1 %pv.15, label %alloc.20, label %atomic.19
+alloc.20:
+  %priv.23 = call ptr @calloc(i64 %cv.9, i64 64)
+  %pslot.24 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.23, ptr %pslot.24
+  %pnn.25 = icmp ne ptr %priv.23, null
+  %pok.26 = and i1 true, %pnn.25
+  %priv.27 = call ptr @calloc(i64 %cv.9, i64 32)
+  %pslot.28 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.27, ptr %pslot.28
+  %pnn.29 = icmp ne ptr %priv.27, null
+  %pok.30 = and i1 %pok.26, %pnn.29
+  br i1 %pok.30, label %private.21, label %nomem.31
+nomem.31:
+  call void @free(ptr %priv.23)
+  call void @free(ptr %priv.27)
+  br label %atomic.19
+private.21:
+  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  %real.33 = getelementptr i8, ptr %root.38, i64 0
+  %real.32 = getelementptr i8, ptr %real.33, i64 0
+  %sslot.39 = getelementptr i64, ptr %sclo.34, i64 0
+  store ptr %priv.23, ptr %sslot.39
+  %sslot.40 = getelementptr i64, ptr %sclo.34, i64 1
+  store ptr %real.32, ptr %sslot.40
+  %sslot.41 = getelementptr i64, ptr %sclo.34, i64 2
+  store i64 %cv.9, ptr %sslot.41
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.34, i64 0, i64 16, i64 8192)
+  call void @free(ptr %priv.23)
+  %real.43 = getelementptr i8, ptr %root.48, i64 0
+  %real.42 = getelementptr i8, ptr %real.43, i64 0
+  %sslot.49 = getelementptr i64, ptr %sclo.44, i64 0
+  store ptr %priv.27, ptr %sslot.49
+  %sslot.50 = getelementptr i64, ptr %sclo.44, i64 1
+  store ptr %real.42, ptr %sslot.50
+  %sslot.51 = getelementptr i64, ptr %sclo.44, i64 2
+  store i64 %cv.9, ptr %sslot.51
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.44, i64 0, i64 8, i64 8192)
+  call void @free(ptr %priv.27)
+  br label %scatterdone.22
+atomic.19:
+  call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  br label %scatterdone.22
+scatterdone.22:
+  %cancel.52 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.53 = icmp ne i32 %cancel.52, 0
+  br i1 %cancelled.53, label %stop.54, label %go.55
+stop.54:
+  call void @sg_report(ptr %ctx, i64 -1, i64 0)
+  ret void
+go.55:
   ret void
 }
 
