@@ -33,7 +33,7 @@ _CLOSED, _JOINED = 1 << 30, (1 << 30) - 1
 _INT_MAX = 2**31 - 1
 #: most iterations one task call runs: between chunks the pool looks at the cancel flag (Ctrl-C); a
 #: chunk this long costs far more than handing it out (one atomic add)
-CHUNK_CAP = 1 << 16
+CHUNK_CAP = 1 << 18
 #: how long workers (and the caller) spin before sleeping; long enough to stay hot across
 #: back-to-back kernel launches from Python, short enough not to burn a core when idle.
 DEFAULT_SPIN_NS = 50_000
