@@ -9,7 +9,9 @@ directory) and generated stand-ins for files a program would download. The child
 
 - makes `import taichi` resolve to simgrad (`sys.modules["taichi"] = simgrad`) or to the real taichi,
 - wraps `ti.init` to pick the CPU and an empty offline cache in the temp dir (compile time is measured),
-- wraps `ti.GUI` with `show_gui=False`, turns cv2's window calls into no-ops, uses matplotlib's Agg backend,
+- wraps `ti.GUI` with `show_gui=False` (and `GUI.line` flattens its two points to floats: rigid_body.py
+  passes (2, 1) arrays, which taichi 1.7.4's canvas rejects under numpy 2), turns cv2's window calls
+  into no-ops, uses matplotlib's Agg backend,
 - seeds `random` and `numpy.random` with 0 before running the program (the same draws for both
   frameworks; no program draws random numbers inside kernels),
 - gives taichi 1.7.4 `ti.clear_all_gradients = ti.ad.clear_all_gradients` (liquid.py calls the removed name),
@@ -133,6 +135,8 @@ class _Stamped:
 
 def _headless(ti, cache_dir):
     """The GUI, arch and cache patches, applied to the framework module (not to the program's text)."""
+    import numpy as np
+
     init = ti.init
 
     def cpu_init(*args, **kw):
@@ -150,6 +154,11 @@ def _headless(ti, cache_dir):
             else:
                 kw["show_gui"] = False
             super().__init__(*args, **kw)
+
+        def line(self, begin, end, *args, **kw):
+            # rigid_body.py passes (2, 1) column arrays; under numpy 2 taichi 1.7.4's canvas rejects them
+            flat = [tuple(float(c) for c in np.asarray(p, dtype=np.float64).reshape(-1)) for p in (begin, end)]
+            return super().line(*flat, *args, **kw)
 
     ti.GUI = HeadlessGUI
     if not hasattr(ti, "clear_all_gradients"):  # removed in taichi 1.x; liquid.py calls it
