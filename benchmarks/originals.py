@@ -133,7 +133,7 @@ class _Stamped:
         return False
 
 
-def _headless(ti, cache_dir):
+def _headless(ti, cache_dir, extra_init):
     """The GUI, arch and cache patches, applied to the framework module (not to the program's text)."""
     import numpy as np
 
@@ -142,6 +142,7 @@ def _headless(ti, cache_dir):
     def cpu_init(*args, **kw):
         kw["arch"] = ti.cpu
         kw.setdefault("offline_cache_file_path", cache_dir)
+        kw.update(extra_init)
         return init(*args[1:], **kw) if args else init(**kw)
 
     ti.init = cpu_init
@@ -184,7 +185,8 @@ def child(framework, script, argv):
         import simgrad as ti
         sys.modules["taichi"] = ti
     print(f"@import {time.perf_counter() - out.t0:.6f}")
-    _headless(ti, os.path.join(os.getcwd(), ".cache"))
+    extra = json.loads(os.environ.get("ORIGINALS_INIT", "{}")) if framework == "taichi" else {}
+    _headless(ti, os.path.join(os.getcwd(), ".cache"), extra)
     import numpy as np
 
     random.seed(0)
@@ -259,6 +261,7 @@ def run_one(python, framework, prog, args, pythonpath):
     work, argv = prepare(prog, args.difftaichi, args.iters)
     env = dict(os.environ, MPLBACKEND="Agg", TI_LOG_LEVEL="error", TI_GUI_SHOW="0")
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as on a user's machine: our .py files are not recompiled
+    env["ORIGINALS_INIT"] = json.dumps(args.taichi_init)
     env["PYTHONPATH"] = os.pathsep.join(p for p in [ROOT if framework == "simgrad" else "", *pythonpath,
                                                      os.environ.get("PYTHONPATH", "")] if p)
     cmd = [python, os.path.abspath(__file__), "--child", framework, prog.script, "--", *argv]
@@ -294,6 +297,11 @@ def run_one(python, framework, prog, args, pythonpath):
         res["error"], res["at_program"], res["at_library"] = _error(stderr)
         res["stderr_tail"] = stderr[-3000:]
     return res
+
+
+def _keyval(s):
+    key, _, value = s.partition("=")
+    return key, json.loads(value.lower()) if value.lower() in ("true", "false") else json.loads(value)
 
 
 def _text(b):
@@ -377,12 +385,15 @@ def main():
     ap.add_argument("--simgrad-python", default=sys.executable)
     ap.add_argument("--taichi-python", default=os.environ.get("TAICHI_PYTHON", sys.executable))
     ap.add_argument("--pythonpath", action="append", default=[], help="extra path for both children (cv2...)")
+    ap.add_argument("--taichi-init", type=_keyval, action="append", default=[],
+                    help="extra ti.init argument for taichi, e.g. fast_math=False (taichi's default is True)")
     ap.add_argument("--timeout", type=float, default=1800)
     ap.add_argument("--nice", type=int, default=0)
     ap.add_argument("--keep", action="store_true", help="keep the temp dirs")
     ap.add_argument("--json", help="results file; merged with what it already holds")
     ap.add_argument("--readme", action="store_true", help="write the table into examples/README.md")
     args = ap.parse_args()
+    args.taichi_init = dict(args.taichi_init)
     results = {}
     if args.json and os.path.exists(args.json):
         with open(args.json) as fh:
