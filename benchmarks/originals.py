@@ -264,7 +264,7 @@ def run_one(python, framework, prog, args, pythonpath):
     env = dict(os.environ, MPLBACKEND="Agg", TI_LOG_LEVEL="error", TI_GUI_SHOW="0")
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as on a user's machine: our .py files are not recompiled
     env["ORIGINALS_INIT"] = json.dumps(args.taichi_init)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in [ROOT if framework == "simgrad" else "", *pythonpath,
+    env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path if framework == "simgrad" else "", *pythonpath,
                                                      os.environ.get("PYTHONPATH", "")] if p)
     cmd = [python, os.path.abspath(__file__), "--child", framework, prog.script, "--", *argv]
     if args.nice:
@@ -386,6 +386,7 @@ def main():
     ap.add_argument("--frameworks", default="simgrad,taichi")
     ap.add_argument("--iters", type=int, default=5)
     ap.add_argument("--simgrad-python", default=sys.executable)
+    ap.add_argument("--simgrad-path", default=ROOT, help="directory holding the simgrad package to test")
     ap.add_argument("--taichi-python", default=os.environ.get("TAICHI_PYTHON", sys.executable))
     ap.add_argument("--pythonpath", action="append", default=[], help="extra path for both children (cv2...)")
     ap.add_argument("--taichi-init", type=_keyval, action="append", default=[],
