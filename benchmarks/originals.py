@@ -254,7 +254,7 @@ def _error(stderr):
     if rest:  # simgrad's located errors: 'Error: File "x", line n:' / source / caret / message
         exc += " … " + rest[-1]
     frames = [line.strip() for line in block if line.strip().startswith("File ")]
-    prog = next((f for f in reversed(frames) if "originals-" in f), None)
+    prog = next((f for f in reversed(frames) if f.startswith('File "') and "/" not in f.split('"')[1]), None)
     lib = next((f for f in reversed(frames) if "/simgrad/" in f or "/taichi/" in f), None)
     return exc, prog, lib
 
@@ -296,6 +296,7 @@ def run_one(python, framework, prog, args, pythonpath):
     res["first_s"] = res["times"][0] if n else None
     res["sec_per_iter"] = (res["times"][-1] - res["times"][1]) / (n - 2) if n >= 3 else None
     if rc != 0:
+        stderr = stderr.replace(work + os.sep, "")  # the program's file by its own name
         res["error"], res["at_program"], res["at_library"] = _error(stderr)
         res["stderr_tail"] = stderr[-3000:]
     return res
@@ -323,6 +324,10 @@ def _fmt(x, spec=".3g"):
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
 
+def _secs(r):
+    return f"{r['first_s']:.3g} s" if r and r["first_s"] is not None else "-"
+
+
 def _status(r):
     if r is None:
         return "not run"
@@ -333,7 +338,7 @@ def _status(r):
 
 def _learns(r):
     ls = r["losses"] if r else []
-    return len(ls) >= 2 and ls[-1] < ls[0]
+    return "-" if len(ls) < 2 else ("yes" if ls[-1] < ls[0] else "no")
 
 
 def table(results):
@@ -355,9 +360,9 @@ def table(results):
         name = prog.name + (f" ({prog.note})" if prog.note else "")
         rows.append(
             f"| {name} | {entry.get('iters', '-')} | {losses} | {agreement} "
-            f"| {'yes' if _learns(s) else 'no'} / {'yes' if _learns(t) else 'no'} "
+            f"| {_learns(s)} / {_learns(t)} "
             f"| {_fmt(s and s['sec_per_iter'])} | {_fmt(t and t['sec_per_iter'])} | {_fmt(ratio, '.2f')} "
-            f"| {_fmt(s and s['first_s'])} s / {_fmt(t and t['first_s'])} s | {_status(s)} | {_status(t)} |")
+            f"| {_secs(s)} / {_secs(t)} | {_status(s)} | {_status(t)} |")
     return "\n".join(rows)
 
 
@@ -396,13 +401,14 @@ def main():
     ap.add_argument("--keep", action="store_true", help="keep the temp dirs")
     ap.add_argument("--json", help="results file; merged with what it already holds")
     ap.add_argument("--readme", action="store_true", help="write the table into examples/README.md")
+    ap.add_argument("--table-only", action="store_true", help="run nothing: the table from --json")
     args = ap.parse_args()
     args.taichi_init = dict(args.taichi_init)
     results = {}
     if args.json and os.path.exists(args.json):
         with open(args.json) as fh:
             results = json.load(fh)
-    progs = [p for p in PROGRAMS if not args.only or p.name in args.only]
+    progs = [p for p in PROGRAMS if (not args.only or p.name in args.only) and not args.table_only]
     if args.skip_slow:
         progs = [p for p in progs if not p.slow]
     progs.sort(key=lambda p: p.slow)
