@@ -442,8 +442,8 @@ class Matrix:
     def fill(self, v) -> None:
         self.entries = [v] * len(self.entries)
 
-    def __repr__(self) -> str:
-        return repr(self.to_numpy()) if not any(isinstance(e, Expr) for e in self.entries) else \
+    def __repr__(self) -> str:  # Python-scope values print as taichi prints them: [0.5 2. ]
+        return str(self.to_numpy()) if not any(isinstance(e, Expr) for e in self.entries) else \
             f"Matrix({self.shape})"
 
     def __array__(self, dtype=None, copy=None):
