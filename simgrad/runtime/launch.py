@@ -34,6 +34,7 @@ class Launcher:
     def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
                  error_table: list, program, ret_matrix: tuple[int, int] | None = None):
         self.kernel_name = kernel_name
+        self.params = params  # SlotParam per kernel parameter (Tape validation maps ARG slots to values)
         self.ret_matrix = ret_matrix  # (n, m) when the kernel returns a matrix: values come back as a tuple
         self.error_table = error_table
         self.program = program
