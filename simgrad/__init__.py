@@ -53,7 +53,7 @@ from simgrad.lang.ops import (
     tan,
     tanh,
 )
-from simgrad.lang.snode import i, ij, ijk, ijkl, ik, il, j, jk, jkl, jl, k, kl, l, axes
+from simgrad.lang.snode import i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import template, types
 from simgrad.lang.atomics import (
     atomic_add,

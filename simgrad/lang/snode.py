@@ -160,14 +160,18 @@ class SNode:
         for n in path:
             for a, s in zip(n.axes, n.sizes):
                 shape[a] = shape.get(a, 1) * s
-        ndim = max(shape) + 1 if shape else 0
+        # a field has as many indices as distinct axes on its path, in axis order (Taichi packs them):
+        # dense(ti.k, n).dense(ti.l, m) gives x[a, b]
+        position = {a: p for p, a in enumerate(sorted(shape))}
+        ndim = len(position)
         inner = dict.fromkeys(range(ndim), 1)
         raw: list[AccessTerm] = []
         for n in reversed(path):  # innermost first
             if n.kind != "dense":
                 continue
             row = n.cell_size
-            for a, s in reversed(list(zip(n.axes, n.sizes))):
+            for ax, s in reversed(list(zip(n.axes, n.sizes))):
+                a = position[ax]
                 raw.append(AccessTerm(a, inner[a], s, row))
                 row *= s
                 inner[a] *= s
@@ -185,7 +189,7 @@ class SNode:
                 last = merged[-1]
                 merged[-1] = AccessTerm(a, last.divisor, 0, last.stride)
             terms.extend(merged)
-        full_shape = tuple(shape.get(a, 1) for a in range(ndim))
+        full_shape = tuple(shape[a] for a in sorted(shape))
         return const, tuple(terms), full_shape
 
 
