@@ -297,6 +297,20 @@ class MatrixField(Field):
     def _components(self):
         return self.comps
 
+    def get_scalar_field(self, *indices: int) -> ScalarField:
+        """The scalar field of one entry (`v.get_scalar_field(i)`, `m.get_scalar_field(i, j)`), to place the
+        entries of a vector/matrix field separately (SoA)."""
+        want = 1 if self.m == 0 else 2
+        if len(indices) != want or not all(isinstance(k, (int, np.integer)) for k in indices):
+            raise SimgradError(f"get_scalar_field of {self.name} takes {want} integer index(es), got {indices!r}",
+                               caller_loc())
+        r = int(indices[0])
+        c = int(indices[1]) if want == 2 else 0
+        if not (0 <= r < self.n and 0 <= c < max(self.m, 1)):
+            raise SimgradError(f"get_scalar_field{indices!r} is outside the {self.entry_shape} entries of "
+                               f"{self.name}", caller_loc())
+        return self.comps[r * max(self.m, 1) + c]
+
     def _stacked(self, arrays: list[np.ndarray]) -> np.ndarray:
         a = np.stack(arrays, axis=-1)
         return a.reshape(a.shape[:-1] + self.entry_shape)

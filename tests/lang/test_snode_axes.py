@@ -62,3 +62,38 @@ def test_vector_field_on_packed_axes():
     fill()
     assert e.shape == (3, 2)
     np.testing.assert_array_equal(e.to_numpy()[2, 1], [2, 1])
+
+
+def test_get_scalar_field_places_entries_separately_with_gradients():
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    v = ti.Vector.field(2, ti.f64)
+    m = ti.Matrix.field(2, 2, ti.f64)
+    loss = ti.field(ti.f64, shape=(), needs_grad=True)
+    for c in range(2):
+        ti.root.dense(ti.k, 3).dense(ti.l, 4).place(v.get_scalar_field(c))
+        for d in range(2):
+            ti.root.dense(ti.i, 4).place(m.get_scalar_field(c, d))
+    ti.root.lazy_grad()
+    assert v.shape == (3, 4) and m.shape == (4,)
+
+    @ti.kernel
+    def f():
+        for a, b in v:
+            v[a, b] = [a, b]
+        for i in m:
+            m[i] = [[i, 1], [2, i]]
+
+    @ti.kernel
+    def total():
+        for a, b in v:
+            loss[None] += v[a, b].dot(v[a, b]) * m[b][0, 0]
+
+    f()
+    with ti.ad.Tape(loss=loss):
+        total()
+    vs, ms = v.to_numpy(), m.to_numpy()
+    np.testing.assert_array_equal(vs[2, 3], [2, 3])
+    np.testing.assert_array_equal(ms[3], [[3, 1], [2, 3]])
+    np.testing.assert_allclose(v.grad.to_numpy(), 2 * vs * ms[:, 0, 0][None, :, None])
+    with pytest.raises(Exception, match="takes 2 integer index"):
+        m.get_scalar_field(0)
