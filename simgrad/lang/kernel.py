@@ -196,7 +196,7 @@ class Kernel:
             if not hasattr(a, "dtype") or not hasattr(a, "shape"):
                 raise SimgradTypeError(f"kernel {self.name}: argument '{p.name}' expects an ndarray, got "
                                        f"{type(a).__name__}")
-            return (str(a.dtype), len(a.shape))
+            return (str(a.dtype), len(a.shape), p.ann.element_shape_of(tuple(a.shape)))
         return None
 
     # -- compilation -------------------------------------------------------------------------------
@@ -313,6 +313,10 @@ class Kernel:
                         want = ann.dtype.dtype
                     else:
                         want = dt.from_any(ann.dtype) if ann.dtype is not None else None
+                        elem = ann.element_shape_of(tuple(arr.shape))
+                        if len(elem) > len(arr.shape) or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
+                            raise SimgradTypeError(f"kernel {self.name}: ndarray argument '{p.name}' of shape "
+                                                   f"{tuple(arr.shape)} has no trailing element shape {elem}")
                     if want is not None and want is not t:
                         raise SimgradTypeError(f"kernel {self.name}: ndarray argument '{p.name}' must have "
                                                f"dtype {want}, got {t}")

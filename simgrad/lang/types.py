@@ -101,9 +101,20 @@ class NdarrayType:
                  needs_grad=None, boundary=None):
         self.dtype = dtype
         self.ndim = ndim if ndim is not None else field_dim
+        # trailing axes that form each element (a vector or matrix): a count taken from the array, or a shape
+        self.element_dim = element_dim
+        self.element_shape = tuple(element_shape) if element_shape is not None else None
+
+    def element_shape_of(self, shape: tuple) -> tuple:
+        """The element shape of an array of `shape` passed for this parameter (() for scalars)."""
+        if self.element_shape is not None:
+            return self.element_shape
+        if self.element_dim:
+            return tuple(shape[len(shape) - self.element_dim:])
+        return ()
 
     def __repr__(self):
-        return f"ndarray(dtype={self.dtype}, ndim={self.ndim})"
+        return f"ndarray(dtype={self.dtype}, ndim={self.ndim}, element_dim={self.element_dim})"
 
 
 def ndarray(dtype=None, ndim=None, **kw) -> NdarrayType:
