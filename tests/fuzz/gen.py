@@ -275,7 +275,7 @@ def gradient_case(seed: int, size: int) -> str:
              "            p = x[i]", "            q = x[(i + 1) % n]", "            acc = 0.0"]
     names = ["p", "q", "acc"]
     for _ in range(size):
-        k = r.randrange(4)
+        k = r.randrange(5)
         if k == 0:
             lines.append(f"            acc += {_smooth(r, 2, names)}")
         elif k == 1:
@@ -284,8 +284,15 @@ def gradient_case(seed: int, size: int) -> str:
         elif k == 2:
             lines += ["            if i % 2 == 0:", f"                acc += {_smooth(r, 2, names)}",
                       "            else:", f"                acc -= {_smooth(r, 1, names)}"]
-        else:
+        elif k == 3:
             lines.append(f"            acc += helper({_smooth(r, 1, names)}, {_smooth(r, 1, names)})")
+        else:  # a run-time-bound loop reading the field under select/ternary, inside a while with break
+            lines += ["            w = 0", "            while w < 3:", "                w += 1",
+                      "                for m in range(ti.cast(ti.floor(p * 0.0) + 2.0, ti.i32)):",
+                      f"                    acc += ti.select(x[m] > {r.uniform(-1, 1):.2f}, x[m] * q, "
+                      f"{_smooth(r, 1, ['x[m]', 'p'])})",
+                      f"                    acc += x[m] if x[m] < p else {_smooth(r, 1, ['acc', 'q'])} * 0.5",
+                      f"                if w >= {r.randint(1, 3)}:", "                    break"]
     lines += ["            y[i] = acc", "",
               "    @ti.kernel", "    def second():", "        for i in range(n):",
               f"            loss[None] += {_smooth(r, 2, ['y[i]', 'x[i]'])}", "",
