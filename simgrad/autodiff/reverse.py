@@ -33,12 +33,9 @@ from simgrad import dtypes as dt
 from simgrad.autodiff.rules import NEEDS_VALUES, REVERSE, ZERO_GRADIENT
 from simgrad.autodiff.structurize import structurize
 from simgrad.errors import GradientError
-from simgrad.frontend import context
 from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
-from simgrad.lang.expr import Expr
 from simgrad.lang.field import ScalarField
 
 _DROPPED = (Op.PRINT, Op.ASSERT, Op.RET_STORE)
@@ -53,13 +50,6 @@ class _Task:
     def __init__(self, block: Block):
         self.block = block
         self.decls: list[Stmt] = []
-
-
-class _Shim:
-    """Lets lang.ops emit into our builder (they look for `context.current().builder`)."""
-
-    def __init__(self, builder):
-        self.builder = builder
 
 
 def _grad_of(target):
@@ -99,22 +89,18 @@ class Reverse:
 
     # -- entry -------------------------------------------------------------------------------------
     def run(self) -> Block:
-        context.push(_Shim(self.b))
-        try:
-            top = self.kernel.body.stmts
-            kernel_task = self.task
-            for s in top:
-                if not self._parallel(s):
-                    self.clone(s, 0)
-            for s in reversed(top):
-                if self._parallel(s):
-                    self.adjoint_loop(s)
-                else:
-                    self.backward(s)
-            self._declare(kernel_task)
-            self._insert_pushes()
-        finally:
-            context.pop()
+        top = self.kernel.body.stmts
+        kernel_task = self.task
+        for s in top:
+            if not self._parallel(s):
+                self.clone(s, 0)
+        for s in reversed(top):
+            if self._parallel(s):
+                self.adjoint_loop(s)
+            else:
+                self.backward(s)
+        self._declare(kernel_task)
+        self._insert_pushes()
         return self.body
 
     @staticmethod
@@ -337,16 +323,16 @@ class Reverse:
         if s.op is Op.CONST or s.type is None or not s.type.is_float or id(s) not in self.active:
             return
         a = self._adj_var(s)
-        c = ops.cast_expr(ops.to_expr(contribution, s.type), s.type)
-        self.b.emit(Op.ATOMIC, s.type, (a, c.stmt), {"kind": "add"})
+        c = contribution if isinstance(contribution, Stmt) else self.b.const(contribution, s.vtype)
+        self.b.emit(Op.ATOMIC, s.type, (a, self.b.cast(c, s.vtype)), {"kind": "add"})
 
-    def take(self, s: Stmt) -> Expr:
+    def take(self, s: Stmt) -> Stmt:
         """Read adj(s) and reset it, as the definition of s is reversed."""
         a = self.adj[id(s)]
         g = self.b.emit(Op.LOCAL_LOAD, a.type, (a,))
         if self.owner.get(id(s)) is self.task:
             self.b.emit(Op.LOCAL_STORE, None, (a, self.b.const(0, a.vtype)))
-        return Expr(g)
+        return g
 
     # -- values in the backward walk ---------------------------------------------------------------------
     def values(self, s: Stmt, olds: list[Stmt]) -> list[Stmt]:
@@ -405,7 +391,7 @@ class Reverse:
                 ga = self.b.emit(Op.LOCAL_LOAD, a.type, (self.adj[id(a)],))
                 if self.owner.get(id(a)) is self.task:
                     self.b.emit(Op.LOCAL_STORE, None, (self.adj[id(a)], self.b.const(0, a.vtype)))
-                self.acc(w, Expr(ga))
+                self.acc(w, ga)
         elif op is Op.ATOMIC:
             self._backward_atomic(s)
         elif op is Op.GLOBAL_LOAD:
@@ -417,17 +403,15 @@ class Reverse:
                 g = self.take(s)
                 src = s.operands[0]
                 if src.vtype.is_float and s.vtype.is_float:
-                    self.acc(src, ops.cast_expr(g, src.type))
+                    self.acc(src, self.b.cast(g, src.vtype))
         elif op in REVERSE and s.type is not None and s.type.is_float:
             if self.has_adj(s):
                 g = self.take(s)
                 needed = (list(s.operands) if op in NEEDS_VALUES
                           else [o for o in s.operands if not o.type.is_float])
                 vals = dict(zip((id(o) for o in needed), self.values(s, needed)))
-                args = [Expr(vals[id(o)]) if id(o) in vals else None for o in s.operands]
-                if op is Op.SELECT:
-                    args[0] = Expr(vals[id(s.operands[0])])
-                contribs = REVERSE[op](g, *args)
+                args = [vals.get(id(o)) for o in s.operands]
+                contribs = REVERSE[op](self.b, g, *args)
                 for o, c in zip(s.operands, contribs):
                     if c is not None:
                         self.acc(o, c)
@@ -514,7 +498,7 @@ class Reverse:
         g = self.take(s)
         gp, _, _ = self._grad_ptr(s, s.operands[0])
         if gp is not None:
-            self.b.emit(Op.ATOMIC, gp.type, (gp, ops.cast_expr(g, gp.type).stmt), {"kind": "add"})
+            self.b.emit(Op.ATOMIC, gp.type, (gp, self.b.cast(g, gp.vtype)), {"kind": "add"})
 
     def _backward_global_store(self, s: Stmt) -> None:
         """The store overwrote the element, so the gradient that reached it belongs to the stored value and
@@ -525,7 +509,7 @@ class Reverse:
             return
         gp, _, _ = self._grad_ptr(s, ptr)
         if w.type.is_float and id(w) in self.active:
-            self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
+            self.acc(w, self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,)))
         self.b.emit(Op.GLOBAL_STORE, None, (gp, self.b.const(0, gp.type)))
 
     def _backward_atomic(self, s: Stmt) -> None:
@@ -540,14 +524,14 @@ class Reverse:
                 raise GradientError(f"atomic_{kind} on a local variable is not differentiable; "
                                     "use ti.min/ti.max", s.loc)
             if self.has_adj(ptr):
-                self.acc(w, Expr(self.b.emit(Op.LOCAL_LOAD, ptr.type, (self.adj[id(ptr)],))))
+                self.acc(w, self.b.emit(Op.LOCAL_LOAD, ptr.type, (self.adj[id(ptr)],)))
             return
         if kind == "add":
             if id(w) not in self.active:
                 return
             gp, _, _ = self._grad_ptr(s, ptr)
             if gp is not None:
-                self.acc(w, Expr(self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,))))
+                self.acc(w, self.b.emit(Op.GLOBAL_LOAD, gp.type, (gp,)))
         elif kind in ("min", "max"):
             # subgradient: the gradient of the final value goes to exactly one operand equal to it (the
             # first whose adjoint runs takes it with an atomic exchange); the value that was in the
@@ -555,12 +539,12 @@ class Reverse:
             gp, idx, (wv,) = self._grad_ptr(s, ptr, [w])
             if gp is not None:
                 xp = self.b.emit(Op.GLOBAL_PTR, ptr.type, tuple(idx), {"target": ptr.attrs["target"]})
-                final = Expr(self.b.emit(Op.GLOBAL_LOAD, ptr.type, (xp,)))
-                won = self.b.emit(Op.IF, None, (ops.eq(final, Expr(wv)).stmt,), nblocks=2)
+                final = self.b.emit(Op.GLOBAL_LOAD, ptr.type, (xp,))
+                won = self.b.emit(Op.IF, None, (self.b.eq(final, wv),), nblocks=2)
                 with self.b.inside(won.blocks[0]):
                     zero = self.b.const(0.0, gp.type)
                     taken = self.b.emit(Op.ATOMIC, gp.type, (gp, zero), {"kind": "xchg"})
-                    self.acc(w, Expr(taken))
+                    self.acc(w, taken)
         else:
             raise GradientError(f"atomic_{kind} on floats has no derivative", s.loc)
 

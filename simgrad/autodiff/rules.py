@@ -1,10 +1,12 @@
 """Derivative rules, one entry per differentiable Op.
 
-A rule gets the adjoint of the result `g` and the operand values (as kernel expressions) and returns the
-contribution to each operand's adjoint (None: no contribution). `NEEDS_VALUES` ops need their operand
-values in the backward pass (nonlinear ops); the others are linear. Ops listed in `ZERO_GRADIENT` are
-piecewise constant: their derivative is zero almost everywhere, which is what we propagate.
-Any float op without an entry here makes the transform raise a GradientError naming it.
+A reverse (VJP) rule gets the IR builder `b`, the adjoint of the result `g` and the operand values, and
+returns the contribution to each operand's adjoint (None: no contribution), emitted with the builder:
+`lambda b, g, a: (b.mul(g, b.cos(a)),)`. Python numbers stand for constants of the other operand's type.
+`NEEDS_VALUES` ops need their operand values in the backward pass (nonlinear ops); the others are
+linear. Ops listed in `ZERO_GRADIENT` are piecewise constant: their derivative is zero almost everywhere,
+which is what we propagate. Any float op without an entry here makes the transform raise a
+GradientError naming it.
 """
 
 from __future__ import annotations
@@ -12,62 +14,72 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from simgrad.ir.ops import Op
-from simgrad.lang import ops as o
 
 
-def _div(g, a, b):
-    return o.truediv(g, b), o.neg(o.truediv(o.mul(g, a), o.mul(b, b)))
+def _div(b, g, x, y):
+    return b.div(g, y), b.neg(b.div(b.mul(g, x), b.mul(y, y)))
 
 
-def _pow(g, a, b):
-    da = o.mul(g, o.mul(b, o.pow(a, o.sub(b, 1.0))))
-    safe = o.select(o.gt(a, 0.0), a, 1.0)
-    db = o.select(o.gt(a, 0.0), o.mul(g, o.mul(o.pow(a, b), o.log(safe))), 0.0)
-    return da, db
+def _pow(b, g, x, y):
+    dx = b.mul(g, b.mul(y, b.pow(x, b.sub(y, 1.0))))
+    positive = b.gt(x, 0.0)
+    safe = b.select(positive, x, 1.0)
+    dy = b.select(positive, b.mul(g, b.mul(b.pow(x, y), b.log(safe))), 0.0)
+    return dx, dy
 
 
-def _atan2(g, y, x):
-    r = o.add(o.mul(x, x), o.mul(y, y))
-    return o.truediv(o.mul(g, x), r), o.neg(o.truediv(o.mul(g, y), r))
+def _atan2(b, g, y, x):
+    r = b.add(b.mul(x, x), b.mul(y, y))
+    return b.div(b.mul(g, x), r), b.neg(b.div(b.mul(g, y), r))
 
 
-def _min(g, a, b):
-    first = o.le(a, b)  # ties go to the first operand
-    return o.select(first, g, 0.0), o.select(first, 0.0, g)
+def _min(b, g, x, y):
+    first = b.le(x, y)  # ties go to the first operand
+    return b.select(first, g, 0.0), b.select(first, 0.0, g)
 
 
-def _max(g, a, b):
-    first = o.ge(a, b)
-    return o.select(first, g, 0.0), o.select(first, 0.0, g)
+def _max(b, g, x, y):
+    first = b.ge(x, y)
+    return b.select(first, g, 0.0), b.select(first, 0.0, g)
 
 
-def _abs(g, a):
-    return (o.select(o.gt(a, 0.0), g, o.select(o.lt(a, 0.0), o.neg(g), 0.0)),)
+def _abs(b, g, x):
+    return (b.select(b.gt(x, 0.0), g, b.select(b.lt(x, 0.0), b.neg(g), 0.0)),)
 
 
-# (g, *operands) -> one contribution (or None) per operand
+def _tan(b, g, x):
+    t = b.tan(x)
+    return (b.mul(g, b.add(b.mul(t, t), 1.0)),)
+
+
+def _tanh(b, g, x):
+    t = b.tanh(x)
+    return (b.mul(g, b.sub(1.0, b.mul(t, t))),)
+
+
+# (builder, g, *operands) -> one contribution (or None) per operand
 REVERSE: dict[Op, Callable[..., tuple]] = {
-    Op.ADD: lambda g, a, b: (g, g),
-    Op.SUB: lambda g, a, b: (g, o.neg(g)),
-    Op.MUL: lambda g, a, b: (o.mul(g, b), o.mul(g, a)),
+    Op.ADD: lambda b, g, x, y: (g, g),
+    Op.SUB: lambda b, g, x, y: (g, b.neg(g)),
+    Op.MUL: lambda b, g, x, y: (b.mul(g, y), b.mul(g, x)),
     Op.DIV: _div,
-    Op.NEG: lambda g, a: (o.neg(g),),
+    Op.NEG: lambda b, g, x: (b.neg(g),),
     Op.POW: _pow,
     Op.MIN: _min,
     Op.MAX: _max,
     Op.ATAN2: _atan2,
-    Op.SQRT: lambda g, a: (o.truediv(o.mul(g, 0.5), o.sqrt(a)),),
-    Op.RSQRT: lambda g, a: (o.mul(o.mul(g, -0.5), o.truediv(o.rsqrt(a), a)),),
-    Op.SIN: lambda g, a: (o.mul(g, o.cos(a)),),
-    Op.COS: lambda g, a: (o.neg(o.mul(g, o.sin(a))),),
-    Op.TAN: lambda g, a: (o.mul(g, o.add(1.0, o.mul(o.tan(a), o.tan(a)))),),
-    Op.ASIN: lambda g, a: (o.truediv(g, o.sqrt(o.sub(1.0, o.mul(a, a)))),),
-    Op.ACOS: lambda g, a: (o.neg(o.truediv(g, o.sqrt(o.sub(1.0, o.mul(a, a))))),),
-    Op.EXP: lambda g, a: (o.mul(g, o.exp(a)),),
-    Op.LOG: lambda g, a: (o.truediv(g, a),),
-    Op.TANH: lambda g, a: (o.mul(g, o.sub(1.0, o.mul(o.tanh(a), o.tanh(a)))),),
+    Op.SQRT: lambda b, g, x: (b.div(b.mul(g, 0.5), b.sqrt(x)),),
+    Op.RSQRT: lambda b, g, x: (b.mul(b.mul(g, -0.5), b.div(b.rsqrt(x), x)),),
+    Op.SIN: lambda b, g, x: (b.mul(g, b.cos(x)),),
+    Op.COS: lambda b, g, x: (b.neg(b.mul(g, b.sin(x))),),
+    Op.TAN: _tan,
+    Op.ASIN: lambda b, g, x: (b.div(g, b.sqrt(b.sub(1.0, b.mul(x, x)))),),
+    Op.ACOS: lambda b, g, x: (b.neg(b.div(g, b.sqrt(b.sub(1.0, b.mul(x, x))))),),
+    Op.EXP: lambda b, g, x: (b.mul(g, b.exp(x)),),
+    Op.LOG: lambda b, g, x: (b.div(g, x),),
+    Op.TANH: _tanh,
     Op.ABS: _abs,
-    Op.SELECT: lambda g, c, a, b: (None, o.select(c, g, 0.0), o.select(c, 0.0, g)),
+    Op.SELECT: lambda b, g, c, x, y: (None, b.select(c, g, 0.0), b.select(c, 0.0, g)),
 }
 NEEDS_VALUES = {op for op in REVERSE if op not in (Op.ADD, Op.SUB, Op.NEG)}
 ZERO_GRADIENT = {Op.FLOOR, Op.CEIL, Op.ROUND, Op.LT, Op.LE, Op.GT, Op.GE, Op.EQ, Op.NE, Op.LOGICAL_NOT}

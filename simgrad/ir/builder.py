@@ -70,7 +70,78 @@ class Builder:
         result = dt.i32 if op is Op.LOGICAL_NOT else a.type
         return self.emit(op, result, (a,))
 
-    def select(self, cond: Stmt, a: Stmt, b: Stmt) -> Stmt:
+    def select(self, cond: Stmt, a, b) -> Stmt:
+        a, b = self._pair(a, b)
         if a.type is not b.type:
             raise SimgradTypeError(f"internal: select on {a.type} and {b.type}", self.loc)
         return self.emit(Op.SELECT, a.type, (cond, a, b))
+
+    # -- arithmetic on values and Python numbers (what derivative rules are written with) ---------------
+    def _pair(self, a, b) -> tuple[Stmt, Stmt]:
+        """Both as statements: a Python number takes the other operand's type."""
+        if not isinstance(a, Stmt):
+            a = self.const(a, b.vtype)
+        if not isinstance(b, Stmt):
+            b = self.const(b, a.vtype)
+        return a, b
+
+    def _arith(self, op: Op, a, b) -> Stmt:
+        a, b = self._pair(a, b)
+        return self.binary(op, a, b)
+
+    def add(self, a, b) -> Stmt:
+        return self._arith(Op.ADD, a, b)
+
+    def sub(self, a, b) -> Stmt:
+        return self._arith(Op.SUB, a, b)
+
+    def mul(self, a, b) -> Stmt:
+        return self._arith(Op.MUL, a, b)
+
+    def div(self, a, b) -> Stmt:
+        return self._arith(Op.DIV, a, b)
+
+    def pow(self, a, b) -> Stmt:
+        return self._arith(Op.POW, a, b)
+
+    def lt(self, a, b) -> Stmt:
+        return self._arith(Op.LT, a, b)
+
+    def le(self, a, b) -> Stmt:
+        return self._arith(Op.LE, a, b)
+
+    def gt(self, a, b) -> Stmt:
+        return self._arith(Op.GT, a, b)
+
+    def ge(self, a, b) -> Stmt:
+        return self._arith(Op.GE, a, b)
+
+    def eq(self, a, b) -> Stmt:
+        return self._arith(Op.EQ, a, b)
+
+    def neg(self, a: Stmt) -> Stmt:
+        return self.unary(Op.NEG, a)
+
+    def sqrt(self, a: Stmt) -> Stmt:
+        return self.unary(Op.SQRT, a)
+
+    def rsqrt(self, a: Stmt) -> Stmt:
+        return self.unary(Op.RSQRT, a)
+
+    def sin(self, a: Stmt) -> Stmt:
+        return self.unary(Op.SIN, a)
+
+    def cos(self, a: Stmt) -> Stmt:
+        return self.unary(Op.COS, a)
+
+    def tan(self, a: Stmt) -> Stmt:
+        return self.unary(Op.TAN, a)
+
+    def exp(self, a: Stmt) -> Stmt:
+        return self.unary(Op.EXP, a)
+
+    def log(self, a: Stmt) -> Stmt:
+        return self.unary(Op.LOG, a)
+
+    def tanh(self, a: Stmt) -> Stmt:
+        return self.unary(Op.TANH, a)
