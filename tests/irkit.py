@@ -28,7 +28,7 @@ def target(field):
     from simgrad.runtime.program import get_program
 
     get_program().materialize_all()
-    return field
+    return field.ref()
 
 
 def ptr(b: Builder, field, *indices: Stmt) -> Stmt:

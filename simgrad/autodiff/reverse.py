@@ -34,9 +34,9 @@ from simgrad.autodiff.rules import NEEDS_VALUES, REVERSE, ZERO_GRADIENT
 from simgrad.autodiff.structurize import structurize
 from simgrad.errors import GradientError
 from simgrad.ir.builder import Builder
+from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
-from simgrad.lang.field import ScalarField
 
 _DROPPED = (Op.PRINT, Op.ASSERT, Op.RET_STORE)
 # statements whose own adjoint is nothing (a local's adjoint belongs to its loads and stores)
@@ -54,7 +54,7 @@ class _Task:
 
 def _grad_of(target):
     """The gradient field of a field element target, or None when it has no placed gradient."""
-    if isinstance(target, ScalarField) and target.grad is not None and target.grad.snode is not None:
+    if isinstance(target, FieldRef) and target.grad is not None:
         return target.grad
     return None
 

@@ -16,14 +16,13 @@ import hashlib
 import numpy as np
 
 from simgrad.errors import GradientError, Loc
+from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
-from simgrad.lang.field import ScalarField
 
 
 def _differentiable(target) -> bool:
-    return isinstance(target, ScalarField) and target.dtype.is_float and target.grad is not None \
-        and target.grad.snode is not None
+    return isinstance(target, FieldRef) and target.dtype.is_float and target.grad is not None
 
 
 def _user_name(target) -> str:
@@ -98,7 +97,8 @@ def _evaluate(s, args: dict) -> int:
 
 def _watched(f, leads, args: dict) -> bytes:
     """The bytes of what a launch read of `f`: the slices its leading indices name, or the whole field."""
-    data = f.view if f.view is not None else f.to_numpy()
+    field = f.owner  # the lang-level field behind the IR's record
+    data = field.view if field.view is not None else field.to_numpy()
     try:
         picked = None if leads is None else sorted({_evaluate(e, args) for e in leads})
     except KeyError:  # an index from a matrix argument's entry: watch everything

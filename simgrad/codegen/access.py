@@ -4,8 +4,8 @@ checks in debug mode."""
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.ops import Op
-from simgrad.lang.field import ScalarField
 from simgrad.passes.digits import digit_chain
 
 
@@ -40,8 +40,7 @@ def _bounds_check(gen, f, s, k: int, idx: str, extent: str, shape_text: str, off
 def lower_global_ptr(gen, f, s) -> str:
     target = s.attrs["target"]
     idx = [_i64(f, f.v(o), o.type) for o in s.operands]
-    if isinstance(target, ScalarField):
-        assert target.layout is not None  # kernels compile after their fields' trees are materialised
+    if isinstance(target, FieldRef):
         tree_id, const, terms, shape = target.layout
         if gen.debug:
             offset = target.offset or (0,) * len(shape)

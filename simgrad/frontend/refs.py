@@ -13,6 +13,7 @@ from simgrad.frontend import context
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
+from simgrad.lang.field import ScalarField
 from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index
 
 
@@ -58,7 +59,9 @@ class GlobalRef:
 
     def ptr(self):
         b = context.builder()
-        return b.emit(Op.GLOBAL_PTR, self.dtype, tuple(i.stmt for i in self.indices), {"target": self.target})
+        t = self.target
+        target = t.ref() if isinstance(t, ScalarField) else t  # the IR sees a field's FieldRef record
+        return b.emit(Op.GLOBAL_PTR, self.dtype, tuple(i.stmt for i in self.indices), {"target": target})
 
     def load(self) -> Expr:
         e = Expr(context.builder().emit(Op.GLOBAL_LOAD, self.dtype, (self.ptr(),)))

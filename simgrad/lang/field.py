@@ -11,6 +11,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradError, SimgradIndexError, SimgradOverflowError, caller_loc
+from simgrad.ir.fieldref import FieldRef
 
 if TYPE_CHECKING:
     from simgrad.lang.snode import AccessTerm
@@ -125,6 +126,20 @@ class ScalarField(Field):
 
     def _components(self):
         return [self]
+
+    def ref(self) -> FieldRef:
+        """The IR's record of this field (the same object while name and layout stay, so analyses can key
+        on its identity within a kernel)."""
+        assert self.layout is not None, f"field {self.name} is not materialised"
+        g = self.grad
+        grad = g.ref() if isinstance(g, ScalarField) and g.layout is not None else None
+        key = (self.name, self.layout, self.offset, id(grad))
+        cached = getattr(self, "_ref", None)
+        if cached is None or cached[0] != key:
+            kinds = tuple(n.kind for n in self._snode.path() if n.kind not in ("root", "place"))
+            ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, kinds, owner=self)
+            self._ref = cached = (key, ref)
+        return cached[1]
 
     @property
     def snode(self):  # type: ignore[override]

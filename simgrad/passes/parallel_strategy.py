@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from simgrad import dtypes as dt
+from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
-from simgrad.lang.field import ScalarField
 from simgrad.passes.digits import digit_chain, digit_of
 from simgrad.passes.privatize import Region, access_key, private_regions
 
@@ -136,7 +136,7 @@ def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
     if p1.op is not Op.GLOBAL_PTR or p2.op is not Op.GLOBAL_PTR or p1.operands != p2.operands:
         return False
     t1, t2 = p1.attrs["target"], p2.attrs["target"]
-    if not isinstance(t1, ScalarField) or not isinstance(t2, ScalarField) or t1.layout is None or t2.layout is None:
+    if not isinstance(t1, FieldRef) or not isinstance(t2, FieldRef):
         return False
     (tree1, c1, terms1, _), (tree2, c2, terms2, _) = t1.layout, t2.layout
     return tree1 == tree2 and terms1 == terms2 and c2 == c1 + 4 and c1 % 8 == 0 \

@@ -13,9 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from simgrad.dtypes import DataType
+from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Stmt
 from simgrad.ir.ops import Op
-from simgrad.lang.field import ScalarField
 
 
 @dataclass
@@ -36,7 +36,7 @@ class Region:
         return (self.hi - self.lo) // self.dtype.nbytes
 
 
-def _span(f: ScalarField, nprefix: int) -> tuple[int, int]:
+def _span(f: FieldRef, nprefix: int) -> tuple[int, int]:
     """[first byte, one past the last byte] of a dense field's elements in its tree, for fixed values of
     its first `nprefix` indices (their offset left out)."""
     assert f.layout is not None  # kernels compile after their fields' trees are materialised
@@ -52,7 +52,7 @@ def _span(f: ScalarField, nprefix: int) -> tuple[int, int]:
     return const, top + f.dtype.nbytes
 
 
-def _prefix_len(f: ScalarField, ptrs: list[Stmt], loop: Stmt, inside: set) -> int:
+def _prefix_len(f: FieldRef, ptrs: list[Stmt], loop: Stmt, inside: set) -> int:
     """How many leading axes every update indexes with loop-invariant values, each a plain strided axis."""
     n = min(len(p.operands) for p in ptrs)
     for p in ptrs:
@@ -137,7 +137,7 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
     weight = 0
     for tid, updates in adds.items():
         f = updates[0][0].operands[0].attrs["target"]
-        if tid not in shared or tid in reduced or not isinstance(f, ScalarField) \
+        if tid not in shared or tid in reduced or not isinstance(f, FieldRef) \
                 or f.layout is None or f.dtype.name not in ("f32", "f64", "i32", "i64"):
             continue
         ptrs = [a.operands[0] for a, _times in updates]
