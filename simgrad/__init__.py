@@ -66,7 +66,7 @@ from simgrad.lang.atomics import (
 )
 from simgrad.lang.linalg import polar_decompose, svd, sym_eig
 from simgrad.lang import profiler
-from simgrad.runtime.program import init, reset
+from simgrad.lang.program import init, reset
 
 int8, int16, int32, int64 = i8, i16, i32, i64
 uint8, uint16, uint32, uint64 = u8, u16, u32, u64
@@ -80,7 +80,7 @@ def sync():
 
 
 def get_runtime():
-    from simgrad.runtime.program import get_program
+    from simgrad.lang.program import get_program
 
     return get_program()
 
@@ -93,7 +93,7 @@ def __getattr__(name):
             return _gui
         return getattr(_gui, name)
     if name in ("ad", "Tape", "clear_all_gradients", "no_grad", "grad_replaced", "grad_for"):
-        from simgrad.autodiff import api as _ad
+        from simgrad.lang import ad as _ad
 
         return _ad if name == "ad" else getattr(_ad, name)
     raise AttributeError(f"module 'simgrad' has no attribute '{name}'")

@@ -36,7 +36,7 @@ class Loc:
 def caller_loc() -> Loc | None:
     """The user's line that called into simgrad (the innermost frame outside the package), for errors
     raised in Python scope."""
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     if context.in_kernel():
         return None  # compiling a kernel: the statement being compiled is the place

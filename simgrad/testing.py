@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simgrad.autodiff.tape import Tape
+from simgrad.lang.tape import Tape
 
 
 def _loss(outputs, weights) -> float:

@@ -25,7 +25,7 @@ def serial_for(b: Builder, begin: Stmt, end: Stmt) -> Stmt:
 
 def target(field):
     """What a GLOBAL_PTR of `field` refers to (its trees materialised first)."""
-    from simgrad.runtime.program import get_program
+    from simgrad.lang.program import get_program
 
     get_program().materialize_all()
     return field.ref()

@@ -1,3 +1,2 @@
-"""Automatic differentiation of kernels (reverse mode in the IR) and the Tape across launches."""
-
-from simgrad.autodiff import api  # noqa: F401
+"""Automatic differentiation of kernels: IR-to-IR transforms (reverse mode) and their derivative rules.
+The user-facing Tape lives in lang/tape.py (it records launches of lang kernels)."""

@@ -210,7 +210,7 @@ def _count(extents):
         total = ops.mul(total, ops.cast_expr(ops.to_expr(n, dt.i64), dt.i64))
     if not all(_fits_i32(n) for n in extents):
         return total  # a 64-bit extent: a 64-bit loop
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     context.builder().emit(Op.ASSERT, None, (ops.le(total, _I32_MAX).stmt,), {
         "message": "the loop's iteration count (the product of its extents) exceeds 2**31 - 1; give the "
@@ -219,7 +219,7 @@ def _count(extents):
 
 
 def _raw(op: Op, a: Expr, n):
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     if isinstance(n, int) and n == 1:
         return a if op is Op.RAW_DIV else ops.to_expr(0, a.dtype)
@@ -245,8 +245,8 @@ def emit_fill(field, value) -> None:
     """`x.fill(v)` inside a kernel: one loop over all elements, storing `v` (a scalar broadcast to every
     entry, or a vector/matrix of the field's entry shape). Emitted into the kernel, so it runs at every
     launch and `v` may be a run-time value; at the top level of a kernel the loop is parallel."""
-    from simgrad.frontend import context
     from simgrad.frontend.refs import GlobalRef, MatrixRef
+    from simgrad.ir import context
     from simgrad.lang.field import MatrixField
 
     comp = context.current()

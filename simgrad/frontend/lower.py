@@ -19,9 +19,9 @@ from simgrad.errors import (
     SimgradSyntaxError,
     SimgradTypeError,
 )
-from simgrad.frontend import context
 from simgrad.frontend.refs import DynamicElementRef, GlobalRef, MatrixRef, VarRef
 from simgrad.frontend.source import FunctionSource, get_source
+from simgrad.ir import context
 from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Kernel, walk

@@ -9,7 +9,7 @@ import itertools
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
-from simgrad.frontend import context
+from simgrad.ir import context
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr

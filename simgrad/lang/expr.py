@@ -22,7 +22,7 @@ class Expr:
         return f"Expr({self.stmt!r})"
 
     def __bool__(self):
-        from simgrad.frontend.context import current_loc
+        from simgrad.ir.context import current_loc
 
         raise SimgradSyntaxError(
             "a kernel value was used where Python needs a compile-time bool (e.g. in a plain Python "

@@ -14,7 +14,7 @@ from simgrad import dtypes as dt
 from simgrad.errors import SimgradRuntimeError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
-from simgrad.runtime.program import get_program
+from simgrad.lang.program import get_program
 
 _counter = [0]
 

@@ -396,7 +396,7 @@ def _as_array(value):
 
 
 def _in_kernel() -> bool:
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     return context.in_kernel()
 

@@ -11,14 +11,14 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError, caller_loc
-from simgrad.frontend import context
 from simgrad.frontend.source import get_source
+from simgrad.ir import context
 from simgrad.ir.nodes import Kernel as IRKernel
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
+from simgrad.lang.program import Program, get_program
 from simgrad.lang.types import MatrixType, NdarrayType, is_template
-from simgrad.runtime.program import Program, get_program
 
 # Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
 # a second thread asking for the same instantiation waits and then finds it in the cache.
@@ -225,8 +225,8 @@ class Kernel:
 
     def _cache_key(self, prog: Program, args, transform, name_suffix):
         """(key, guard) of the kernel cache for this instantiation, or (None, None) when it is not cached."""
+        from simgrad.debug import debug_level
         from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
-        from simgrad.runtime.jit import debug_level
 
         if not prog.jit.cache_enabled or debug_level() > 0:  # debug levels print what the compile does
             return None, None

@@ -17,7 +17,7 @@ def static(x, *xs):
 
 
 def _check_static(v) -> None:
-    from simgrad.frontend import context
+    from simgrad.ir import context
     from simgrad.lang.expr import Expr
     from simgrad.lang.matrix import Matrix
 
@@ -84,7 +84,7 @@ _loop_config: dict = {}
 def loop_config(*, serialize: bool = False, block_dim: int | None = None, parallelize: int | None = None,
                 block_dim_adaptive: bool = True, bit_vectorize: bool = False):
     """Applies to the next for loop in the kernel (Taichi semantics)."""
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     comp = context.current()
     if comp is not None:

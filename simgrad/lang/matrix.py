@@ -541,7 +541,7 @@ def dtype_of(m: Matrix) -> dt.DataType:
 
 
 def check_dynamic_index(key, dims) -> None:
-    from simgrad.frontend import context
+    from simgrad.ir import context
 
     comp = context.current()
     if comp is None or not getattr(comp, "debug", False):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from simgrad import dtypes as dt
-from simgrad.frontend import context
+from simgrad.ir import context
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 

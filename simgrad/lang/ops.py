@@ -11,8 +11,7 @@ import math
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
-from simgrad.frontend import context
-from simgrad.ir import numeric
+from simgrad.ir import context, numeric
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 

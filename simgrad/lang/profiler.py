@@ -1,6 +1,6 @@
 """`ti.profiler`: per-kernel launch counts and times (enable with ti.init(kernel_profiler=True))."""
 
-from simgrad.runtime.program import get_program
+from simgrad.lang.program import get_program
 
 
 def print_kernel_profiler_info(mode: str = "count") -> None:

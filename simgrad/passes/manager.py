@@ -11,7 +11,7 @@ from simgrad.ir.printer import print_kernel
 
 
 def _debug() -> int:
-    from simgrad.runtime.jit import debug_level
+    from simgrad.debug import debug_level
 
     return debug_level()
 

@@ -1,7 +1,7 @@
 """The kernel context ABI: what each 8-byte slot of the buffer passed to `entry(ptr ctx)` holds.
 
 Generated code (codegen/) reads these slots and the launcher (runtime/launch.py) and the program
-(runtime/program.py) fill them, so the numbers live here, in one place both sides import.
+(lang/program.py) fill them, so the numbers live here, in one place both sides import.
 """
 
 from __future__ import annotations

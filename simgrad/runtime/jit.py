@@ -14,17 +14,10 @@ from pathlib import Path
 import llvmlite
 import llvmlite.binding as llvm
 
+from simgrad.debug import debug_level
+
 _COMPILER_VERSION = "simgrad-jit-1"
 
-
-def debug_level() -> int:
-    """SIMGRAD_DEBUG: 1 names passes, 2 prints IR after each, 3 the optimised LLVM IR, 4 the assembly.
-    Any level > 0 bypasses the kernel cache (lang/kernel.py) so the passes run and print; the object
-    cache still serves native code, and 3/4 print on its hits too."""
-    try:
-        return int(os.environ.get("SIMGRAD_DEBUG", "0"))
-    except ValueError:
-        return 0
 
 
 def default_cache_dir() -> Path:
@@ -154,7 +147,7 @@ class CodeSpace:
     for the life of the process)."""
 
     def __init__(self, jit: Jit) -> None:
-        from simgrad.codegen import half
+        from simgrad.runtime import half
 
         anchor = llvm.parse_assembly("")  # an empty module anchors the engine; objects are added to it
         anchor.triple = jit.triple

@@ -412,7 +412,7 @@ print("RESULT " + json.dumps(out))
 
 def test_f16_without_f16c_uses_our_conversions(tmp_path):
     """On an x86 CPU without F16C, LLVM calls __extendhfsf2/__truncsfhf2, which MCJIT cannot resolve
-    (the process aborted); codegen/half.py provides them. Simulated here by compiling for this CPU with
+    (the process aborted); runtime/half.py provides them. Simulated here by compiling for this CPU with
     F16C switched off: every f16 value widened, f32 and f64 values rounded, against numpy."""
     import json
     import os

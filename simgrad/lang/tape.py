@@ -8,8 +8,14 @@ Kernels decorated with @ti.ad.no_grad run forward and are skipped backward. A fu
 from __future__ import annotations
 
 import functools
+import hashlib
 
-from simgrad.errors import SimgradError
+import numpy as np
+
+from simgrad.autodiff.validate import differentiable, user_name
+from simgrad.errors import GradientError, SimgradError
+from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
 
@@ -48,12 +54,10 @@ class Tape:
         if not getattr(kernel, "_no_grad", False):
             self.entries.append((kernel, args))
             if self._validating():
-                from simgrad.autodiff.validate import Snapshot
-
                 self.snapshots[len(self.entries) - 1] = Snapshot(kernel, args)
 
     def _validating(self) -> bool:
-        from simgrad.runtime.program import get_program
+        from simgrad.lang.program import get_program
 
         return self.validation or get_program().config.debug
 
@@ -84,7 +88,7 @@ class Tape:
 
 def clear_all_gradients(gradient_type=None) -> None:
     """Zero every placed gradient field of the program."""
-    from simgrad.runtime.program import get_program
+    from simgrad.lang.program import get_program
 
     prog = get_program()
     prog.materialize_all()
@@ -134,3 +138,83 @@ def grad_for(primal):
         return fn
 
     return register
+
+
+# -- run-time access checks (Tape(validation=True), debug mode) ---------------------------------------
+def reads_of(kernel_ir: Kernel) -> dict:
+    """{field component: (location of its first read, leading indices)} for the fields a forward kernel
+    reads. The leading indices are IR expressions of the kernel's scalar arguments (`x[t - 1, i]`), or None
+    when some read's first index depends on anything else: then the whole field is watched."""
+    out: dict = {}
+    for s in walk(kernel_ir.body):
+        if s.op is Op.GLOBAL_LOAD:
+            ptr = s.operands[0]
+            target = ptr.attrs["target"]
+            if not differentiable(target):
+                continue
+            loc, leads = out.get(target, (s.loc, []))
+            lead = ptr.operands[0] if ptr.operands and _evaluable(ptr.operands[0]) else None
+            out[target] = (loc, None if leads is None or lead is None else leads + [lead])
+    return out
+
+
+_ARITH = {Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b}
+
+
+def _evaluable(s) -> bool:
+    if s.op in (Op.CONST, Op.ARG):
+        return True
+    return s.op in _ARITH and all(_evaluable(o) for o in s.operands)
+
+
+def _evaluate(s, args: dict) -> int:
+    if s.op is Op.CONST:
+        return int(s.attrs["value"])
+    if s.op is Op.ARG:
+        return int(args[s.attrs["slot"]])
+    a, b = (_evaluate(o, args) for o in s.operands)
+    return _ARITH[s.op](a, b)
+
+
+def _watched(f, leads, args: dict) -> bytes:
+    """The bytes of what a launch read of `f`: the slices its leading indices name, or the whole field."""
+    field = f.owner  # the lang-level field behind the IR's record
+    data = field.view if field.view is not None else field.to_numpy()
+    try:
+        picked = None if leads is None else sorted({_evaluate(e, args) for e in leads})
+    except KeyError:  # an index from a matrix argument's entry: watch everything
+        picked = None
+    if picked is None:
+        return hashlib.blake2b(np.ascontiguousarray(data).tobytes(), digest_size=16).digest()
+    h = hashlib.blake2b(digest_size=16)
+    for i in picked:
+        if 0 <= i < data.shape[0]:
+            h.update(np.ascontiguousarray(data[i]).tobytes())
+    return h.digest()
+
+
+class Snapshot:
+    """Fingerprints of what one forward launch read, checked before its adjoint launch: the slices of the
+    leading axis the launch read when its arguments pick them (x[t - 1, i]: writing x[t] later is fine),
+    else whole fields."""
+
+    def __init__(self, kernel, args):
+        inst = kernel.instance(args)
+        self.kernel = kernel
+        self.args = {p.slot: a for p, a in zip(inst.launcher.params, args) if p.kind == "scalar"}
+        self.reads = reads_of(inst.ir)
+        self.prints = self._fingerprint()
+
+    def _fingerprint(self) -> dict:
+        return {f: _watched(f, leads, self.args) for f, (_, leads) in self.reads.items()}
+
+    def check(self) -> None:
+        now = self._fingerprint()
+        for f, digest in self.prints.items():
+            if now[f] != digest:
+                loc = self.reads[f][0]
+                raise GradientError(
+                    f"global data access rule violated: field '{user_name(f)}' was modified after kernel "
+                    f"{self.kernel.name} read it, so its gradient would be computed from different values. "
+                    "Keep every state a differentiated kernel reads unchanged until backward (e.g. store "
+                    "each time step separately).", loc)

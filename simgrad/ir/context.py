@@ -1,4 +1,6 @@
-"""The kernel under construction: the IR builder that operators emit into, and the source location."""
+"""The kernel under construction: a stack of the compilers whose builder operators emit into (anything with
+`.builder`), and the source location. In ir/ so that lang operators and the IR builder meet without lang
+depending on the frontend."""
 
 from __future__ import annotations
 
