@@ -134,8 +134,8 @@ class Reverse:
         """Adjoint locals at the top of their task, set to zero at every entry (every iteration)."""
         decls = []
         for a in task.decls:
-            zero = Stmt(Op.CONST, a.type, (), {"value": 0.0 if a.vtype.is_float else 0}, a.loc)
-            st = Stmt(Op.LOCAL_STORE, None, (a, zero), {}, a.loc)
+            zero = Builder.detached(Op.CONST, a.type, (), {"value": 0.0 if a.vtype.is_float else 0}, a.loc)
+            st = Builder.detached(Op.LOCAL_STORE, None, (a, zero), {}, a.loc)
             for x in (a, zero, st):
                 x.block = task.block
             decls += [a, zero, st]
@@ -262,7 +262,8 @@ class Reverse:
         begin, end = (o if o.op is Op.CONST else self.v(o) for o in s.operands)
         n = _trip(self.b, begin, end)
         t = n.vtype
-        loop = Stmt(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True}, s.loc)
+        loop = Builder.detached(Op.RANGE_FOR, t, (self.b.const(0, t), n), {"parallel": False, "reversed": True},
+                                s.loc)
         body = Block(loop)
         loop.blocks = (body,)
         with self.b.inside(body):
@@ -310,7 +311,7 @@ class Reverse:
         a = self.adj.get(id(s))
         if a is None:
             task = self.owner.get(id(s), self.task)
-            a = Stmt(Op.ALLOCA, s.type, (), {}, s.loc)
+            a = Builder.detached(Op.ALLOCA, s.type, (), {}, s.loc)
             task.decls.append(a)
             self.adj[id(s)] = a
         return a
@@ -448,7 +449,7 @@ class Reverse:
         self._attach(new, [then_b, else_b])
 
     def _backward_loop(self, s: Stmt, bounds) -> None:
-        index_var = Stmt(Op.ALLOCA, s.type or dt.i32, (), {}, s.loc)
+        index_var = Builder.detached(Op.ALLOCA, s.type or dt.i32, (), {}, s.loc)
         body_old = s.blocks[0].stmts if s.op is Op.RANGE_FOR else _split_header(s.blocks[0])[1]
         # a local stored late in the body feeds loads of the next iteration, whose backward ran before; the
         # store is walked before those loads, so its adjoint variable must exist already
@@ -560,7 +561,7 @@ class Reverse:
             pos = block.stmts.index(after) + 1 if after is not None else 0
             new = []
             for v in values:
-                p = Stmt(Op.TAPE_PUSH, None, (v,), {"message": self._overflow_text(v)}, v.loc)
+                p = Builder.detached(Op.TAPE_PUSH, None, (v,), {"message": self._overflow_text(v)}, v.loc)
                 p.block = block
                 new.append(p)
             block.stmts[pos:pos] = new

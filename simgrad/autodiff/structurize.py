@@ -11,16 +11,13 @@ A serial range-for that can break is first turned into a while loop over a count
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Block, Stmt
 from simgrad.ir.ops import Op
 
 
 def _new(op, type_, operands, block, loc, attrs=None, nblocks=0) -> Stmt:
-    s = Stmt(op, type_, tuple(operands), attrs or {}, loc)
-    s.block = block
-    if nblocks:
-        s.blocks = tuple(Block(s) for _ in range(nblocks))
-    return s
+    return Builder.detached(op, type_, operands, attrs, loc, block, nblocks)
 
 
 def _const(v, block, loc, type_=dt.i32) -> Stmt:

@@ -23,11 +23,19 @@ class Builder:
         return self.blocks[-1]
 
     def emit(self, op: Op, type: DataType | None, operands=(), attrs=None, nblocks: int = 0) -> Stmt:
-        s = Stmt(op, type, tuple(operands), attrs or {}, self.loc)
+        s = self.detached(op, type, operands, attrs, self.loc, self.block, nblocks)
+        self.block.stmts.append(s)
+        return s
+
+    @staticmethod
+    def detached(op: Op, type: DataType | None, operands=(), attrs=None, loc: Loc | None = None,
+                 block: Block | None = None, nblocks: int = 0) -> Stmt:
+        """A statement that the caller places itself (a transform inserting at a position it computed):
+        still made here, so every statement comes from the builder."""
+        s = Stmt(op, type, tuple(operands), attrs or {}, loc)
         if nblocks:
             s.blocks = tuple(Block(s) for _ in range(nblocks))
-        s.block = self.block
-        self.block.stmts.append(s)
+        s.block = block
         return s
 
     @contextmanager
