@@ -177,6 +177,13 @@ class Kernel:
         return inst
 
     def _compile_instance(self, args, grad: bool, key, keep: list, cache: dict) -> Instance:
+        t0 = time.perf_counter()
+        try:
+            return self._compile_uncounted(args, grad, key, keep, cache)
+        finally:
+            get_program().compile_seconds += time.perf_counter() - t0
+
+    def _compile_uncounted(self, args, grad: bool, key, keep: list, cache: dict) -> Instance:
         if grad:
             from simgrad.autodiff.validate import check_and_adjoint
 

@@ -72,6 +72,7 @@ class Program:
         self.trees: list = []
         self._open_tree = None
         self.profiler = Profiler()
+        self.compile_seconds = 0.0  # time spent instantiating kernels (compiles and kernel-cache hits)
         self.error = np.zeros(4, dtype=np.int64)
         self._pool = None
         self._rng: np.ndarray | None = None
@@ -104,6 +105,10 @@ class Program:
         for t in self.trees:
             if not t.materialized:
                 t.materialize()
+
+    def get_total_compilation_time(self) -> float:
+        """Seconds spent compiling kernels in this program (taichi's `impl.get_runtime().prog` asks it)."""
+        return self.compile_seconds
 
     # -- native services ---------------------------------------------------------------------------
     def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:

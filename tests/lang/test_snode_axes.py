@@ -97,3 +97,19 @@ def test_get_scalar_field_places_entries_separately_with_gradients():
     np.testing.assert_allclose(v.grad.to_numpy(), 2 * vs * ms[:, 0, 0][None, :, None])
     with pytest.raises(Exception, match="takes 2 integer index"):
         m.get_scalar_field(0)
+
+
+def test_total_compilation_time_through_lang_impl():
+    """smoke_taichi_gpu prints ti.lang.impl.get_runtime().prog.get_total_compilation_time()."""
+    ti.init(arch=ti.cpu)
+    before = ti.lang.impl.get_runtime().prog.get_total_compilation_time()
+    x = ti.field(ti.f32, 4)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            x[i] = 1
+
+    k()
+    after = ti.lang.impl.get_runtime().prog.get_total_compilation_time()
+    assert after > before >= 0.0

@@ -1,0 +1,15 @@
+"""The few `taichi.lang.impl` names that public programs call (`ti.lang.impl.get_runtime().prog`)."""
+
+from __future__ import annotations
+
+from simgrad.lang.program import Program, get_program
+
+
+class _Runtime:
+    @property
+    def prog(self) -> Program:
+        return get_program()
+
+
+def get_runtime() -> _Runtime:
+    return _Runtime()
