@@ -32,6 +32,8 @@ for spec in sys.argv[2:]:
         try:
             (gen.run_forward if kind == "fwd" else gen.run_gradient)(seed, size, pathlib.Path(d))
             status, msg = "ok", ""
+        except gen.Inconclusive as e:
+            status, msg = "inconclusive", str(e)[-300:]
         except AssertionError as e:
             status, msg = "mismatch", str(e)[-3000:]
         except Exception as e:
@@ -82,12 +84,12 @@ def main() -> None:
     with ThreadPoolExecutor(args.jobs) as ex:
         for k, res in enumerate(ex.map(run_batch, batches)):
             results += res
-            bad = [r for r in res if r["status"] != "ok"]
+            bad = [r for r in res if r["status"] not in ("ok", "inconclusive")]
             print(f"batch {k + 1}/{len(batches)}: {len(res)} cases, {len(bad)} failing", flush=True)
-    counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "mismatch", "error", "crash")}
+    counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "inconclusive", "mismatch", "error", "crash")}
     print(json.dumps({"cases": len(results), **counts}))
     for r in results:
-        if r["status"] != "ok":
+        if r["status"] not in ("ok", "inconclusive"):
             print(f"--- {r['spec']} {r['status']}\n{r['msg']}")
     if args.json:
         with open(args.json, "w") as fh:

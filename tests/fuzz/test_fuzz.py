@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import sys
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -30,4 +30,7 @@ def test_random_kernels_match_the_reference(tmp_path, seed, size):
 @SETTINGS
 @given(seed=st.integers(0, 2**31 - 1), size=st.integers(1, 5))
 def test_random_gradients_match_finite_differences(tmp_path, seed, size):
-    gen.run_gradient(seed, size, tmp_path)
+    try:
+        gen.run_gradient(seed, size, tmp_path)
+    except gen.Inconclusive:
+        reject()  # finite differences cannot judge this program (they disagree with each other)
