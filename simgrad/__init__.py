@@ -11,10 +11,22 @@ from simgrad.errors import (
     SimgradAssertionError,
     SimgradError,
     SimgradIndexError,
+    SimgradNameError,
     SimgradRuntimeError,
     SimgradSyntaxError,
     SimgradTypeError,
+    TaichiCompilationError,
+    TaichiRuntimeError,
 )
+from simgrad.lang.logging import DEBUG, ERROR, INFO, TRACE, WARN, set_logging_level
+
+# Taichi's exception names for ours (`except ti.TaichiTypeError` in existing programs catches simgrad's)
+TaichiSyntaxError = SimgradSyntaxError
+TaichiTypeError = SimgradTypeError
+TaichiNameError = SimgradNameError
+TaichiIndexError = SimgradIndexError
+TaichiAssertionError = SimgradAssertionError
+TaichiRuntimeTypeError = SimgradTypeError
 from simgrad.lang import mathlib as math
 from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, metal, opengl, vulkan, x64
 from simgrad.lang.factories import FieldsBuilder, field, root

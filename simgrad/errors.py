@@ -66,7 +66,16 @@ class SimgradError(Exception):
         return self._text()
 
 
-class SimgradSyntaxError(SimgradError, SyntaxError):
+class TaichiCompilationError(SimgradError):
+    """What a program does wrong, found while compiling a kernel (Taichi's name, so that
+    `except ti.TaichiCompilationError` in existing programs catches ours)."""
+
+
+class TaichiRuntimeError(SimgradError, RuntimeError):
+    """An error a running kernel or the runtime reports (Taichi's name)."""
+
+
+class SimgradSyntaxError(TaichiCompilationError, SyntaxError):
     """A Python construct the kernel language does not support, or misuse of one it does."""
 
     def __init__(self, message: str, loc: Loc | None = None):
@@ -77,15 +86,15 @@ class SimgradSyntaxError(SimgradError, SyntaxError):
         return self._text()
 
 
-class SimgradTypeError(SimgradError, TypeError):
+class SimgradTypeError(TaichiCompilationError, TypeError):
     pass
 
 
-class SimgradNameError(SimgradError, NameError):
+class SimgradNameError(TaichiCompilationError, NameError):
     pass
 
 
-class SimgradIndexError(SimgradError, IndexError):
+class SimgradIndexError(TaichiCompilationError, IndexError):
     pass
 
 
@@ -97,13 +106,13 @@ class SimgradOverflowError(SimgradError, OverflowError):
     pass
 
 
-class SimgradAssertionError(SimgradError, AssertionError):
+class SimgradAssertionError(TaichiRuntimeError, AssertionError):
     pass
 
 
-class SimgradRuntimeError(SimgradError, RuntimeError):
+class SimgradRuntimeError(TaichiRuntimeError):
     pass
 
 
-class GradientError(SimgradError, RuntimeError):
+class GradientError(TaichiRuntimeError):
     """A kernel that cannot be differentiated correctly: we refuse instead of returning wrong numbers."""
