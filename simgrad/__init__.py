@@ -32,7 +32,17 @@ from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, 
 from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.kernel import func, kernel, pyfunc
-from simgrad.lang.loops import grouped, loop_config, ndrange, static, static_assert, static_print
+from simgrad.lang.loops import (
+    assume_in_range,
+    block_local,
+    cache_read_only,
+    grouped,
+    loop_config,
+    ndrange,
+    static,
+    static_assert,
+    static_print,
+)
 from simgrad.lang.matrix import Matrix, Vector
 from simgrad.lang.ops import (
     abs,

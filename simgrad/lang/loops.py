@@ -89,3 +89,30 @@ def loop_config(*, serialize: bool = False, block_dim: int | None = None, parall
     comp = context.current()
     if comp is not None:
         comp.next_loop_config = {"serialize": serialize or parallelize == 1, "block_dim": block_dim}
+
+
+# -- scheduling hints a CPU does not need: accepted so Taichi programs run, with no effect on results -------
+def block_local(*fields) -> None:
+    """Taichi caches these fields in GPU shared memory inside the next loop; on a CPU the cache is the cache."""
+    _check_fields("block_local", fields)
+
+
+def cache_read_only(*fields) -> None:
+    """Taichi's read-only data cache hint (GPU); nothing to do on a CPU."""
+    _check_fields("cache_read_only", fields)
+
+
+def assume_in_range(val, base, low: int, high: int):
+    """Taichi's promise that base + low <= val < base + high (it shrinks GPU shared-memory tiles); the value
+    itself is returned unchanged."""
+    if not (isinstance(low, int) and isinstance(high, int)) or low > high:
+        raise ValueError(f"assume_in_range: low and high must be integers with low <= high, got {low}, {high}")
+    return val
+
+
+def _check_fields(name: str, fields) -> None:
+    from simgrad.lang.field import Field
+
+    for f in fields:
+        if not isinstance(f, Field):
+            raise TypeError(f"ti.{name} expects fields, got {type(f).__name__}")

@@ -48,3 +48,25 @@ def test_set_logging_level():
     with pytest.raises(ValueError, match="unknown logging level"):
         ti.set_logging_level("loud")
     ti.set_logging_level(ti.INFO)
+
+
+def test_gpu_scheduling_hints_run_and_change_nothing():
+    ti.init(arch=ti.cpu)
+    n = 16
+    a = ti.field(ti.f32, n + 2)
+    b = ti.field(ti.f32, n)
+
+    @ti.kernel
+    def blur():
+        ti.block_local(a)
+        ti.cache_read_only(a)
+        for i in range(n):
+            j = ti.assume_in_range(i + 1, i, 0, 2)
+            b[i] = (a[j - 1] + a[j] + a[j + 1]) / 3
+
+    import numpy as np
+
+    av = np.arange(n + 2, dtype=np.float32) ** 2
+    a.from_numpy(av)
+    blur()
+    np.testing.assert_allclose(b.to_numpy(), (av[:-2] + av[1:-1] + av[2:]) / 3, rtol=1e-6)
