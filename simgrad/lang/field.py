@@ -12,6 +12,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradError, SimgradIndexError, SimgradOverflowError, caller_loc
 from simgrad.ir.fieldref import FieldRef
+from simgrad.lang.matrix import Matrix
 
 if TYPE_CHECKING:
     from simgrad.lang.snode import AccessTerm
@@ -362,7 +363,7 @@ class MatrixField(Field):
 
     def __getitem__(self, key):
         self._check_key(key)
-        return _element_class()(self, key)
+        return FieldElement(self, key)
 
     def _check_key(self, key) -> None:
         """Index errors name this field, not its first component."""
@@ -408,59 +409,47 @@ def _kernel_fill(field: Field, value) -> None:
     emit_fill(field, value)
 
 
-_ELEMENT = None
+class FieldElement(Matrix):
+    """`f[i]` of a vector/matrix field in Python scope, as Taichi has it: a live view of the element.
+    Reading it reads the field now; element and swizzle assignment (`v[None][0] -= lr * g`, `m[i][r, c] = x`,
+    `v[None].y = 1`) write through to the field, so no write is silently dropped."""
 
+    __slots__ = ("_field", "_key")
 
-def _element_class():
-    """FieldElement, built on first use (lang.matrix imports this module)."""
-    global _ELEMENT
-    if _ELEMENT is None:
-        from simgrad.lang.matrix import Matrix
+    def __init__(self, field, key):
+        object.__setattr__(self, "_field", field)
+        object.__setattr__(self, "_key", key)
+        object.__setattr__(self, "n", field.n)
+        object.__setattr__(self, "m", field.m)
 
-        class FieldElement(Matrix):
-            """`f[i]` of a vector/matrix field in Python scope, as Taichi has it: a live view of the element.
-            Reading it reads the field now; element, row-free and swizzle assignment (`v[None][0] -= lr * g`,
-            `m[i][r, c] = x`, `v[None].y = 1`) write through to the field, so no write is silently dropped."""
+    @property  # type: ignore[override]
+    def entries(self):
+        return [c[self._key] for c in self._field.comps]
 
-            __slots__ = ("_field", "_key")
+    def _one_index(self, key) -> None:
+        if self.m and not isinstance(key, (tuple, slice)):
+            raise IndexError(f"an element of the matrix field {self._field.name} takes 2 indices "
+                             f"([r, c]), got 1", )
 
-            def __init__(self, field, key):
-                object.__setattr__(self, "_field", field)
-                object.__setattr__(self, "_key", key)
-                object.__setattr__(self, "n", field.n)
-                object.__setattr__(self, "m", field.m)
+    def __getitem__(self, key):
+        self._one_index(key)
+        return Matrix.__getitem__(self, key)
 
-            @property  # type: ignore[override]
-            def entries(self):
-                return [c[self._key] for c in self._field.comps]
+    def __setitem__(self, key, value):
+        self._one_index(key)
+        idx = self._flat_index(key)
+        if idx is None:
+            raise IndexError(f"{key!r} is not an element index of the field {self._field.name}")
+        self._field.comps[idx][self._key] = value
 
-            def _one_index(self, key) -> None:
-                if self.m and not isinstance(key, (tuple, slice)):
-                    raise IndexError(f"an element of the matrix field {self._field.name} takes 2 indices "
-                                     f"([r, c]), got 1", )
+    def __setattr__(self, name, value):
+        idx = self._swizzle(name)
+        vals = [value] if len(idx) == 1 else list(value)
+        if len(vals) != len(idx):
+            raise ValueError(f"swizzle '{name}' takes {len(idx)} values, got {len(vals)}")
+        for i, v in zip(idx, vals):
+            self._field.comps[i][self._key] = v
 
-            def __getitem__(self, key):
-                self._one_index(key)
-                return Matrix.__getitem__(self, key)
-
-            def __setitem__(self, key, value):
-                self._one_index(key)
-                idx = self._flat_index(key)
-                if idx is None:
-                    raise IndexError(f"{key!r} is not an element index of the field {self._field.name}")
-                self._field.comps[idx][self._key] = value
-
-            def __setattr__(self, name, value):
-                idx = self._swizzle(name)
-                vals = [value] if len(idx) == 1 else list(value)
-                if len(vals) != len(idx):
-                    raise ValueError(f"swizzle '{name}' takes {len(idx)} values, got {len(vals)}")
-                for i, v in zip(idx, vals):
-                    self._field.comps[i][self._key] = v
-
-            def fill(self, v) -> None:
-                for c in self._field.comps:
-                    c[self._key] = v
-
-        _ELEMENT = FieldElement
-    return _ELEMENT
+    def fill(self, v) -> None:
+        for c in self._field.comps:
+            c[self._key] = v

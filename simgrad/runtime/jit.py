@@ -34,12 +34,9 @@ class Jit:
         llvm.initialize_native_target()
         llvm.initialize_native_asmprinter()
         self.triple = llvm.get_process_triple()
-        target = llvm.Target.from_triple(self.triple)
         self.cpu = llvm.get_host_cpu_name()
         self.features = llvm.get_host_cpu_features().flatten()
-        self.target_machine = target.create_target_machine(
-            cpu=self.cpu, features=self.features, opt=3, reloc="default", codemodel="jitdefault", jit=True
-        )
+        self.target_machine = self.new_target_machine()  # for optimising and emitting objects
         self.data_layout = str(self.target_machine.target_data)
         self.cache_enabled = True
         self.cache_dir = default_cache_dir()
