@@ -134,11 +134,11 @@ class Reverse:
         """Adjoint locals at the top of their task, set to zero at every entry (every iteration)."""
         decls = []
         for a in task.decls:
-            zero = Builder.detached(Op.CONST, a.type, (), {"value": 0.0 if a.vtype.is_float else 0}, a.loc)
+            zero = Builder.constant(0.0 if a.vtype.is_float else 0, a.vtype, a.loc)
             st = Builder.detached(Op.LOCAL_STORE, None, (a, zero), {}, a.loc)
-            for x in (a, zero, st):
+            for x in (a, st):
                 x.block = task.block
-            decls += [a, zero, st]
+            decls += [a, st]
         task.block.stmts[0:0] = decls
 
     # -- forward replay -----------------------------------------------------------------------------

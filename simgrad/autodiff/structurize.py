@@ -20,8 +20,8 @@ def _new(op, type_, operands, block, loc, attrs=None, nblocks=0) -> Stmt:
     return Builder.detached(op, type_, operands, attrs, loc, block, nblocks)
 
 
-def _const(v, block, loc, type_=dt.i32) -> Stmt:
-    return _new(Op.CONST, type_, (), block, loc, {"value": v})
+def _const(v, loc, type_=dt.i32) -> Stmt:
+    return Builder.constant(v, type_, loc)
 
 
 def structurize(block: Block) -> None:
@@ -61,7 +61,7 @@ def _range_to_while(loop: Stmt) -> Stmt:
     done = _new(Op.GE, dt.i32, (i, end), body, loc)
     stop = _new(Op.IF, None, (done,), body, loc, nblocks=2)
     stop.blocks[0].stmts.append(_new(Op.BREAK, None, (), stop.blocks[0], loc, {"header": True}))
-    nxt = _new(Op.ADD, t, (i, _const(1, body, loc, t)), body, loc)
+    nxt = _new(Op.ADD, t, (i, _const(1, loc, t)), body, loc)
     step = _new(Op.LOCAL_STORE, None, (idx, nxt), body, loc)
     old = loop.blocks[0].stmts
     for x in old:
@@ -88,7 +88,7 @@ def _rewrite_loop(loop: Stmt) -> None:
     outer = body if loop.attrs.get("parallel") else loop.block
     assert outer is not None, "internal: a loop outside any block"
     flag = _new(Op.ALLOCA, dt.i32, (), outer, loc)
-    init = _new(Op.LOCAL_STORE, None, (flag, _const(0, outer, loc)), outer, loc)
+    init = _new(Op.LOCAL_STORE, None, (flag, _const(0, loc)), outer, loc)
     _replace_jumps(body, flag)
     head = []
     if loop.op is Op.WHILE:
@@ -100,11 +100,11 @@ def _rewrite_loop(loop: Stmt) -> None:
             body.stmts = body.stmts[n + 1 :]
     # every iteration: clear "continue" (1), keep "break" (2); then run the body only while no flag is set
     ld = _new(Op.LOCAL_LOAD, dt.i32, (flag,), body, loc)
-    keep = _new(Op.BIT_AND, dt.i32, (ld, _const(2, body, loc)), body, loc)
+    keep = _new(Op.BIT_AND, dt.i32, (ld, _const(2, loc)), body, loc)
     reset = _new(Op.LOCAL_STORE, None, (flag, keep), body, loc)
     stop = []
     if loop.op is Op.WHILE:
-        c = _new(Op.NE, dt.i32, (keep, _const(0, body, loc)), body, loc)
+        c = _new(Op.NE, dt.i32, (keep, _const(0, loc)), body, loc)
         exit_if = _new(Op.IF, None, (c,), body, loc, nblocks=2)
         brk = _new(Op.BREAK, None, (), exit_if.blocks[0], loc, {"header": True})
         exit_if.blocks[0].stmts.append(brk)
@@ -129,7 +129,7 @@ def _is_pure(s: Stmt) -> bool:
 def _replace_jumps(block: Block, flag: Stmt) -> None:
     for k, s in enumerate(block.stmts):
         if s.op in (Op.BREAK, Op.CONTINUE) and not s.attrs.get("header"):
-            value = _const(2 if s.op is Op.BREAK else 1, block, s.loc)
+            value = _const(2 if s.op is Op.BREAK else 1, s.loc)
             block.stmts[k] = _new(Op.LOCAL_STORE, None, (flag, value), block, s.loc, {"jump": True})
         elif s.op is Op.IF:
             for b in s.blocks:
@@ -153,7 +153,7 @@ def _guarded(stmts: list[Stmt], flag: Stmt, block: Block, loc) -> list[Stmt]:
         out.append(s)
         if _sets_flag(s) and k + 1 < len(stmts):
             ld = _new(Op.LOCAL_LOAD, dt.i32, (flag,), block, loc)
-            ok = _new(Op.EQ, dt.i32, (ld, _const(0, block, loc)), block, loc)
+            ok = _new(Op.EQ, dt.i32, (ld, _const(0, loc)), block, loc)
             g = _new(Op.IF, None, (ok,), block, loc, nblocks=2)
             g.blocks[0].stmts = _guarded(stmts[k + 1 :], flag, g.blocks[0], loc)
             out += [ld, ok, g]

@@ -23,6 +23,8 @@ class Builder:
         return self.blocks[-1]
 
     def emit(self, op: Op, type: DataType | None, operands=(), attrs=None, nblocks: int = 0) -> Stmt:
+        if op is Op.CONST:  # a constant is a value, placed in no block (it prints inline)
+            return self.detached(op, type, operands, attrs, self.loc)
         s = self.detached(op, type, operands, attrs, self.loc, self.block, nblocks)
         self.block.stmts.append(s)
         return s
@@ -48,8 +50,14 @@ class Builder:
 
     # -- typed helpers ---------------------------------------------------------------------
     def const(self, value, type: DataType) -> Stmt:
-        """A constant, its value wrapped or rounded to `type` (ir/numeric.py)."""
-        return self.emit(Op.CONST, type, (), {"value": numeric.const_value(value, type)})
+        """A constant, its value wrapped or rounded to `type` (ir/numeric.py). Constants are values, as in
+        LLVM: placed in no block, so any statement anywhere may use one (the verifier checks that)."""
+        return self.constant(numeric.const_value(value, type), type)
+
+    @staticmethod
+    def constant(value, type: DataType, loc: Loc | None = None) -> Stmt:
+        """A constant of an already exact value (a fold's result)."""
+        return Stmt(Op.CONST, type, (), {"value": value}, loc)
 
     def cast(self, v: Stmt, type: DataType) -> Stmt:
         if v.type is type:
@@ -57,7 +65,7 @@ class Builder:
         if v.op is Op.CONST:
             folded = numeric.convert(v.attrs["value"], v.vtype, type)
             if folded is not None:
-                return self.emit(Op.CONST, type, (), {"value": folded})
+                return self.constant(folded, type, self.loc)
         return self.emit(Op.CAST, type, (v,))
 
     def binary(self, op: Op, a: Stmt, b: Stmt) -> Stmt:

@@ -1,10 +1,11 @@
-"""A stable, diffable text form of the IR: `%3:f32 = mul %1, %2  # sim.py:12`."""
+"""A stable, diffable text form of the IR: `%3:f32 = mul %1, 2.0:f32  # sim.py:12` (constants inline)."""
 
 from __future__ import annotations
 
 import os
 
 from simgrad.ir.nodes import Block, Kernel, Stmt
+from simgrad.ir.ops import Op
 
 
 def _attr_text(s: Stmt) -> str:
@@ -18,8 +19,14 @@ def _attr_text(s: Stmt) -> str:
     return (" [" + ", ".join(parts) + "]") if parts else ""
 
 
+def _operand_text(o: Stmt, names: dict[Stmt, str]) -> str:
+    if o.op is Op.CONST:
+        return f"{o.attrs['value']!r}:{o.type}"
+    return names.get(o, f"%{o.id}")
+
+
 def _stmt_text(s: Stmt, names: dict[Stmt, str]) -> str:
-    ops = ", ".join(names.get(o, f"%{o.id}") for o in s.operands)
+    ops = ", ".join(_operand_text(o, names) for o in s.operands)
     lhs = f"%{s.id}:{s.type} = " if s.type is not None else ""
     where = f"  # {os.path.basename(s.loc.file)}:{s.loc.line}" if s.loc else ""
     return f"{lhs}{s.op.name.lower()} {ops}{_attr_text(s)}".rstrip() + where

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from typing import Any
 
 from simgrad.ir import ops as O
+from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.numeric import minmax, wrap_int
 from simgrad.ir.ops import Op
@@ -85,8 +86,6 @@ def _key(s: Stmt, repl):
     """A hashable identity of a pure statement's value (None: not a CSE candidate)."""
     if s.op not in O.PURE or s.op is Op.ARG:
         return None
-    if s.op is Op.CONST:
-        return (Op.CONST, s.type, repr(s.attrs["value"]))  # repr keeps -0.0 apart from 0.0
     return (s.op, s.type, tuple(id(o) for o in s.operands), tuple(s.attrs.items()))
 
 
@@ -99,8 +98,9 @@ def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
             n += 1
         folded = _fold(s)
         if folded is not None:
-            s.op, s.operands, s.attrs = Op.CONST, (), {"value": folded}
+            repl[id(s)] = Builder.constant(folded, s.vtype, s.loc)
             n += 1
+            continue
         ident = _identity(s)
         if ident is not None:
             repl[id(s)] = ident

@@ -1,4 +1,7 @@
-"""IR invariants: every operand is defined before its use in an enclosing scope; operand types agree."""
+"""IR invariants: every operand is defined before its use in an enclosing scope; operand types agree.
+
+Constants are values placed in no block (ir/builder.py): one found in a block, or used as an operand while
+it sits in a block, is an error, so a constant can never be out of scope."""
 
 from __future__ import annotations
 
@@ -20,8 +23,13 @@ def verify(kernel: Kernel) -> bool:
 def _block(block: Block, visible: set) -> None:
     local = set(visible)
     for s in block.stmts:
+        if s.op is Op.CONST:
+            raise IRVerifyError(f"internal: constant {s!r} placed in a block", s.loc)
         for o in s.operands:
-            if id(o) not in local and o.op is not Op.CONST:  # constants have no scope
+            if o.op is Op.CONST:
+                if o.block is not None:
+                    raise IRVerifyError(f"internal: {s!r} uses constant {o!r} placed in a block", s.loc)
+            elif id(o) not in local:
                 raise IRVerifyError(f"internal: {s!r} uses {o!r} outside its scope", s.loc)
         if s.op in O.BINARY_ARITH or s.op in O.COMPARE:
             a, b = s.operands

@@ -43,7 +43,9 @@ def test_simplify_folds_identities_cse_and_dead_code(golden):
     text = _before_after(golden, k, simplify)
     muls = [s for s in walk(k.body) if s.op is Op.MUL]
     assert len(muls) == 1 and muls[0].operands[0] is i and muls[0].operands[1].attrs["value"] == 5
-    assert f32_sum.op is Op.ADD and f64_sum.op is Op.CONST and f64_sum.attrs["value"] == 0.75
+    rets = [s.operands[0] for s in k.body.stmts if s.op is Op.RET_STORE]
+    assert rets[1] is f32_sum and f32_sum.op is Op.ADD
+    assert rets[2].op is Op.CONST and rets[2].attrs["value"] == 0.75 and f64_sum not in list(walk(k.body))
     golden.check("simplify.txt", text)
 
 
@@ -102,6 +104,26 @@ def test_verify_reports_scope_and_type_errors():
     k, b = new_kernel("bad_types")
     b.emit(Op.ADD, dt.i32, (b.const(1, dt.i32), b.const(1.0, dt.f32)))  # emit itself does not check
     with pytest.raises(IRVerifyError, match="mixes i32 and f32"):
+        verify(k)
+
+
+def test_verify_checks_constants_are_placed_nowhere():
+    """A constant is a value usable anywhere only because it sits in no block: the verifier holds that."""
+    k, b = new_kernel("const_ok")
+    two = b.const(2, dt.i32)
+    loop = serial_for(b, b.const(0, dt.i32), b.const(4, dt.i32))
+    with b.inside(loop.blocks[0]):
+        b.emit(Op.RET_STORE, None, (b.binary(Op.MUL, loop, two),), {"slot": 0})
+    assert two.block is None and Op.CONST not in [s.op for s in walk(k.body)]
+    verify(k)  # the constant made outside the loop is fine inside it
+
+    k, b = new_kernel("const_placed")
+    loop = serial_for(b, b.const(0, dt.i32), b.const(4, dt.i32))
+    with b.inside(loop.blocks[0]):
+        placed = Builder.detached(Op.CONST, dt.i32, (), {"value": 3}, None, b.block)
+        b.block.stmts.append(placed)  # what a transform must not do
+    b.emit(Op.RET_STORE, None, (placed,), {"slot": 0})
+    with pytest.raises(IRVerifyError, match="placed in a block"):
         verify(k)
 
 
