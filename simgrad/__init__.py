@@ -31,7 +31,8 @@ from simgrad.lang import mathlib as math
 from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, metal, opengl, vulkan, x64
 from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField
-from simgrad.lang.kernel import func, kernel, pyfunc
+from simgrad.compiler.kernel import kernel
+from simgrad.lang.kernel import func, pyfunc
 from simgrad.lang.loops import (
     assume_in_range,
     block_local,

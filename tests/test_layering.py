@@ -1,6 +1,7 @@
 """The layering of docs/ARCHITECTURE.md, checked on the source: ir, passes, autodiff and codegen import
-nothing from lang or frontend (not even inside functions), and the stages import each other without
-cycles. An AST walk over every module, so a function-local import counts too."""
+nothing from lang or frontend (not even inside functions), lang nothing from frontend or compiler, and the
+stages (the packages under simgrad/) import each other without any cycle. An AST walk over every module,
+so a function-local import counts too."""
 
 from __future__ import annotations
 
@@ -70,20 +71,31 @@ def test_no_import_cycles_between_stages():
         state[n] = 2
         return None
 
-    # Known and still to remove (issue 10): @ti.kernel in lang drives the frontend (lang/kernel.py compiles,
-    # lang/field.py fill and lang/ndarray.py emit through frontend helpers) while the frontend lowers lang's
-    # objects. Every other pair of stages must be acyclic.
-    edges["lang"].discard("frontend")
     for n in sorted(edges):
         if n not in state:
             cycle = visit(n)
             assert cycle is None, f"stage import cycle: {' -> '.join(cycle)}; edges {edges}"
 
 
-def test_the_known_lang_frontend_cycle_is_the_only_lang_to_frontend_import():
-    """The exception above stays as small as it is: these lang modules, nothing new."""
-    users = set()
-    for path in (PKG / "lang").rglob("*.py"):
-        if any(name.startswith("simgrad.frontend") for _line, name in _imports(path)):
-            users.add(path.name)
-    assert users <= {"kernel.py", "field.py", "ndarray.py"}, users
+def test_lang_imports_neither_frontend_nor_compiler():
+    """lang (fields, types, operators) sits below the frontend that lowers it and the compiler that drives
+    both: what lang needs of a kernel under construction (inline a ti.func, emit a fill) it asks of the
+    compiler on ir/context.py's stack."""
+    bad = []
+    for path in sorted((PKG / "lang").rglob("*.py")):
+        for line, name in _imports(path):
+            if name.startswith(("simgrad.frontend", "simgrad.compiler")):
+                bad.append(f"{path.relative_to(PKG.parent)}:{line} imports {name}")
+    assert not bad, "\n".join(bad)
+
+
+def test_nothing_imports_the_compiler_stage_but_the_public_namespace():
+    bad = []
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG)
+        if len(rel.parts) < 2 or rel.parts[0] == "compiler":
+            continue
+        for line, name in _imports(path):
+            if name.startswith("simgrad.compiler"):
+                bad.append(f"{rel}:{line} imports {name}")
+    assert not bad, "\n".join(bad)

@@ -1,2 +1,2 @@
 """Automatic differentiation of kernels: IR-to-IR transforms (reverse mode) and their derivative rules.
-The user-facing Tape lives in lang/tape.py (it records launches of lang kernels)."""
+The user-facing Tape lives in lang/tape.py (it records kernel launches through lang/ad_hooks)."""

@@ -89,11 +89,11 @@ def call(comp, node: ast.Call):
         hashable = False
     if hashable:
         return _BUILTINS[fn](*args, **kwargs)
-    from simgrad.lang.kernel import Func, Kernel
+    from simgrad.lang.kernel import Func, KernelDef
 
     if isinstance(fn, Func):
         return inline(comp, fn, args, kwargs, node)
-    if isinstance(fn, Kernel):
+    if isinstance(fn, KernelDef):
         raise SimgradSyntaxError(f"kernel {fn.name} cannot be called from inside a kernel; make it a @ti.func",
                                  comp.loc(node))
     if not callable(fn):

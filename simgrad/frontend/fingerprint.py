@@ -57,7 +57,7 @@ def _trusted_module(name) -> bool:
 # and change no Python-scope state (fields, trees, the program are in other modules)
 _PURE_LIBRARY = frozenset(("simgrad.dtypes", "simgrad.lang.ops", "simgrad.lang.matrix", "simgrad.lang.mathlib",
                            "simgrad.lang.linalg", "simgrad.lang.loops", "simgrad.lang.types",
-                           "simgrad.lang.atomics", "simgrad.lang.expr", "simgrad.lang.ndarray"))
+                           "simgrad.lang.atomics", "simgrad.lang.expr", "simgrad.frontend.arrays"))
 
 
 def is_library_function(fn) -> bool:

@@ -54,7 +54,7 @@ def lower_for(comp, node: ast.For) -> None:
 
 
 def _is_array(v) -> bool:
-    from simgrad.lang.ndarray import ArrayArg
+    from simgrad.frontend.arrays import ArrayArg
 
     return isinstance(v, ArrayArg)
 

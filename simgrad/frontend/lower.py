@@ -104,6 +104,18 @@ class Compiler:
     def frame(self) -> Frame:
         return self.frames[-1]
 
+    # -- what lang objects ask of the compiler on the context stack (lang imports no frontend) -----------
+    def call_func(self, fn, args: list, kwargs: dict):
+        """A ti.func called from Python code running at compile time: inlined here."""
+        from simgrad.frontend.calls import inline
+
+        return inline(self, fn, args, kwargs, self.frame.src.tree)
+
+    def emit_fill(self, field, value) -> None:
+        from simgrad.frontend.loops import emit_fill
+
+        emit_fill(field, value)
+
     # -- scopes --------------------------------------------------------------------------------------
     def bind(self, name: str, value) -> None:
         self.frame.scopes[-1][name] = value
@@ -638,7 +650,7 @@ def _is_swizzle(name: str) -> bool:
 
 
 def _is_array_arg(v) -> bool:
-    from simgrad.lang.ndarray import ArrayArg
+    from simgrad.frontend.arrays import ArrayArg
 
     return isinstance(v, ArrayArg)
 
@@ -654,7 +666,7 @@ class _Starred:
 
 def global_ref(comp: Compiler, base, index, node):
     """Ref of `field[index]` / `array[index]`, with indices cast to i32 and shifted by field offsets."""
-    from simgrad.lang.ndarray import ArrayArg
+    from simgrad.frontend.arrays import ArrayArg
 
     idx: tuple
     if index is None:

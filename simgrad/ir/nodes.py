@@ -68,7 +68,7 @@ class Kernel:
     def __init__(self, name: str):
         self.name = name
         self.body = Block()
-        self.args: list = []  # runtime argument descriptors, in slot order (lang.kernel fills these)
+        self.args: list = []  # runtime argument descriptors, in slot order (the compile driver fills these)
         self.returns: list[DataType] = []
         self.ret_slot = 0  # the first context slot after the arguments: return values go there
         self.uses_tape = False  # an adjoint that pushes values on the per-thread tape (autodiff sets it)

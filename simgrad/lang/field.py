@@ -403,10 +403,11 @@ def _in_kernel() -> bool:
 
 
 def _kernel_fill(field: Field, value) -> None:
-    """`x.fill(v)` inside a kernel: a loop over every element at each launch (v may be a run-time value)."""
-    from simgrad.frontend.loops import emit_fill
+    """`x.fill(v)` inside a kernel: a loop over every element at each launch (v may be a run-time value),
+    emitted by the compiler on the context stack."""
+    from simgrad.ir import context
 
-    emit_fill(field, value)
+    context.current().emit_fill(field, value)
 
 
 class FieldElement(Matrix):

@@ -1,8 +1,10 @@
-"""ndarray kernel arguments: numpy arrays (or CPU torch tensors) passed by reference, any dtype/ndim."""
+"""How a kernel under compilation sees an ndarray parameter (a numpy array or CPU torch tensor passed by
+reference, any dtype/ndim): its components are the targets of GLOBAL_PTRs, its shape is read at run time."""
 
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.frontend.refs import GlobalRef, MatrixRef
 from simgrad.ir import context
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
@@ -46,8 +48,6 @@ class ArrayArg:
         return f"arg{self.slot}"
 
     def ref(self, indices):
-        from simgrad.frontend.refs import GlobalRef, MatrixRef
-
         refs = [GlobalRef(c, indices, self.dtype) for c in self.comps]
         if not self.element_shape:
             return refs[0]

@@ -1,0 +1,304 @@
+"""The compile driver: one instantiation of a @ti.kernel, from its arguments to a CompiledKernel.
+
+kernel cache key (frontend/fingerprint.py) -> on a hit, the cached object and launcher metadata; on a miss,
+frontend (parameters bound to context slots, body lowered) -> passes (and the autodiff transform for .grad)
+-> codegen -> object (runtime/jit.py, cached on disk) -> launcher (runtime/launch.py)."""
+
+from __future__ import annotations
+
+import inspect
+import pickle
+import threading
+from typing import Any, Protocol
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.debug import debug_level
+from simgrad.errors import SimgradTypeError
+from simgrad.frontend.arrays import ArrayArg
+from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
+from simgrad.frontend.lower import Compiler
+from simgrad.frontend.source import get_source
+from simgrad.ir import context
+from simgrad.ir.nodes import Kernel as IRKernel
+from simgrad.ir.ops import Op
+from simgrad.lang.expr import Expr
+from simgrad.lang.matrix import Matrix
+from simgrad.lang.program import Program
+from simgrad.lang.types import MatrixType, NdarrayType, is_template
+from simgrad.passes.manager import run_pipeline
+from simgrad.runtime.launch import Launcher
+
+# Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
+# a second thread asking for the same instantiation waits and then finds it in the cache.
+COMPILE_LOCK = threading.RLock()
+
+
+class Param:
+    """One kernel parameter as declared by its annotation."""
+
+    def __init__(self, name: str, ann, kernel_name: str):
+        self.name = name
+        self.ann = ann
+        if is_template(ann):
+            self.kind = "template"
+        elif isinstance(ann, NdarrayType) or ann is NdarrayType or ann is np.ndarray:
+            self.kind = "ndarray"
+            self.ann = ann if isinstance(ann, NdarrayType) else NdarrayType()
+        elif isinstance(ann, MatrixType):
+            self.kind = "matrix"
+        elif ann is inspect.Parameter.empty:
+            raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
+                                   "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
+        else:
+            try:
+                dt.from_any(ann)
+            except TypeError:
+                raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' has an unsupported "
+                                       f"annotation {ann!r}") from None
+            self.kind = "scalar"
+
+    def ndarray_key(self, a, kernel_name: str) -> tuple:
+        """What of an ndarray argument an instantiation depends on: dtype, dimensions, element shape."""
+        if not hasattr(a, "dtype") or not hasattr(a, "shape"):
+            raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' expects an ndarray, got "
+                                   f"{type(a).__name__}")
+        return (str(a.dtype), len(a.shape), self.ann.element_shape_of(tuple(a.shape)))
+
+
+class KernelSource(Protocol):
+    """What the driver reads of a @ti.kernel (compiler/kernel.py Kernel)."""
+
+    name: str
+    func: Any
+    signature: inspect.Signature
+    params: list[Param]
+
+
+class SlotParam:
+    """A parameter as one instantiation lays it out in the context buffer."""
+
+    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0):
+        self.name, self.kind, self.slot, self.dtype = name, kind, slot, dtype
+        self.count, self.ndim, self.ndim_total = count, ndim, ndim_total
+
+
+class CompiledKernel:
+    """One compiled instantiation: its launcher (`launch(*args)` runs it), the return shape, and the IR and
+    LLVM IR it was made from. Taken from the kernel cache, it has no IR: `ir` and `llvm_text` are rebuilt on
+    first use (tests and Tape validation read them)."""
+
+    def __init__(self, launcher: Launcher, ir: IRKernel | None, llvm_text: str | None,
+                 ret_matrix: tuple[int, int] | None, rebuild=None):
+        self.launcher = launcher
+        self.launch = launcher.launch
+        self._ir = ir
+        self._llvm_text = llvm_text
+        self._rebuild = rebuild
+        self.ret_matrix = ret_matrix
+
+    @property
+    def ir(self) -> IRKernel:
+        if self._ir is None:
+            self._ir, self._llvm_text, _ = self._rebuild()
+        return self._ir
+
+    @property
+    def llvm_text(self) -> str:
+        if self._llvm_text is None:
+            self._ir, self._llvm_text, _ = self._rebuild()
+        return self._llvm_text
+
+
+
+def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=None,
+                   name_suffix: str = "") -> CompiledKernel:
+    """Compile (or take from the kernel cache) the instantiation of `kernel` for `args`; `transform` (the
+    adjoint for .grad) runs on the IR between the passes."""
+    prog.materialize_all()
+    key, guard = _cache_key(kernel, prog, args, transform, name_suffix)
+    if key is not None:
+        entry = _read_entry(prog, key)
+        if entry is not None:
+            meta, obj = entry
+            launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
+            light = tuple(np.empty((0,) * a.ndim, a.dtype) if isinstance(a, np.ndarray) else a for a in args)
+            return CompiledKernel(launcher, None, None, meta["ret_matrix"],
+                                  rebuild=lambda: _build(kernel, prog, light, transform, name_suffix))
+    ir, text, meta = _build(kernel, prog, args, transform, name_suffix, guard)
+    obj = prog.jit.object_for(text)
+    if key is not None and guard is not None and guard.reason is None:
+        try:
+            prog.jit.write_entry(key, pickle.dumps((meta, obj), protocol=pickle.HIGHEST_PROTOCOL))
+        except (pickle.PicklingError, TypeError, AttributeError):
+            pass  # metadata that does not pickle only costs us the cache
+    launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
+    return CompiledKernel(launcher, ir, text, meta["ret_matrix"])
+
+
+def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix):
+    """(key, guard) of the kernel cache for this instantiation, or (None, None) when it is not cached."""
+    if not prog.jit.cache_enabled or debug_level() > 0:  # debug levels print what the compile does
+        return None, None
+    kb = KeyBuilder()
+    config = tuple(sorted((k, repr(v)) for k, v in vars(prog.config).items()
+                          if k not in ("offline_cache", "offline_cache_file_path")))
+    step = None if transform is None else f"{transform.__module__}.{transform.__qualname__}"
+    try:
+        parts = (environment(), prog.jit.target_id(), config, dt.Defaults.fp.name, dt.Defaults.ip.name,
+                 name_suffix, step, kb.function(kernel.func), kb.signature(kernel.signature),
+                 tuple(_param_fingerprint(kernel, kb, p, a) for p, a in zip(kernel.params, args)))
+    except Exception:  # Unkeyable, or e.g. a function without source: compiling reports it (or never needs it)
+        return None, None
+    return kb.digest(parts), Guard(kb.covered)
+
+
+def _param_fingerprint(kernel: KernelSource, kb: KeyBuilder, p: Param, a):
+    if p.kind == "template":
+        return kb.value(a)
+    if p.kind == "ndarray":
+        return p.ndarray_key(a, kernel.name)  # dtype and ndim; the annotation is in the signature
+    return None
+
+
+def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
+    """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
+    ir = IRKernel(kernel.name + name_suffix)
+    comp = Compiler(ir, get_source(kernel.func), debug=prog.config.debug)
+    comp.guard = guard
+    trees = len(prog.trees)
+    slots, ret_matrix = _bind_params(kernel, comp, args)
+    prog.materialize_all()
+    comp.compile_body()
+    prog.materialize_all()
+    if guard is not None and len(prog.trees) != trees:
+        guard.taint("fields were created while compiling")
+    ir.ret_slot = slots[1]
+    run_pipeline(ir, transform, debug=prog.config.debug)
+    symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
+    from simgrad.codegen.cpu import CpuCodegen  # the one target today; loaded when first needed
+
+    cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+    text = cg.generate()
+    # the disk cache is keyed by the IR text with the symbol name made stable
+    stable = text.replace(symbol, "sg_kernel")
+    uses_tape = ir.uses_tape
+    meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
+            "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
+            "tape_bound": ir.tape_bound if uses_tape else None}
+    return ir, stable, meta
+
+
+def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list[SlotParam], int],
+                                                                      tuple[int, int] | None]:
+    """Each parameter becomes what the body sees (an ARG value, a Matrix of them, an ndarray view, the
+    template value itself) and its place in the context buffer."""
+    b = comp.builder
+    slot = 0
+    out = []
+    context.push(comp)
+    try:
+        for p, a in zip(kernel.params, args):
+            if p.kind == "template":
+                comp.bind(p.name, a)
+                out.append(SlotParam(p.name, "template"))
+            elif p.kind == "scalar":
+                t = dt.from_any(p.ann)
+                comp.bind(p.name, Expr(b.emit(Op.ARG, t, (), {"slot": slot})))
+                out.append(SlotParam(p.name, "scalar", slot, t))
+                slot += 1
+            elif p.kind == "matrix":
+                mt: MatrixType = p.ann
+                t = mt.dtype
+                entries = [Expr(b.emit(Op.ARG, t, (), {"slot": slot + k})) for k in range(mt.num_entries)]
+                comp.bind(p.name, Matrix(n=mt.n, m=mt.m, _entries=entries))
+                out.append(SlotParam(p.name, "matrix", slot, t, count=mt.num_entries))
+                slot += mt.num_entries
+            else:
+                arg = _array_arg(kernel.name, p, a, slot)
+                comp.bind(p.name, arg)
+                out.append(SlotParam(p.name, "ndarray", slot, arg.dtype, ndim=arg.ndim,
+                                     ndim_total=arg.ndim + len(arg.element_shape)))
+                slot += arg.num_slots
+        ret = kernel.signature.return_annotation
+        ret_matrix = None
+        if ret is not inspect.Signature.empty and ret is not None:
+            if isinstance(ret, MatrixType):
+                comp.return_types = [ret.dtype] * ret.num_entries
+                ret_matrix = (ret.n, ret.m)
+            elif isinstance(ret, (tuple, list)):
+                comp.return_types = [dt.from_any(r) for r in ret]
+            else:
+                comp.return_types = [dt.from_any(ret)]
+            comp.ir.returns = comp.return_types
+    finally:
+        context.pop()
+    return (out, slot), ret_matrix
+
+
+def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
+    """The compiler's view of an ndarray argument, its dtype, dimensions and element shape checked."""
+    ann: NdarrayType = p.ann
+    arr = a if hasattr(a, "dtype") else np.asarray(a)
+    t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
+    want: dt.DataType | None
+    if isinstance(ann.dtype, MatrixType):
+        elem = ann.dtype.shape
+        want = ann.dtype.dtype
+    else:
+        want = dt.from_any(ann.dtype) if ann.dtype is not None else None
+        elem = ann.element_shape_of(tuple(arr.shape))
+        if len(elem) > len(arr.shape) or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
+            raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' of shape "
+                                   f"{tuple(arr.shape)} has no trailing element shape {elem}")
+    if want is not None and want is not t:
+        raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
+                               f"dtype {want}, got {t}")
+    ndim = len(arr.shape) - len(elem)
+    if ann.ndim is not None and ann.ndim != ndim:
+        raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
+                               f"{ann.ndim} dimension(s), got {ndim}")
+    return ArrayArg(p.name, slot, t, ndim, elem)
+
+
+def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
+    """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
+    launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
+                        meta["errors"], prog, meta["ret_matrix"])
+    if meta["uses_tape"]:
+        # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
+        bound = meta["tape_bound"]
+        launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
+    ret_matrix = meta["ret_matrix"]
+    if ret_matrix is not None:
+        inner = launcher.launch
+        n, m = ret_matrix
+
+        def launch(*a):
+            vals = inner(*a)
+            return Matrix(list(vals)) if m == 0 else Matrix([list(vals[r * m:(r + 1) * m]) for r in range(n)])
+
+        launcher.launch = launch
+    return launcher
+
+
+def _read_entry(prog: Program, key: str):
+    """(metadata, object) stored under `key`, or None (absent or unreadable: then it is compiled again)."""
+    data = prog.jit.read_entry(key)
+    if data is None:
+        return None
+    try:
+        return pickle.loads(data)
+    except Exception:  # a truncated or foreign file is a miss, never an error
+        return None
+
+
+def _torch_dtype(t):
+    import torch
+
+    m = {torch.float32: dt.f32, torch.float64: dt.f64, torch.int32: dt.i32, torch.int64: dt.i64,
+         torch.int8: dt.i8, torch.int16: dt.i16, torch.uint8: dt.u8, torch.float16: dt.f16}
+    return m[t.dtype]
+
+

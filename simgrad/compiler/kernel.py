@@ -1,0 +1,166 @@
+"""@ti.kernel: the object a decorated function becomes. It binds arguments, picks or compiles the
+instantiation they need (compiler/driver.py) and launches it; Tape recording goes through lang/ad_hooks."""
+
+from __future__ import annotations
+
+import inspect
+import time
+
+import numpy as np
+
+from simgrad.autodiff.validate import check_and_adjoint
+from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, Param, compile_kernel
+from simgrad.errors import SimgradTypeError, caller_loc
+from simgrad.lang import ad_hooks
+from simgrad.lang.kernel import KernelDef, resolved_signature, unexpected_keywords
+from simgrad.lang.program import Program, get_program
+
+
+def _template_key(v, keep: list):
+    if isinstance(v, (int, float, bool, str, type(None))):
+        return (type(v), v)
+    if isinstance(v, (tuple, list)):
+        return (type(v), tuple(_template_key(x, keep) for x in v))
+    if isinstance(v, np.ndarray) and v.size <= 16:
+        return ("nd", v.dtype.str, v.shape, v.tobytes())
+    keep.append(v)
+    return ("id", id(v))
+
+
+class Kernel(KernelDef):
+    """A @ti.kernel: binds arguments, keeps one CompiledKernel per instantiation (template values, ndarray
+    dtypes and shapes) and launches it; `.grad` launches the adjoint."""
+
+    def __init__(self, func) -> None:
+        self.func = func
+        self.name = func.__name__
+        self.__name__, self.__qualname__, self.__module__ = func.__name__, func.__qualname__, func.__module__
+        self.signature = resolved_signature(func)
+        self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]
+        self._nparams = len(self.params)
+        self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
+        self._has_defaults = any(p.default is not inspect.Parameter.empty
+                                 for p in self.signature.parameters.values())
+        self._instances: dict = {}
+        self._keep: list = []
+        self._generation = -1
+        self._simple_launch = None
+        self._grad_instances: dict = {}
+        self.grad = GradKernel(self)
+        self.__doc__ = func.__doc__
+        self.__wrapped__ = func
+
+    def __call__(self, *args, **kwargs):
+        if kwargs or (self._has_defaults and len(args) != self._nparams):
+            args = self._bind(args, kwargs)
+        if ad_hooks.recorder is not None:
+            ad_hooks.recorder(self, args)
+        prog = get_program()
+        if self._generation != prog.generation:
+            self._reset(prog)
+        launch = self._simple_launch
+        if launch is None or len(args) != self._nparams:
+            launch = self._launch_for(args)
+        if prog.config.kernel_profiler:
+            t0 = time.perf_counter()
+            out = launch(*args)
+            prog.profiler.add(self.name, time.perf_counter() - t0)
+            return out
+        return launch(*args)
+
+    def _bind(self, args, kwargs):
+        unknown = unexpected_keywords(self.signature, kwargs)
+        if unknown:
+            raise SimgradTypeError(f"kernel {self.name}: {unknown}", caller_loc())
+        try:
+            b = self.signature.bind(*args, **kwargs)
+        except TypeError as e:
+            raise SimgradTypeError(f"kernel {self.name}: {e}") from None
+        b.apply_defaults()
+        return tuple(b.arguments.values())
+
+    def _reset(self, prog: Program) -> None:
+        self._instances.clear()
+        self._grad_instances.clear()
+        self._keep.clear()
+        self._simple_launch = None
+        self._generation = prog.generation
+
+    def _launch_for(self, args, grad: bool = False):
+        return self._instance_for(args, grad).launch
+
+    def instance(self, args) -> CompiledKernel:
+        """The (compiled) forward instance these arguments launch."""
+        return self._instance_for(args, grad=False)
+
+    def _instance_for(self, args, grad: bool) -> CompiledKernel:
+        if len(args) != self._nparams:
+            names = ", ".join(p.name for p in self.params)
+            raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
+                                   f"got {len(args)}")
+        keep: list = []
+        key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
+        cache = self._grad_instances if grad else self._instances
+        inst = cache.get(key)
+        if inst is None:
+            with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
+                inst = cache.get(key)
+                if inst is None:
+                    inst = self._compile_instance(args, grad, key, keep, cache)
+        return inst
+
+    def _compile_instance(self, args, grad: bool, key, keep: list, cache: dict) -> CompiledKernel:
+        t0 = time.perf_counter()
+        try:
+            return self._compile_uncounted(args, grad, key, keep, cache)
+        finally:
+            get_program().compile_seconds += time.perf_counter() - t0
+
+    def _compile_uncounted(self, args, grad: bool, key, keep: list, cache: dict) -> CompiledKernel:
+        prog = get_program()
+        if grad:
+            inst = compile_kernel(self, prog, args, transform=check_and_adjoint, name_suffix="_grad")
+        else:
+            inst = compile_kernel(self, prog, args)
+            if self._simple:
+                self._simple_launch = inst.launch
+        cache[key] = inst
+        self._keep.extend(keep)
+        return inst
+
+    def _key_part(self, p: Param, a, keep):
+        if p.kind == "template":
+            return _template_key(a, keep)
+        if p.kind == "ndarray":
+            return p.ndarray_key(a, self.name)
+        return None
+
+
+class GradKernel:
+    """`kernel.grad(*args)`: launches the adjoint of the kernel (built once per instantiation)."""
+
+    def __init__(self, kernel: Kernel):
+        self.kernel = kernel
+        self.name = kernel.name + ".grad"
+
+    def __call__(self, *args, **kwargs):
+        k = self.kernel
+        if kwargs or (k._has_defaults and len(args) != k._nparams):
+            args = k._bind(args, kwargs)
+        prog = get_program()
+        if k._generation != prog.generation:
+            k._reset(prog)
+        launch = k._launch_for(args, grad=True)
+        if prog.config.kernel_profiler:
+            t0 = time.perf_counter()
+            launch(*args)
+            prog.profiler.add(self.name, time.perf_counter() - t0)
+            return None
+        launch(*args)
+        return None
+
+
+def kernel(func=None, **kw):
+    if func is None:
+        return lambda f: Kernel(f)
+    return Kernel(func)
