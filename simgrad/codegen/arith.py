@@ -102,7 +102,8 @@ def lower_binary(f, s) -> str:
         f.emit(f"{r} = {kind} {ty} {x}, {amt}")
         return r
     if op in _INT_BIN:
-        f.emit(f"{r} = {_INT_BIN[op]} {ty} {x}, {y}")
+        flags = " nuw nsw" if s.attrs.get("nowrap") else ""  # address arithmetic (passes/lower_access.py)
+        f.emit(f"{r} = {_INT_BIN[op]}{flags} {ty} {x}, {y}")
         return r
     if op in (Op.MIN, Op.MAX):
         name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")

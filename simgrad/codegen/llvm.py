@@ -15,6 +15,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.codegen import arith
+from simgrad.codegen.access import lower_check_index as check_index
 from simgrad.codegen.access import lower_global_ptr as global_address
 from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import Op
@@ -269,8 +270,13 @@ class KernelCodegen:
         while k < len(stmts):
             s = stmts[k]
             if s.op is Op.ATOMIC and f.in_task and atomic_form(f, s) == PAIR:
-                lower_pair(self, f, s, stmts[k + 1], stmts[k + 2])  # the pass marks `a; ptr; b` triples
-                k += 3
+                # the strategy pass marks `a; ptr; b` triples; lower_access put ptr's offset before ptr
+                j = k + 1
+                while stmts[j].op is not Op.GLOBAL_PTR:
+                    LOWERING[stmts[j].op](self, f, stmts[j])
+                    j += 1
+                lower_pair(self, f, s, stmts[j], stmts[j + 1])
+                k = j + 2
                 continue
             LOWERING[s.op](self, f, s)
             k += 1
@@ -407,6 +413,10 @@ def lower_local_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     f.names[s] = global_address(g, f, s)
+
+
+def lower_check_index(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    f.names[s] = check_index(g, f, s)
 
 
 def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -590,7 +600,8 @@ def _combine_text(dst, op, ty, a, b, fm: str) -> str:
 # Every Op and the function that emits it. A target reuses this table; only parallel loops are its own.
 LOWERING: dict[Op, Lowering] = {
     Op.CONST: lower_const, Op.ARG: lower_arg, Op.ALLOCA: lower_alloca, Op.LOCAL_LOAD: lower_local_load,
-    Op.LOCAL_STORE: lower_local_store, Op.GLOBAL_PTR: lower_global_ptr, Op.GLOBAL_LOAD: lower_global_load,
+    Op.LOCAL_STORE: lower_local_store, Op.GLOBAL_PTR: lower_global_ptr, Op.CHECK_INDEX: lower_check_index,
+    Op.GLOBAL_LOAD: lower_global_load,
     Op.GLOBAL_STORE: lower_global_store, Op.ATOMIC: lower_atomic, Op.ARRAY_SHAPE: lower_array_shape,
     Op.RET_STORE: lower_ret_store,
     **{op: lower_binary_op for op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.RAW_MOD,

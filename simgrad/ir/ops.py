@@ -14,7 +14,9 @@ class Op(Enum):
     ALLOCA = auto()  # a mutable local
     LOCAL_LOAD = auto()
     LOCAL_STORE = auto()
-    GLOBAL_PTR = auto()  # address of a field/ndarray element (attrs: target, comp; operands: indices)
+    GLOBAL_PTR = auto()  # address of a field/ndarray element (attrs: target; operands: indices, and once
+    #                      passes/lower_access.py has run (attrs: lowered) the element's byte offset last)
+    CHECK_INDEX = auto()  # debug mode: an index (u64) checked against its extent; 0 when out of bounds
     GLOBAL_LOAD = auto()
     GLOBAL_STORE = auto()
     ATOMIC = auto()  # atomic read-modify-write, returns the old value (attrs: kind)
@@ -99,7 +101,7 @@ CONTROL = {Op.IF, Op.RANGE_FOR, Op.WHILE}
 # Statements with an effect beyond their value: never removed by dead-code elimination.
 SIDE_EFFECTS = {
     Op.LOCAL_STORE, Op.GLOBAL_STORE, Op.ATOMIC, Op.RET_STORE, Op.IF, Op.RANGE_FOR, Op.WHILE, Op.BREAK,
-    Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP,
+    Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP, Op.CHECK_INDEX,
 }
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = BINARY_ARITH | COMPARE | UNARY_MATH | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG,

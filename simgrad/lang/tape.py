@@ -18,6 +18,7 @@ from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
+from simgrad.passes.lower_access import indices_of
 
 
 class Tape:
@@ -153,7 +154,8 @@ def reads_of(kernel_ir: Kernel) -> dict:
             if not differentiable(target):
                 continue
             loc, leads = out.get(target, (s.loc, []))
-            lead = ptr.operands[0] if ptr.operands and _evaluable(ptr.operands[0]) else None
+            indices = indices_of(ptr)
+            lead = indices[0] if indices and _evaluable(indices[0]) else None
             out[target] = (loc, None if leads is None or lead is None else leads + [lead])
     return out
 

@@ -23,7 +23,7 @@ def _verify_enabled() -> bool:
 
 def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics)."""
-    from simgrad.passes import hoist, parallel_strategy, promote, simplify, verify
+    from simgrad.passes import hoist, lower_access, parallel_strategy, promote, simplify, verify
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -34,6 +34,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
     steps.append(("hoist", hoist.hoist))  # loop-invariant index arithmetic out of parallel loops
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
+    # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)
+    steps.append(("lower_access", partial(lower_access.lower_access, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass
         steps = [("verify", verify.verify)] + [x for st in steps for x in (st, ("verify", verify.verify))]
     for name, fn in steps:

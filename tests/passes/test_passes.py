@@ -202,3 +202,52 @@ def test_owned_through_the_digits_of_a_flattened_loop():
     parallel_strategy(k)
     forms = [s.attrs["strategy"] for s in walk(k.body) if s.op is Op.ATOMIC]
     assert forms == ["plain", "plain", "private|atomic", "private|atomic"]
+
+
+def _access_kernel():
+    """A parallel loop over a 4x8 grid (flat index digits), reading a field in its own order (affine), a
+    blocked field (division and remainder terms) and a loop-invariant element (offset before the loop)."""
+    ti.init(arch=ti.cpu)
+    g = ti.field(ti.f32, shape=(4, 8), name="g")
+    blocked = ti.field(ti.f32, name="blocked")
+    ti.root.dense(ti.ij, (2, 2)).dense(ti.ij, (2, 4)).place(blocked)
+    total = ti.field(ti.f32, shape=(), name="total")
+    k, b = new_kernel("access")
+    t = b.emit(Op.ARG, dt.i32, (), {"slot": 0})
+    loop = parallel_for(b, 32)
+    with b.inside(loop.blocks[0]):
+        i = b.binary(Op.RAW_DIV, loop, b.const(8, dt.i32))
+        j = b.binary(Op.RAW_MOD, loop, b.const(8, dt.i32))
+        v = load(b, ptr(b, g, i, j))
+        store(b, ptr(b, blocked, i, j), v)
+        atomic_add(b, ptr(b, g, t, b.const(1, dt.i32)), v)
+        atomic_add(b, ptr(b, total), v)
+    return k, loop
+
+
+def test_lower_access_expands_fields_into_offsets(golden):
+    from simgrad.passes.lower_access import indices_of, lower_access
+
+    k, loop = _access_kernel()
+    parallel_strategy(k)
+    text = _before_after(golden, k, lower_access)
+    ptrs = [s for s in walk(k.body) if s.op is Op.GLOBAL_PTR]
+    assert all(s.attrs["lowered"] for s in ptrs) and [len(indices_of(s)) for s in ptrs] == [2, 2, 2, 0]
+    affine, blocked, invariant, scalar = (s.operands[-1] for s in ptrs)
+    assert affine.op is Op.MUL and affine.operands[0].operands[0] is loop  # L * 4: no division
+    assert {s.op for s in walk(loop.blocks[0])} >= {Op.RAW_DIV, Op.RAW_MOD}  # the blocked layout's digits
+    assert invariant in k.body.stmts and invariant.block is k.body  # computed before the loop
+    assert scalar.op is Op.CONST and scalar.attrs["value"] == 0
+    golden.check("lower_access.txt", text)
+
+
+def test_lower_access_debug_mode_checks_every_index_at_the_access():
+    from simgrad.passes.lower_access import lower_access
+
+    k, loop = _access_kernel()
+    parallel_strategy(k, debug=True)
+    lower_access(k, debug=True)
+    verify(k)
+    checks = [s for s in walk(k.body) if s.op is Op.CHECK_INDEX]
+    assert len(checks) == 6 and all(c.block is not k.body for c in checks)  # nothing hoisted past a check
+    assert [c.attrs["axis"] for c in checks] == [0, 1, 0, 1, 0, 1]

@@ -6,10 +6,10 @@ entry:
   %capv.2 = load float, ptr %cap.1
   %lo.3 = trunc i64 %lo to i32
   %hi.4 = trunc i64 %hi to i32
-  %cp.18 = getelementptr i64, ptr %ctx, i64 0
-  %cv.19 = load ptr, ptr %cp.18
-  %rp.20 = getelementptr ptr, ptr %cv.19, i64 0
-  %root.21 = load ptr, ptr %rp.20, !invariant.load !0
+  %cp.16 = getelementptr i64, ptr %ctx, i64 0
+  %cv.17 = load ptr, ptr %cp.16
+  %rp.18 = getelementptr ptr, ptr %cv.17, i64 0
+  %root.19 = load ptr, ptr %rp.18, !invariant.load !0
   br label %pre.5
 pre.5:
   br label %head.6
@@ -18,14 +18,12 @@ head.6:
   %c.12 = icmp slt i32 %i.10, %hi.4
   br i1 %c.12, label %body.7, label %done.9
 body.7:
-  %ix.13 = sext i32 %i.10 to i64
-  %ix.14 = sext i32 %i.10 to i64
-  %of.15 = mul nsw i64 %ix.14, 4
-  %of.16 = add nsw i64 0, %of.15
-  %ptr.17 = getelementptr inbounds i8, ptr %root.21, i64 %of.16
-  %cv.22 = sitofp i32 %i.10 to float
-  %v.23 = fmul nsz float %capv.2, %cv.22
-  store float %v.23, ptr %ptr.17
+  %cv.13 = sext i32 %i.10 to i64
+  %v.14 = mul nuw nsw i64 %cv.13, 4
+  %ptr.15 = getelementptr inbounds i8, ptr %root.19, i64 %v.14
+  %cv.20 = sitofp i32 %i.10 to float
+  %v.21 = fmul nsz float %capv.2, %cv.20
+  store float %v.21, ptr %ptr.15
   br label %latch.8
 latch.8:
   %inext.11 = add i32 %i.10, 1
@@ -48,7 +46,7 @@ entry:
   store float %cv.4, ptr %cap.6
   %b.7 = sext i32 0 to i64
   %e.8 = sext i32 16 to i64
-  call void %cv.10(ptr @sg_kernel_task1, ptr %clo.5, i64 %b.7, i64 %e.8, i64 1024)
+  call void %cv.10(ptr @sg_kernel_task1, ptr %clo.5, i64 %b.7, i64 %e.8, i64 682)
   %cancel.11 = load atomic i32, ptr %cv.2 monotonic, align 4
   %cancelled.12 = icmp ne i32 %cancel.11, 0
   br i1 %cancelled.12, label %stop.13, label %go.14

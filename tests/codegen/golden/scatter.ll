@@ -8,18 +8,18 @@ entry:
   %hi.2 = trunc i64 %hi to i32
   %red.3 = alloca float
   store float 0x0000000000000000, ptr %red.3
-  %cp.29 = getelementptr i64, ptr %ctx, i64 0
-  %cv.30 = load ptr, ptr %cp.29
-  %rp.31 = getelementptr ptr, ptr %cv.30, i64 0
-  %root.32 = load ptr, ptr %rp.31, !invariant.load !0
-  %cp.55 = getelementptr i64, ptr %ctx, i64 0
-  %cv.56 = load ptr, ptr %cp.55
-  %rp.57 = getelementptr ptr, ptr %cv.56, i64 1
-  %root.58 = load ptr, ptr %rp.57, !invariant.load !0
-  %cp.61 = getelementptr i64, ptr %ctx, i64 0
-  %cv.62 = load ptr, ptr %cp.61
-  %rp.63 = getelementptr ptr, ptr %cv.62, i64 2
-  %root.64 = load ptr, ptr %rp.63, !invariant.load !0
+  %cp.28 = getelementptr i64, ptr %ctx, i64 0
+  %cv.29 = load ptr, ptr %cp.28
+  %rp.30 = getelementptr ptr, ptr %cv.29, i64 0
+  %root.31 = load ptr, ptr %rp.30, !invariant.load !0
+  %cp.53 = getelementptr i64, ptr %ctx, i64 0
+  %cv.54 = load ptr, ptr %cp.53
+  %rp.55 = getelementptr ptr, ptr %cv.54, i64 1
+  %root.56 = load ptr, ptr %rp.55, !invariant.load !0
+  %cp.59 = getelementptr i64, ptr %ctx, i64 0
+  %cv.60 = load ptr, ptr %cp.59
+  %rp.61 = getelementptr ptr, ptr %cv.60, i64 2
+  %root.62 = load ptr, ptr %rp.61, !invariant.load !0
   br label %pre.4
 pre.4:
   br label %head.5
@@ -41,48 +41,46 @@ body.6:
   %t.23 = and i1 %t.19, %t.22
   %t.24 = select i1 %t.23, i32 %d.16, i32 0
   %v.12 = add i32 %m.18, %t.24
-  %ix.25 = sext i32 %v.12 to i64
-  %of.26 = mul nuw nsw i64 %ix.25, 8
-  %of.27 = add nuw nsw i64 0, %of.26
-  %ptr.28 = getelementptr inbounds i8, ptr %root.32, i64 %of.27
-  %ix.33 = sext i32 %v.12 to i64
-  %of.34 = mul nuw nsw i64 %ix.33, 8
-  %of.35 = add nuw nsw i64 0, %of.34
-  %ptr.36 = getelementptr inbounds i8, ptr %root.32, i64 %of.35
-  %pv.37 = insertelement <2 x float> poison, float 0x3FF0000000000000, i32 0
-  %pv.38 = insertelement <2 x float> %pv.37, float 0x4000000000000000, i32 1
-  %pinc.39 = bitcast <2 x float> %pv.38 to i64
-  %cur.43 = load atomic i64, ptr %ptr.36 monotonic, align 8
-  br label %cas.40
-cas.40:
-  br label %casloop.41
-casloop.41:
-  %c.44 = phi i64 [%cur.43, %cas.40], [%c.49, %casloop.41]
-  %c.45 = bitcast i64 %c.44 to <2 x float>
-  %c.47 = fadd <2 x float> %c.45, %pv.38
-  %c.46 = bitcast <2 x float> %c.47 to i64
-  %c.48 = cmpxchg ptr %ptr.36, i64 %c.44, i64 %c.46 monotonic monotonic, align 8
-  %c.49 = extractvalue { i64, i1 } %c.48, 0
-  %c.50 = extractvalue { i64, i1 } %c.48, 1
-  br i1 %c.50, label %casdone.42, label %casloop.41
-casdone.42:
-  %ix.51 = sext i32 %v.12 to i64
-  %of.52 = mul nuw nsw i64 %ix.51, 4
-  %of.53 = add nuw nsw i64 0, %of.52
-  %ptr.54 = getelementptr inbounds i8, ptr %root.58, i64 %of.53
-  %old.59 = atomicrmw fadd ptr %ptr.54, float 0x3FF0000000000000 monotonic
-  %ptr.60 = getelementptr inbounds i8, ptr %root.64, i64 0
-  %old.65 = load float, ptr %red.3
-  %new.66 = fadd nsz float %old.65, 0x3FF0000000000000
-  store float %new.66, ptr %red.3
+  %cv.25 = sext i32 %v.12 to i64
+  %v.26 = mul nuw nsw i64 %cv.25, 8
+  %ptr.27 = getelementptr inbounds i8, ptr %root.31, i64 %v.26
+  %cv.32 = sext i32 %v.12 to i64
+  %v.33 = mul nuw nsw i64 %cv.32, 8
+  %v.34 = add nuw nsw i64 4, %v.33
+  %ptr.35 = getelementptr inbounds i8, ptr %root.31, i64 %v.26
+  %pv.36 = insertelement <2 x float> poison, float 0x3FF0000000000000, i32 0
+  %pv.37 = insertelement <2 x float> %pv.36, float 0x4000000000000000, i32 1
+  %pinc.38 = bitcast <2 x float> %pv.37 to i64
+  %cur.42 = load atomic i64, ptr %ptr.35 monotonic, align 8
+  br label %cas.39
+cas.39:
+  br label %casloop.40
+casloop.40:
+  %c.43 = phi i64 [%cur.42, %cas.39], [%c.48, %casloop.40]
+  %c.44 = bitcast i64 %c.43 to <2 x float>
+  %c.46 = fadd <2 x float> %c.44, %pv.37
+  %c.45 = bitcast <2 x float> %c.46 to i64
+  %c.47 = cmpxchg ptr %ptr.35, i64 %c.43, i64 %c.45 monotonic monotonic, align 8
+  %c.48 = extractvalue { i64, i1 } %c.47, 0
+  %c.49 = extractvalue { i64, i1 } %c.47, 1
+  br i1 %c.49, label %casdone.41, label %casloop.40
+casdone.41:
+  %cv.50 = sext i32 %v.12 to i64
+  %v.51 = mul nuw nsw i64 %cv.50, 4
+  %ptr.52 = getelementptr inbounds i8, ptr %root.56, i64 %v.51
+  %old.57 = atomicrmw fadd ptr %ptr.52, float 0x3FF0000000000000 monotonic
+  %ptr.58 = getelementptr inbounds i8, ptr %root.62, i64 0
+  %old.63 = load float, ptr %red.3
+  %new.64 = fadd nsz float %old.63, 0x3FF0000000000000
+  store float %new.64, ptr %red.3
   br label %latch.7
 latch.7:
   %inext.10 = add i32 %i.9, 1
   br label %head.5
 done.8:
-  %sum.67 = load float, ptr %red.3
-  %ptr.68 = getelementptr inbounds i8, ptr %root.64, i64 0
-  %old.69 = atomicrmw fadd ptr %ptr.68, float %sum.67 monotonic
+  %sum.65 = load float, ptr %red.3
+  %ptr.66 = getelementptr inbounds i8, ptr %root.62, i64 0
+  %old.67 = atomicrmw fadd ptr %ptr.66, float %sum.65 monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
@@ -106,10 +104,10 @@ entry:
   %hi.16 = trunc i64 %hi to i32
   %red.17 = alloca float
   store float 0x0000000000000000, ptr %red.17
-  %cp.58 = getelementptr i64, ptr %ctx, i64 0
-  %cv.59 = load ptr, ptr %cp.58
-  %rp.60 = getelementptr ptr, ptr %cv.59, i64 2
-  %root.61 = load ptr, ptr %rp.60, !invariant.load !0
+  %cp.56 = getelementptr i64, ptr %ctx, i64 0
+  %cv.57 = load ptr, ptr %cp.56
+  %rp.58 = getelementptr ptr, ptr %cv.57, i64 2
+  %root.59 = load ptr, ptr %rp.58, !invariant.load !0
   br label %pre.18
 pre.18:
   br label %head.19
@@ -131,39 +129,37 @@ body.20:
   %t.37 = and i1 %t.33, %t.36
   %t.38 = select i1 %t.37, i32 %d.30, i32 0
   %v.26 = add i32 %m.32, %t.38
-  %ix.39 = sext i32 %v.26 to i64
-  %of.40 = mul nuw nsw i64 %ix.39, 8
-  %of.41 = add nuw nsw i64 0, %of.40
-  %ptr.42 = getelementptr i8, ptr %pr.6, i64 %of.41
-  %old.43 = load float, ptr %ptr.42
-  %new.44 = fadd nsz float %old.43, 0x3FF0000000000000
-  store float %new.44, ptr %ptr.42
-  %ix.45 = sext i32 %v.26 to i64
-  %of.46 = mul nuw nsw i64 %ix.45, 8
-  %of.47 = add nuw nsw i64 4, %of.46
-  %ptr.48 = getelementptr i8, ptr %pr.6, i64 %of.47
-  %old.49 = load float, ptr %ptr.48
-  %new.50 = fadd nsz float %old.49, 0x4000000000000000
-  store float %new.50, ptr %ptr.48
-  %ix.51 = sext i32 %v.26 to i64
-  %of.52 = mul nuw nsw i64 %ix.51, 4
-  %of.53 = add nuw nsw i64 0, %of.52
-  %ptr.54 = getelementptr i8, ptr %pr.13, i64 %of.53
-  %old.55 = load float, ptr %ptr.54
-  %new.56 = fadd nsz float %old.55, 0x3FF0000000000000
-  store float %new.56, ptr %ptr.54
-  %ptr.57 = getelementptr inbounds i8, ptr %root.61, i64 0
-  %old.62 = load float, ptr %red.17
-  %new.63 = fadd nsz float %old.62, 0x3FF0000000000000
-  store float %new.63, ptr %red.17
+  %cv.39 = sext i32 %v.26 to i64
+  %v.40 = mul nuw nsw i64 %cv.39, 8
+  %ptr.41 = getelementptr i8, ptr %pr.6, i64 %v.40
+  %old.42 = load float, ptr %ptr.41
+  %new.43 = fadd nsz float %old.42, 0x3FF0000000000000
+  store float %new.43, ptr %ptr.41
+  %cv.44 = sext i32 %v.26 to i64
+  %v.45 = mul nuw nsw i64 %cv.44, 8
+  %v.46 = add nuw nsw i64 4, %v.45
+  %ptr.47 = getelementptr i8, ptr %pr.6, i64 %v.46
+  %old.48 = load float, ptr %ptr.47
+  %new.49 = fadd nsz float %old.48, 0x4000000000000000
+  store float %new.49, ptr %ptr.47
+  %cv.50 = sext i32 %v.26 to i64
+  %v.51 = mul nuw nsw i64 %cv.50, 4
+  %ptr.52 = getelementptr i8, ptr %pr.13, i64 %v.51
+  %old.53 = load float, ptr %ptr.52
+  %new.54 = fadd nsz float %old.53, 0x3FF0000000000000
+  store float %new.54, ptr %ptr.52
+  %ptr.55 = getelementptr inbounds i8, ptr %root.59, i64 0
+  %old.60 = load float, ptr %red.17
+  %new.61 = fadd nsz float %old.60, 0x3FF0000000000000
+  store float %new.61, ptr %red.17
   br label %latch.21
 latch.21:
   %inext.24 = add i32 %i.23, 1
   br label %head.19
 done.22:
-  %sum.64 = load float, ptr %red.17
-  %ptr.65 = getelementptr inbounds i8, ptr %root.61, i64 0
-  %old.66 = atomicrmw fadd ptr %ptr.65, float %sum.64 monotonic
+  %sum.62 = load float, ptr %red.17
+  %ptr.63 = getelementptr inbounds i8, ptr %root.59, i64 0
+  %old.64 = atomicrmw fadd ptr %ptr.63, float %sum.62 monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private_sum0(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
@@ -290,7 +286,7 @@ nomem.31:
   call void @free(ptr %priv.27)
   br label %atomic.19
 private.21:
-  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 256)
   %real.33 = getelementptr i8, ptr %root.38, i64 0
   %real.32 = getelementptr i8, ptr %real.33, i64 0
   %sslot.39 = getelementptr i64, ptr %sclo.34, i64 0
@@ -313,7 +309,7 @@ private.21:
   call void @free(ptr %priv.27)
   br label %scatterdone.22
 atomic.19:
-  call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 256)
   br label %scatterdone.22
 scatterdone.22:
   %cancel.52 = load atomic i32, ptr %cv.2 monotonic, align 4

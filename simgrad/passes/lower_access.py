@@ -1,0 +1,183 @@
+"""Expand every element access into address arithmetic in the IR: the last pass before codegen.
+
+A GLOBAL_PTR names an element by its indices (what autodiff and the parallel analyses reason about).
+This pass appends the element's byte offset, computed in IR, as the GLOBAL_PTR's last operand and marks
+it `lowered`; codegen then only adds the offset to the tree's root (or to a thread's private copy, or to
+an ndarray's base). The expansion goes level by level over the field's SNode kinds (FieldRef.kinds): a
+dense level is arithmetic, `((I[axis] // divisor) % modulus) * stride` per layout term; pointer,
+bitmasked and dynamic levels will add their lookups and activation here.
+
+- Affine addressing: when the indices are exactly the digits of the enclosing parallel loop's flat index
+  L (`for i, j in g` reading `g[i, j]`, laid out in that order) the offset is `const + L * stride`, with
+  no division, so LLVM sees an affine address and vectorises the loop.
+- An offset whose indices are all loop-invariant is computed before the parallel loop, so the task
+  captures it (the per-thread sums of a `total[None] += v` add into that place after the loop).
+- Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
+  index 0 instead of a wild access).
+Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LLVM gets nuw/nsw.
+"""
+
+from __future__ import annotations
+
+from simgrad import dtypes as dt
+from simgrad.ir.builder import Builder
+from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.ops import Op
+from simgrad.passes.digits import digit_chain
+
+_NOWRAP = {"nowrap": True}
+
+
+def indices_of(ptr: Stmt) -> tuple[Stmt, ...]:
+    """A GLOBAL_PTR's index operands, whether or not it has been lowered."""
+    return ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands
+
+
+def lower_access(kernel: Kernel, debug: bool = False) -> bool:
+    return _lower_block(kernel.body, None, set(), None, debug)
+
+
+def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt] | None, debug: bool) -> bool:
+    """Lower the accesses of `block`; `loop` is the parallel loop the block is in (None outside one),
+    `inside` the ids of its statements, `before` what goes ahead of it."""
+    changed = False
+    out: list[Stmt] = []
+    for s in block.stmts:
+        if loop is None and s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
+            ahead: list[Stmt] = []
+            changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug)
+            for x in ahead:
+                x.block = block
+            out += ahead
+        else:
+            for b in s.blocks:
+                changed |= _lower_block(b, loop, inside, before, debug)
+        if s.op is Op.GLOBAL_PTR and not s.attrs.get("lowered"):
+            invariant = before is not None and not debug and all(id(o) not in inside for o in s.operands)
+            offset_stmts = _lower_one(s, loop, debug)
+            for x in offset_stmts:
+                x.block = None if invariant else block
+            (before if invariant and before is not None else out).extend(offset_stmts)
+            changed = True
+        out.append(s)
+    block.stmts = out
+    return changed
+
+
+def _lower_one(s: Stmt, loop: Stmt | None, debug: bool) -> list[Stmt]:
+    """The statements computing GLOBAL_PTR `s`'s byte offset, which becomes its last operand."""
+    scratch = Block()
+    b = Builder(scratch)
+    b.loc = s.loc
+    target = s.attrs["target"]
+    if isinstance(target, FieldRef):
+        offset = _field_offset(b, s, target, loop, debug)
+    else:
+        offset = _array_offset(b, s, target, debug)
+    s.operands = (*s.operands, offset)
+    s.attrs["lowered"] = True
+    return scratch.stmts
+
+
+def _u64(b: Builder, v: Stmt) -> Stmt:
+    return b.cast(v, dt.u64)
+
+
+def _value(x: Stmt):
+    return x.attrs["value"] if x.op is Op.CONST else None
+
+
+def _add(b: Builder, x: Stmt, y: Stmt) -> Stmt:
+    """x + y, folded when either is a known 0 or both are constants (constant indices, field offsets)."""
+    vx, vy = _value(x), _value(y)
+    if vx is not None and vy is not None:
+        return b.const(vx + vy, dt.u64)
+    if vx == 0:
+        return y
+    if vy == 0:
+        return x
+    return b.emit(Op.ADD, dt.u64, (x, y), dict(_NOWRAP))
+
+
+def _mul(b: Builder, x: Stmt, k: int) -> Stmt:
+    vx = _value(x)
+    if vx is not None:
+        return b.const(vx * k, dt.u64)
+    if k == 1:
+        return x
+    return b.emit(Op.MUL, dt.u64, (x, b.const(k, dt.u64)), dict(_NOWRAP))
+
+
+def _digit(b: Builder, op: Op, x: Stmt, k: int) -> Stmt:
+    vx = _value(x)
+    if vx is not None:
+        return b.const(vx // k if op is Op.RAW_DIV else vx % k, dt.u64)
+    return b.binary(op, x, b.const(k, dt.u64))
+
+
+def _checked(b: Builder, s: Stmt, name: str, axis: int, idx: Stmt, extent: Stmt, shape_text: str,
+             offset: int = 0) -> Stmt:
+    return b.emit(Op.CHECK_INDEX, dt.u64, (idx, extent),
+                  {"field": name, "axis": axis, "shape": shape_text, "offset": offset})
+
+
+def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, debug: bool) -> Stmt:
+    """The byte offset of a field element from its tree's root, level by level (dense levels only today)."""
+    if any(kind != "dense" for kind in target.kinds):
+        raise NotImplementedError(f"internal: access lowering for SNode kinds {target.kinds}")
+    _tree, const, terms, shape = target.layout
+    stride = None if debug else _linear_stride(s, terms, loop)
+    if stride is not None and loop is not None:  # affine in the loop index: LLVM can vectorise
+        return _add(b, b.const(const, dt.u64), _mul(b, _u64(b, loop), stride))
+    idx = [_u64(b, o) for o in s.operands]
+    if debug:
+        offsets = target.offset or (0,) * len(shape)
+        text = str(shape) + (f" with offset {tuple(offsets)}" if any(offsets) else "")
+        idx = [_checked(b, s, target.name, k, i, b.const(shape[k], dt.u64), text, offsets[k])
+               for k, i in enumerate(idx)]
+    off = b.const(const, dt.u64)
+    for t in terms:
+        d = idx[t.axis]
+        if t.divisor != 1:
+            d = _digit(b, Op.RAW_DIV, d, t.divisor)
+        if t.modulus:
+            d = _digit(b, Op.RAW_MOD, d, t.modulus)
+        off = _add(b, off, _mul(b, d, t.stride))
+    return off
+
+
+def _array_offset(b: Builder, s: Stmt, target, debug: bool) -> Stmt:
+    """The byte offset of an ndarray element from the array's base: C order, the element's components as
+    trailing dimensions."""
+    arg = target.arg
+    idx = [_u64(b, o) for o in s.operands]
+    extents = [_u64(b, b.emit(Op.ARRAY_SHAPE, dt.i32, (), {"arg": arg, "dim": k})) for k in range(arg.ndim)]
+    if debug:
+        idx = [_checked(b, s, arg.name, k, i, extents[k], "ndarray") for k, i in enumerate(idx)]
+    lin: Stmt = b.const(0, dt.u64)
+    for k, i in enumerate(idx):
+        if k:
+            lin = b.emit(Op.MUL, dt.u64, (lin, extents[k]), dict(_NOWRAP))
+        lin = _add(b, lin, i)
+    if arg.num_components > 1:
+        lin = _add(b, _mul(b, lin, arg.num_components), b.const(target.comp, dt.u64))
+    return _mul(b, lin, arg.dtype.bits // 8)
+
+
+def _linear_stride(s: Stmt, terms, loop: Stmt | None) -> int | None:
+    """The byte stride `st` when the element's offset is `const + L * st` for the parallel loop's index L:
+    the indices are the digits `(L // d) % m` of a flattened struct-for (the loop starting at 0) and the
+    field's strides follow the same digits (a dense field iterated in its own order). Else None."""
+    if loop is None or loop.operands[0].op is not Op.CONST or loop.operands[0].attrs["value"] != 0:
+        return None
+    if len(terms) != len(s.operands) or any(t.divisor != 1 or t.modulus for t in terms):
+        return None
+    values = [s.operands[t.axis] for t in terms]
+    chain = digit_chain(values, loop)
+    if chain is None or len(chain) != len(terms):  # every index one digit of the chain
+        return None
+    unit = terms[chain[0][0]].stride
+    if any(terms[k].stride != divisor * unit for k, divisor, _mod in chain):
+        return None
+    return unit
