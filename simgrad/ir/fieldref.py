@@ -3,7 +3,7 @@
 A GLOBAL_PTR of a field refers to a FieldRef (attrs["target"]), built by the frontend from the lang-level
 field (lang/field.py ScalarField.ref()). Passes, autodiff and codegen read only this record, never the
 Field: that is what keeps them free of `simgrad.lang`, and where sparse SNode kinds will plug in (their
-per-level kinds go in `kinds`; access lowering expands by kind)."""
+per-level kinds go in `kinds`; passes/lower_access.py expands by kind)."""
 
 from __future__ import annotations
 

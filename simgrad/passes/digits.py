@@ -1,6 +1,6 @@
 """Digits of a flattened loop index: struct-for and ndrange loops run over one flat index L and recover
 their indices as `(L // d) % m` (raw division by constants). Ownership (passes/parallel_strategy.py)
-and affine addressing (codegen/access.py) both ask which index values form such a chain."""
+and affine addressing (passes/lower_access.py) both ask which index values form such a chain."""
 
 from __future__ import annotations
 
