@@ -39,5 +39,5 @@ def lower_global_ptr(gen, f, s) -> str:
         else:
             f.emit(f"{p} = getelementptr inbounds i8, ptr {f.root(target.layout[0])}, i64 {off}")
     else:
-        f.emit(f"{p} = getelementptr inbounds i8, ptr {f.array_base(target.arg)}, i64 {off}")
+        f.emit(f"{p} = getelementptr inbounds i8, ptr {f.array_base(target)}, i64 {off}")
     return p

@@ -1,25 +1,15 @@
 """How a kernel under compilation sees an ndarray parameter (a numpy array or CPU torch tensor passed by
-reference, any dtype/ndim): its components are the targets of GLOBAL_PTRs, its shape is read at run time."""
+reference, any dtype/ndim): each component of its elements is an ir.ArrayRef, the target of GLOBAL_PTRs;
+its shape is read at run time."""
 
 from __future__ import annotations
 
 from simgrad import dtypes as dt
 from simgrad.frontend.refs import GlobalRef, MatrixRef
 from simgrad.ir import context
+from simgrad.ir.fieldref import ArrayRef
 from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
-
-
-class ArrayComp:
-    """One scalar component of an ndarray argument's elements (the target of a GLOBAL_PTR)."""
-
-    def __init__(self, arg: ArrayArg, comp: int):
-        self.arg, self.comp = arg, comp
-        self.name = arg.name
-        self.dtype = arg.dtype
-
-    def ir_name(self) -> str:
-        return f"arg{self.arg.slot}.{self.comp}" if self.arg.num_components > 1 else f"arg{self.arg.slot}"
 
 
 class ArrayArg:
@@ -28,17 +18,16 @@ class ArrayArg:
     def __init__(self, name: str, slot: int, dtype: dt.DataType, ndim: int, element_shape: tuple = ()):
         self.name, self.slot, self.dtype, self.ndim = name, slot, dtype, ndim
         self.element_shape = element_shape
-        self.num_components = 1
-        for n in element_shape:
-            self.num_components *= n
-        self.comps = [ArrayComp(self, c) for c in range(self.num_components)]
+        self.comps = [ArrayRef(name, slot, dtype, ndim, element_shape, c)
+                      for c in range(ArrayRef(name, slot, dtype, ndim, element_shape).num_components)]
+        self.num_components = len(self.comps)
 
     @property
     def num_slots(self) -> int:
         return 1 + self.ndim
 
     def shape_expr(self, dim: int) -> Expr:
-        return Expr(context.builder().emit(Op.ARRAY_SHAPE, dt.i32, (), {"arg": self, "dim": dim}))
+        return Expr(context.builder().emit(Op.ARRAY_SHAPE, dt.i32, (), {"arg": self.comps[0], "dim": dim}))
 
     @property
     def shape(self) -> tuple:

@@ -1,4 +1,4 @@
-"""What the IR knows of a field: a record of where and how its elements are laid out.
+"""What the IR knows of a field or an ndarray argument: records of where and how elements are laid out.
 
 A GLOBAL_PTR of a field refers to a FieldRef (attrs["target"]), built by the frontend from the lang-level
 field (lang/field.py ScalarField.ref()). Passes, autodiff and codegen read only this record, never the
@@ -33,3 +33,26 @@ class FieldRef:
 
     def ir_name(self) -> str:
         return self.name
+
+
+@dataclass(eq=False)
+class ArrayRef:
+    """One scalar component of an ndarray argument's elements (a GLOBAL_PTR's target; ARRAY_SHAPE names any
+    component of the argument): the base pointer is context slot `slot`, the run-time extents follow it."""
+
+    name: str
+    slot: int
+    dtype: DataType
+    ndim: int
+    element_shape: tuple = ()
+    comp: int = 0
+
+    @property
+    def num_components(self) -> int:
+        n = 1
+        for e in self.element_shape:
+            n *= e
+        return n
+
+    def ir_name(self) -> str:
+        return f"arg{self.slot}.{self.comp}" if self.num_components > 1 else f"arg{self.slot}"

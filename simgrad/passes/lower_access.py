@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from simgrad import dtypes as dt
 from simgrad.ir.builder import Builder
-from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.digits import digit_chain
@@ -73,8 +73,10 @@ def _lower_one(s: Stmt, loop: Stmt | None, debug: bool) -> list[Stmt]:
     target = s.attrs["target"]
     if isinstance(target, FieldRef):
         offset = _field_offset(b, s, target, loop, debug)
-    else:
+    elif isinstance(target, ArrayRef):
         offset = _array_offset(b, s, target, debug)
+    else:
+        raise AssertionError(f"internal: {s!r} points into {target!r}")
     s.operands = (*s.operands, offset)
     s.attrs["lowered"] = True
     return scratch.stmts
@@ -147,10 +149,9 @@ def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, debu
     return off
 
 
-def _array_offset(b: Builder, s: Stmt, target, debug: bool) -> Stmt:
+def _array_offset(b: Builder, s: Stmt, arg: ArrayRef, debug: bool) -> Stmt:
     """The byte offset of an ndarray element from the array's base: C order, the element's components as
     trailing dimensions."""
-    arg = target.arg
     idx = [_u64(b, o) for o in s.operands]
     extents = [_u64(b, b.emit(Op.ARRAY_SHAPE, dt.i32, (), {"arg": arg, "dim": k})) for k in range(arg.ndim)]
     if debug:
@@ -161,7 +162,7 @@ def _array_offset(b: Builder, s: Stmt, target, debug: bool) -> Stmt:
             lin = b.emit(Op.MUL, dt.u64, (lin, extents[k]), dict(_NOWRAP))
         lin = _add(b, lin, i)
     if arg.num_components > 1:
-        lin = _add(b, _mul(b, lin, arg.num_components), b.const(target.comp, dt.u64))
+        lin = _add(b, _mul(b, lin, arg.num_components), b.const(arg.comp, dt.u64))
     return _mul(b, lin, arg.dtype.bits // 8)
 
 
