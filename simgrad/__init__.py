@@ -32,7 +32,7 @@ from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, 
 from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.compiler.kernel import kernel
-from simgrad.lang.kernel import func, pyfunc
+from simgrad.lang.kernel import data_oriented, func, pyfunc
 from simgrad.lang.loops import (
     assume_in_range,
     block_local,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
 from simgrad.codegen.privatize import emit_private_launch, slice_shift
-from simgrad.ir.nodes import Block, Stmt, walk
+from simgrad.ir.nodes import Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
 from simgrad.passes.privatize import Region
@@ -57,7 +57,7 @@ class CpuCodegen(KernelCodegen):
         for dst, src_stmt in ((b64, s.operands[0]), (e64, s.operands[1])):
             f.emit(f"{dst} = {ext} {ty} {f.v(src_stmt)} to i64" if ext else f"{dst} = add i64 {f.v(src_stmt)}, 0")
         pfor = f.ctx_slot(abi.CTX_PFOR, "ptr")
-        grain = s.attrs.get("block_dim") or max(1, 4096 // max(1, _cost(s.blocks[0])))
+        grain = plan.grain  # decided before access lowering added its address arithmetic
         if not regions:
             f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
             return
@@ -135,7 +135,3 @@ def _free_values(loop: Stmt) -> list[Stmt]:
             if id(o) not in inside and o.op is not Op.CONST and id(o) not in seen:
                 seen[id(o)] = o
     return list(seen.values())
-
-
-def _cost(block: Block) -> int:
-    return sum(1 for _ in walk(block))

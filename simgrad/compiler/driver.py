@@ -38,10 +38,12 @@ COMPILE_LOCK = threading.RLock()
 class Param:
     """One kernel parameter as declared by its annotation."""
 
-    def __init__(self, name: str, ann, kernel_name: str):
+    def __init__(self, name: str, ann, kernel_name: str, first: bool = False):
         self.name = name
         self.ann = ann
-        if is_template(ann):
+        if first and name == "self" and ann is inspect.Parameter.empty:
+            self.kind = "template"  # a kernel method of a @ti.data_oriented class: the object is compile-time
+        elif is_template(ann):
             self.kind = "template"
         elif isinstance(ann, NdarrayType) or ann is NdarrayType or ann is np.ndarray:
             self.kind = "ndarray"

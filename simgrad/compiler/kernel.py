@@ -36,7 +36,8 @@ class Kernel(KernelDef):
         self.name = func.__name__
         self.__name__, self.__qualname__, self.__module__ = func.__name__, func.__qualname__, func.__module__
         self.signature = resolved_signature(func)
-        self.params = [Param(n, p.annotation, self.name) for n, p in self.signature.parameters.items()]
+        self.params = [Param(n, p.annotation, self.name, first=k == 0)
+                       for k, (n, p) in enumerate(self.signature.parameters.items())]
         self._nparams = len(self.params)
         self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
         self._has_defaults = any(p.default is not inspect.Parameter.empty
@@ -67,6 +68,10 @@ class Kernel(KernelDef):
             prog.profiler.add(self.name, time.perf_counter() - t0)
             return out
         return launch(*args)
+
+    def __get__(self, obj, owner=None):
+        """`obj.step()` for a kernel method: the kernel with the object as its first (template) argument."""
+        return self if obj is None else BoundKernel(self, obj)
 
     def _bind(self, args, kwargs):
         unknown = unexpected_keywords(self.signature, kwargs)
@@ -158,6 +163,27 @@ class GradKernel:
             return None
         launch(*args)
         return None
+
+
+class BoundKernel:
+    """A kernel method of an object; `.grad` is the bound adjoint."""
+
+    def __init__(self, kernel: Kernel, obj):
+        self.kernel, self.obj = kernel, obj
+        self.name = kernel.name
+        self.__name__ = kernel.__name__
+        self.grad = _BoundGrad(kernel.grad, obj)
+
+    def __call__(self, *args, **kwargs):
+        return self.kernel(self.obj, *args, **kwargs)
+
+
+class _BoundGrad:
+    def __init__(self, grad: GradKernel, obj):
+        self.grad, self.obj = grad, obj
+
+    def __call__(self, *args, **kwargs):
+        return self.grad(self.obj, *args, **kwargs)
 
 
 def kernel(func=None, **kw):

@@ -89,10 +89,12 @@ def call(comp, node: ast.Call):
         hashable = False
     if hashable:
         return _BUILTINS[fn](*args, **kwargs)
-    from simgrad.lang.kernel import Func, KernelDef
+    from simgrad.lang.kernel import BoundFunc, Func, KernelDef
 
     if isinstance(fn, Func):
         return inline(comp, fn, args, kwargs, node)
+    if isinstance(fn, BoundFunc):  # a ti.func method of a data-oriented object
+        return inline(comp, fn.func, [fn.obj, *args], kwargs, node)
     if isinstance(fn, KernelDef):
         raise SimgradSyntaxError(f"kernel {fn.name} cannot be called from inside a kernel; make it a @ti.func",
                                  comp.loc(node))

@@ -36,6 +36,29 @@ class Func:
             raise SimgradTypeError(f"ti.func {self.name} can only be called from a kernel or another ti.func")
         return comp.call_func(self, list(args), kwargs)  # the frontend's compiler inlines it
 
+    def __get__(self, obj, owner=None):
+        """`self.f(x)` on a @ti.data_oriented object: the func with the object as its first argument."""
+        return self if obj is None else BoundFunc(self, obj)
+
+
+class BoundFunc:
+    """A ti.func method of an object: calling it inlines the func with the object as `self`."""
+
+    def __init__(self, func: Func, obj):
+        self.func, self.obj = func, obj
+        self.name = func.name
+
+    def __call__(self, *args, **kwargs):
+        return self.func(self.obj, *args, **kwargs)
+
+
+def data_oriented(cls):
+    """@ti.data_oriented: a class whose methods may be kernels and funcs (`self` is a compile-time value,
+    like a ti.template() argument). Kernels and funcs bind to instances by themselves; the decorator only
+    marks the class, as Taichi's does, so that passing such an object as a template argument reads well."""
+    cls._data_oriented = True
+    return cls
+
 
 def func(fn=None, **kw):
     if fn is None:

@@ -40,10 +40,12 @@ class LoopStrategy:
     reductions: dict[tuple, tuple[Stmt, list[Stmt]]] = field(default_factory=dict)
     regions: list[Region] = field(default_factory=list)  # candidates for per-thread copies
     weight: int = 0  # updates per iteration into the regions (serial loops of constant trip multiply)
+    #: iterations a thread takes at a time: ~4096 statements' worth of the body (a user's block_dim wins)
+    grain: int = 1
 
     def ir_name(self) -> str:
-        """The IR printer's text: `tasks(reduce=[%7], private=[tree 2 [0, 4096) prefix 1], weight=9)`."""
-        parts = []
+        """The IR printer's text: `tasks(grain=64, reduce=[%7], private=[tree 2 [0, 4096) prefix 1], weight=9)`."""
+        parts = [f"grain={self.grain}"]
         if self.reductions:
             parts.append("reduce=[" + ", ".join(f"%{place.id}" for place, _ in self.reductions.values()) + "]")
         if self.regions:
@@ -85,7 +87,8 @@ def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
     reductions = _reductions(loop, inside, uses)
     reduced = {key[0] for key in reductions}
     regions, weight = private_regions(loop, inside, uses, shared, reduced, debug)
-    loop.attrs["strategy"] = LoopStrategy(reductions, regions, weight)
+    grain = loop.attrs.get("block_dim") or max(1, 4096 // max(1, sum(1 for _ in walk(loop.blocks[0]))))
+    loop.attrs["strategy"] = LoopStrategy(reductions, regions, weight, grain)
     reducing = {id(a) for _place, adds in reductions.values() for a in adds}
     private = {k for r in regions for k in r.keys}  # (id(field), slice key) of the updates copied
     nprefix = {tid: len(key) for tid, key in private}  # every update of a field has as many prefix axes

@@ -46,7 +46,7 @@ entry:
   store float %cv.4, ptr %cap.6
   %b.7 = sext i32 0 to i64
   %e.8 = sext i32 16 to i64
-  call void %cv.10(ptr @sg_kernel_task1, ptr %clo.5, i64 %b.7, i64 %e.8, i64 682)
+  call void %cv.10(ptr @sg_kernel_task1, ptr %clo.5, i64 %b.7, i64 %e.8, i64 1024)
   %cancel.11 = load atomic i32, ptr %cv.2 monotonic, align 4
   %cancelled.12 = icmp ne i32 %cancel.11, 0
   br i1 %cancelled.12, label %stop.13, label %go.14

@@ -286,7 +286,7 @@ nomem.31:
   call void @free(ptr %priv.27)
   br label %atomic.19
 private.21:
-  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 256)
+  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
   %real.33 = getelementptr i8, ptr %root.38, i64 0
   %real.32 = getelementptr i8, ptr %real.33, i64 0
   %sslot.39 = getelementptr i64, ptr %sclo.34, i64 0
@@ -309,7 +309,7 @@ private.21:
   call void @free(ptr %priv.27)
   br label %scatterdone.22
 atomic.19:
-  call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 256)
+  call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
   br label %scatterdone.22
 scatterdone.22:
   %cancel.52 = load atomic i32, ptr %cv.2 monotonic, align 4
