@@ -76,7 +76,7 @@ def test_data_oriented_object_as_a_template_argument():
     @ti.kernel
     def count(obj: ti.template()):
         for i in obj.x:
-            out[None] += obj.n
+            out[None] += obj.n + obj.x[i] * 0
 
     count(s)
     assert out[None] == 9
