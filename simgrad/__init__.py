@@ -18,7 +18,7 @@ from simgrad.errors import (
     TaichiCompilationError,
     TaichiRuntimeError,
 )
-from simgrad.lang.logging import DEBUG, ERROR, INFO, TRACE, WARN, set_logging_level
+from simgrad.lang.logging import CRITICAL, DEBUG, ERROR, INFO, TRACE, WARN, is_logging_effective, set_logging_level
 
 # Taichi's exception names for ours (`except ti.TaichiTypeError` in existing programs catches simgrad's)
 TaichiSyntaxError = SimgradSyntaxError
@@ -29,8 +29,10 @@ TaichiAssertionError = SimgradAssertionError
 TaichiRuntimeTypeError = SimgradTypeError
 from simgrad.lang import mathlib as math
 from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, metal, opengl, vulkan, x64
+
+x86_64 = x64
 from simgrad.lang.factories import FieldsBuilder, field, root
-from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.lang.kernel import data_oriented, func, pyfunc
 from simgrad.lang.loops import (
@@ -38,6 +40,7 @@ from simgrad.lang.loops import (
     block_local,
     cache_read_only,
     grouped,
+    stop_grad,
     loop_config,
     ndrange,
     static,
@@ -57,12 +60,15 @@ from simgrad.lang.ops import (
     cos,
     exp,
     floor,
+    frexp,
+    global_thread_idx,
     log,
     logical_and,
     logical_not,
     logical_or,
     max,
     min,
+    one,
     pow,
     randn,
     random,
@@ -75,6 +81,7 @@ from simgrad.lang.ops import (
     sqrt,
     tan,
     tanh,
+    zero,
 )
 from simgrad.lang.snode import i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import template, types
@@ -83,17 +90,19 @@ from simgrad.lang.atomics import (
     atomic_and,
     atomic_max,
     atomic_min,
+    atomic_mul,
     atomic_or,
     atomic_sub,
     atomic_xor,
 )
-from simgrad.lang.linalg import polar_decompose, svd, sym_eig
+from simgrad.lang.linalg import eig, polar_decompose, solve, svd, sym_eig
 from simgrad.lang import profiler
 from simgrad.lang.program import init, reset
 
 int8, int16, int32, int64 = i8, i16, i32, i64
 uint8, uint16, uint32, uint64 = u8, u16, u32, u64
 float16, float32, float64 = f16, f32, f64
+uint1 = u1
 ScalarField = ScalarField
 MatrixField = MatrixField
 

@@ -52,9 +52,11 @@ class _Task:
         self.decls: list[Stmt] = []
 
 
-def _grad_of(target):
-    """The gradient field of a field element target, or None when it has no placed gradient."""
-    if isinstance(target, FieldRef) and target.grad is not None:
+def _grad_of(ptr: Stmt):
+    """The gradient field of the element `ptr` points to, or None when it has no placed gradient or
+    ti.stop_grad covers the access."""
+    target = ptr.attrs["target"]
+    if isinstance(target, FieldRef) and target.grad is not None and not ptr.attrs.get("stop_grad"):
         return target.grad
     return None
 
@@ -484,8 +486,7 @@ class Reverse:
 
     def _grad_ptr(self, s: Stmt, ptr: Stmt, extra: Sequence[Stmt] = ()):
         """(pointer to the gradient element, values of `extra`) for a field access, or (None, ...)."""
-        target = ptr.attrs["target"]
-        grad = _grad_of(target)
+        grad = _grad_of(ptr)
         if grad is None:
             return None, None, []
         vals = self.values(s, list(ptr.operands) + list(extra))
@@ -506,7 +507,7 @@ class Reverse:
         is consumed: passed on, then zeroed (an earlier write of that element, or its value before this
         kernel, no longer influences anything through it)."""
         ptr, w = s.operands
-        if not ptr.type.is_float or _grad_of(ptr.attrs["target"]) is None:
+        if not ptr.type.is_float or _grad_of(ptr) is None:
             return
         gp, _, _ = self._grad_ptr(s, ptr)
         if w.type.is_float and id(w) in self.active:
@@ -584,7 +585,7 @@ def _active(body: Block) -> set[int]:
                 if id(s) in active:
                     continue
             elif op is Op.GLOBAL_LOAD:
-                on = _grad_of(s.operands[0].attrs["target"]) is not None
+                on = _grad_of(s.operands[0]) is not None
             elif op is Op.LOCAL_LOAD:
                 on = id(s.operands[0]) in active
             else:

@@ -415,6 +415,10 @@ def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     f.names[s] = global_address(g, f, s)
 
 
+def lower_thread_index(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    f.names[s] = f.tid  # the pool's thread id in a task, 0 in serial code
+
+
 def lower_check_index(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     f.names[s] = check_index(g, f, s)
 
@@ -436,9 +440,9 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     ty = llvm_type(t)
     kind = s.attrs["kind"]
     if t.is_float:
-        op = {"add": "fadd", "min": "fmin", "max": "fmax", "xchg": "xchg"}[kind]
+        op = {"add": "fadd", "mul": "fmul", "min": "fmin", "max": "fmax", "xchg": "xchg"}[kind]
     else:
-        op = {"add": "add", "and": "and", "or": "or", "xor": "xor", "xchg": "xchg",
+        op = {"add": "add", "mul": "mul", "and": "and", "or": "or", "xor": "xor", "xchg": "xchg",
               "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
     r = f.tmp("old")
     form = atomic_form(f, s)
@@ -453,9 +457,35 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         n = f.tmp("new")
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.fm))
         f.emit(f"store {ty} {n}, ptr {f.v(p)}")
+    elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
+        r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))
     else:
         f.emit(f"{r} = atomicrmw {op} ptr {f.v(p)}, {ty} {f.v(v)} monotonic")
     f.names[s] = r
+
+
+def _cas_update(f: FunctionText, ptr: str, ty: str, bits: int, combine) -> str:
+    """Atomically replace *ptr by combine(old): retry a compare-exchange of the integer bits until no
+    other thread wrote in between. Returns the old value."""
+    ity = f"i{bits}"
+    pre, loop, done = f.label("cas"), f.label("casloop"), f.label("casdone")
+    first = f.tmp("cur")
+    f.emit(f"{first} = load atomic {ity}, ptr {ptr} monotonic, align {bits // 8}")
+    f.emit(f"br label %{pre}")
+    f.start_block(pre)
+    f.emit(f"br label %{loop}")
+    f.start_block(loop)
+    cur, old, new, newi, res, got, ok = (f.tmp("c") for _ in range(7))
+    f.emit(f"{cur} = phi {ity} [{first}, %{pre}], [{got}, %{loop}]")
+    f.emit(f"{old} = bitcast {ity} {cur} to {ty}" if ty != ity else f"{old} = add {ity} {cur}, 0")
+    f.emit(combine(old, new))
+    f.emit(f"{newi} = bitcast {ty} {new} to {ity}" if ty != ity else f"{newi} = add {ity} {new}, 0")
+    f.emit(f"{res} = cmpxchg ptr {ptr}, {ity} {cur}, {ity} {newi} monotonic monotonic")
+    f.emit(f"{got} = extractvalue {{ {ity}, i1 }} {res}, 0")
+    f.emit(f"{ok} = extractvalue {{ {ity}, i1 }} {res}, 1")
+    f.emit(f"br i1 {ok}, label %{done}, label %{loop}")
+    f.start_block(done)
+    return old
 
 
 def lower_pair(g: KernelCodegen, f: FunctionText, a: Stmt, p2: Stmt, b: Stmt) -> None:
@@ -590,8 +620,8 @@ def lower_random(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 def _combine_text(dst, op, ty, a, b, fm: str) -> str:
     if op == "xchg":
         return f"{dst} = select i1 true, {ty} {b}, {ty} {b}"
-    if op in ("fadd", "add", "and", "or", "xor"):
-        return f"{dst} = {op} {fm if op == 'fadd' else ''}{ty} {a}, {b}"
+    if op in ("fadd", "add", "fmul", "mul", "and", "or", "xor"):
+        return f"{dst} = {op} {fm if op in ('fadd', 'fmul') else ''}{ty} {a}, {b}"
     intr = {"fmin": "minnum", "fmax": "maxnum", "min": "smin", "max": "smax", "umin": "umin", "umax": "umax"}[op]
     suffix = {"float": "f32", "double": "f64", "half": "f16"}.get(ty, ty)
     return f"{dst} = call {ty} @llvm.{intr}.{suffix}({ty} {a}, {ty} {b})"
@@ -601,6 +631,7 @@ def _combine_text(dst, op, ty, a, b, fm: str) -> str:
 LOWERING: dict[Op, Lowering] = {
     Op.CONST: lower_const, Op.ARG: lower_arg, Op.ALLOCA: lower_alloca, Op.LOCAL_LOAD: lower_local_load,
     Op.LOCAL_STORE: lower_local_store, Op.GLOBAL_PTR: lower_global_ptr, Op.CHECK_INDEX: lower_check_index,
+    Op.THREAD_INDEX: lower_thread_index,
     Op.GLOBAL_LOAD: lower_global_load,
     Op.GLOBAL_STORE: lower_global_store, Op.ATOMIC: lower_atomic, Op.ARRAY_SHAPE: lower_array_shape,
     Op.RET_STORE: lower_ret_store,

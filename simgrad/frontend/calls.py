@@ -119,7 +119,7 @@ def _atomic(comp, node: ast.Call, kind: str):
     if ref is None:
         raise SimgradSyntaxError(f"the first argument of ti.atomic_{kind} must be a field element, an ndarray "
                                  "element or a local variable", comp.loc(node))
-    return ref.atomic(kind, comp.eval(node.args[1]))
+    return ref.atomic("atomic_mul" if kind == "mul" else kind, comp.eval(node.args[1]))
 
 
 def inline(comp, fn, args, kwargs, node):

@@ -99,6 +99,7 @@ class Compiler:
         self.debug = debug
         self.return_types: list | None = None
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
+        self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
 
     @property
     def frame(self) -> Frame:
@@ -110,6 +111,20 @@ class Compiler:
         from simgrad.frontend.calls import inline
 
         return inline(self, fn, args, kwargs, self.frame.src.tree)
+
+    def stop_grad(self, field) -> None:
+        """ti.stop_grad(x): no gradient flows through x's elements for the rest of this top-level loop
+        (the rest of the kernel when called outside one), as in Taichi."""
+        fields = field.comps if hasattr(field, "comps") else [field]
+        top = self.builder.blocks[1].parent if len(self.builder.blocks) > 1 else None
+        for f in fields:
+            self.stopped_grads[id(f.ref())] = top
+
+    def grad_stopped(self, target) -> bool:
+        if id(target) not in self.stopped_grads:
+            return False
+        top = self.stopped_grads[id(target)]
+        return top is None or (len(self.builder.blocks) > 1 and self.builder.blocks[1].parent is top)
 
     def emit_fill(self, field, value) -> None:
         from simgrad.frontend.loops import emit_fill

@@ -38,7 +38,8 @@ class VarRef:
         context.builder().emit(Op.LOCAL_STORE, None, (self.alloca, v.stmt))
 
     def atomic(self, kind: str, value) -> Expr:
-        if kind in ("add", "sub", "min", "max", "and", "or", "xor"):
+        if kind in ("add", "sub", "min", "max", "and", "or", "xor", "atomic_mul"):
+            kind = "mul" if kind == "atomic_mul" else kind
             # an ATOMIC on the local: atomic if a parallel task shares it, a plain update otherwise
             v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
             if kind == "sub":
@@ -61,7 +62,10 @@ class GlobalRef:
         b = context.builder()
         t = self.target
         target = t.ref() if isinstance(t, ScalarField) else t  # the IR sees a field's FieldRef record
-        return b.emit(Op.GLOBAL_PTR, self.dtype, tuple(i.stmt for i in self.indices), {"target": target})
+        attrs = {"target": target}
+        if context.current().grad_stopped(target):
+            attrs["stop_grad"] = True  # ti.stop_grad in this loop: autodiff treats the element as constant
+        return b.emit(Op.GLOBAL_PTR, self.dtype, tuple(i.stmt for i in self.indices), attrs)
 
     def load(self) -> Expr:
         e = Expr(context.builder().emit(Op.GLOBAL_LOAD, self.dtype, (self.ptr(),)))
@@ -79,6 +83,7 @@ class GlobalRef:
         v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
         if kind == "sub":
             kind, v = "add", ops.neg(v)
+        kind = "mul" if kind == "atomic_mul" else kind  # ti.atomic_mul (`x *= v` is a plain update, as Taichi)
         if kind in ("and", "or", "xor") and self.dtype.is_float:
             raise SimgradTypeError("atomic bit operation on a float field", context.current_loc())
         s = context.builder().emit(Op.ATOMIC, self.dtype, (self.ptr(), v.stmt), {"kind": kind})

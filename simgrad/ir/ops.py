@@ -78,6 +78,7 @@ class Op(Enum):
     PRINT = auto()
     ASSERT = auto()
     RANDOM = auto()
+    THREAD_INDEX = auto()  # the thread running this iteration (ti.global_thread_idx)
     # autodiff: the per-thread tape (adstack) of values the adjoint needs, in LIFO order
     TAPE_RESET = auto()
     TAPE_PUSH = auto()
@@ -106,4 +107,4 @@ SIDE_EFFECTS = {
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = BINARY_ARITH | COMPARE | UNARY_MATH | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG,
                                               Op.ARRAY_SHAPE, Op.GLOBAL_PTR}
-ATOMIC_KINDS = ("add", "sub", "min", "max", "and", "or", "xor", "xchg")
+ATOMIC_KINDS = ("add", "sub", "mul", "min", "max", "and", "or", "xor", "xchg")

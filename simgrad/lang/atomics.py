@@ -17,6 +17,7 @@ def _atomic(kind: str):
 
 atomic_add = _atomic("add")
 atomic_sub = _atomic("sub")
+atomic_mul = _atomic("mul")
 atomic_min = _atomic("min")
 atomic_max = _atomic("max")
 atomic_and = _atomic("and")

@@ -454,3 +454,17 @@ class FieldElement(Matrix):
     def fill(self, v) -> None:
         for c in self._field.comps:
             c[self._key] = v
+
+
+def rescale_index(a, b, I):  # noqa: E741
+    """The index I of field (or SNode) `a` scaled to `b`'s shape, axis by axis (a coarser `b` divides, a
+    finer one multiplies), as Taichi's ti.rescale_index for multigrid and block-sparse codes."""
+    shape_a, shape_b = tuple(a.shape), tuple(b.shape)
+    entries = list(I) if isinstance(I, (list, tuple)) else list(I.entries)
+    out = list(entries)
+    for k in range(min(len(entries), len(shape_a), len(shape_b))):
+        if shape_a[k] > shape_b[k]:
+            out[k] = entries[k] // (shape_a[k] // shape_b[k])
+        elif shape_a[k] < shape_b[k]:
+            out[k] = entries[k] * (shape_b[k] // shape_a[k])
+    return Matrix(out)

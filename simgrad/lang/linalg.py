@@ -260,3 +260,71 @@ def _sum(xs):
     for x in xs[1:]:
         out = out + x
     return out
+
+
+def eig(A, dt=None):
+    """Eigenvalues and right eigenvectors of a real 2x2 A, in Taichi's complex layout: (2x2 matrix whose
+    rows are the eigenvalues as (real, imaginary), 4x2 matrix whose columns are the unit eigenvectors as
+    (re, im, re, im)). As in Taichi, an eigenvector of one eigenvalue is a column of A minus the other
+    eigenvalue (Cayley-Hamilton: the first, else the second when the first is zero), and A = c*I gives the
+    unit axes. Unlike Taichi (NaN), a repeated eigenvalue gets a unit eigenvector. 2x2 only, as Taichi."""
+    w = _Work(A, dt)
+    if w.n != 2:
+        raise ValueError("ti.eig supports 2x2 matrices only (as Taichi)")
+    a, b, c, d = w.entries
+    tr, det = a + d, a * d - b * c
+    gap = tr * tr - 4.0 * det
+    real = gap >= 0
+    zero, one = w.const(0.0), w.const(1.0)
+    s = ops.sqrt(ops.select(real, gap, zero))
+    si = ops.sqrt(ops.select(real, zero, -gap))
+    l1, l2 = [(tr + s) * 0.5, si * 0.5], [(tr - s) * 0.5, ops.select(real, zero, -si * 0.5)]  # +0.0, as Taichi
+
+    def vector(other):  # a nonzero column of A - other * I (complex), normalised
+        im = ops.select(real, zero, -other[1])
+        col0 = [a - other[0], im, c, zero]
+        col1 = [b, zero, d - other[0], im]
+        n0, n1 = _sum([x * x for x in col0]), _sum([x * x for x in col1])
+        first = n0 > 0
+        v = [ops.select(first, x, y) for x, y in zip(col0, col1)]
+        norm2 = ops.select(first, n0, n1)
+        inv = 1.0 / ops.sqrt(ops.select(norm2 > 0, norm2, one))
+        return [x * inv for x in v], norm2 > 0
+
+    (v1, ok1), (v2, ok2) = vector(l2), vector(l1)
+    v1 = [ops.select(ok1, x, e) for e, x in zip((zero, zero, one, zero), v1)]
+    v2 = [ops.select(ok2, x, e) for e, x in zip((one, zero, zero, zero), v2)]
+    return Matrix([l1, l2]), Matrix([[v1[k], v2[k]] for k in range(4)])
+
+
+def solve(A, b, dt=None):
+    """x with A x = b for 2x2/3x3 A: Gaussian elimination with partial pivoting (row swaps as selects), as
+    Taichi's ti.solve. A singular A gives inf/nan, as there."""
+    w = _Work(A, dt)
+    bv = b if isinstance(b, Matrix) else Matrix(b)
+    if bv.n != w.n:
+        raise ValueError(f"ti.solve: a {w.n}x{w.n} matrix needs a vector of {w.n} entries, got {bv.n}")
+    n = w.n
+    rhs = [ops.cast(e, w.dtype) if w.dtype is not None else float(e) for e in bv.entries]
+    M = [row + [rhs[i]] for i, row in enumerate(w.rows())]
+    for i in range(n):
+        # the row with the largest |pivot| (the first of equals) swaps with row i
+        best, chosen = ops.abs(M[i][i]), i
+        for j in range(i + 1, n):
+            take = ops.abs(M[j][i]) > best
+            best, chosen = ops.select(take, ops.abs(M[j][i]), best), ops.select(take, j, chosen)
+        old = [list(r) for r in M]
+        for j in range(i + 1, n):
+            here = chosen == j
+            M[i] = [ops.select(here, y, x) for x, y in zip(M[i], old[j])]
+            M[j] = [ops.select(here, x, y) for x, y in zip(old[i], old[j])]
+        for j in range(i + 1, n):
+            scale = M[j][i] / M[i][i]
+            M[j] = [M[j][k] - M[i][k] * scale if k > i else w.const(0.0) for k in range(n + 1)]
+    x: list = [None] * n
+    for i in reversed(range(n)):
+        acc = M[i][n]
+        for k in range(i + 1, n):
+            acc = acc - M[i][k] * x[k]
+        x[i] = acc / M[i][i]
+    return Matrix(x)

@@ -116,3 +116,14 @@ def _check_fields(name: str, fields) -> None:
     for f in fields:
         if not isinstance(f, Field):
             raise TypeError(f"ti.{name} expects fields, got {type(f).__name__}")
+
+
+def stop_grad(x) -> None:
+    """ti.stop_grad(field) inside a kernel: no gradient flows through the field's elements in the rest of
+    the enclosing top-level loop (Taichi's scope for it)."""
+    from simgrad.ir import context
+
+    comp = context.current()
+    if comp is None:
+        raise SimgradSyntaxError("ti.stop_grad(field) is called inside a kernel")
+    comp.stop_grad(x)

@@ -427,3 +427,49 @@ def randn(dtype=None):
     u2 = random(t)
     r = sqrt(mul(-2.0, log(sub(1.0, u1))))
     return mul(r, cos(mul(2.0 * math.pi, u2)))
+
+
+def zero(x):
+    """A zero of x's type and shape (a scalar or a matrix), as Taichi's ti.zero."""
+    return x * 0
+
+
+def one(x):
+    """A one of x's type and shape."""
+    return zero(x) + 1
+
+
+# frexp on the bits: (exponent shift, exponent mask, bias to [0.5, 1), sign+mantissa mask (as a signed
+# integer), the exponent bits of 0.5, the scale that makes a subnormal normal, the integer type)
+_FREXP = {32: (23, 0xFF, 126, -0x7F800001, 0x3F000000, 2.0**24, dt.i32),
+          64: (52, 0x7FF, 1022, -0x7FF0000000000001, 0x3FE0000000000000, 2.0**54, dt.i64)}
+
+
+def frexp(x):
+    """(m, e) with x = m * 2**e and 0.5 <= |m| < 1 (0, inf and nan give (x, 0)), as numpy's frexp: on the
+    bits in kernels (a subnormal is first scaled into the normal range), numpy's in Python scope."""
+    if is_matrix(x):
+        raise SimgradTypeError("ti.frexp takes a scalar")
+    if not isinstance(x, Expr):
+        import numpy as np
+
+        m, e = np.frexp(x)
+        return float(m), int(e)
+    t = x.dtype if x.dtype.is_float else dt.Defaults.fp
+    t = dt.f32 if t is dt.f16 else t
+    x = cast_expr(x, t)
+    shift, field_mask, bias, keep, half, up, it = _FREXP[t.bits]
+    tiny = abs(x) < (2.0**-126 if t.bits == 32 else 2.0**-1022)
+    y = select(tiny, x * up, x)
+    bits = bit_cast(y, it)
+    e = bit_and(bit_shr(bits, shift), field_mask) - bias
+    m = bit_cast(bit_or(bit_and(bits, keep), half), t)
+    special = logical_or(x == 0, e == field_mask - bias)  # zero, inf, nan
+    e = select(tiny, e - (24 if t.bits == 32 else 54), e)
+    return select(special, x, m), cast(select(special, 0, e), dt.i32)
+
+
+def global_thread_idx():
+    """The index of the thread running this iteration (the pool's thread id on the CPU; 0 outside a
+    parallel loop)."""
+    return Expr(context.builder().emit(Op.THREAD_INDEX, dt.i32))
