@@ -12,6 +12,7 @@ from simgrad.errors import (
     SimgradError,
     SimgradIndexError,
     SimgradNameError,
+    SimgradNotSupportedError,
     SimgradRuntimeError,
     SimgradSyntaxError,
     SimgradTypeError,
@@ -35,6 +36,8 @@ from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.lang.kernel import data_oriented, func, pyfunc
+
+real_func = func  # inlined like a ti.func (a recursive one is refused with a located error)
 from simgrad.lang.loops import (
     assume_in_range,
     block_local,
@@ -48,6 +51,7 @@ from simgrad.lang.loops import (
     static_print,
 )
 from simgrad.lang.matrix import Matrix, Vector
+from simgrad.lang.ndarray import MatrixNdarray, Ndarray, ScalarNdarray, VectorNdarray, ndarray
 from simgrad.lang.ops import (
     abs,
     acos,
@@ -83,8 +87,8 @@ from simgrad.lang.ops import (
     tanh,
     zero,
 )
-from simgrad.lang.snode import i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
-from simgrad.lang.types import template, types
+from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
+from simgrad.lang.types import Layout, template, types
 from simgrad.lang.atomics import (
     atomic_add,
     atomic_and,
@@ -117,6 +121,29 @@ def get_runtime():
     return get_program()
 
 
+_SPARSE = "sparse SNodes (pointer/bitmasked/dynamic) are not built yet"
+_NOT_SUPPORTED = {
+    **{n: _SPARSE for n in ("activate", "deactivate", "deactivate_all_snodes", "is_active", "length", "append",
+                            "no_activate")},
+    **{n: "Taichi's AOT/graph deployment is not part of simgrad" for n in ("aot", "graph", "ArgPack", "argpack")},
+    **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
+                                                                     "mesh_patch_idx")},
+    **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
+    **{n: "structs are not built yet" for n in ("Struct", "StructField", "dataclass")},
+    "linalg": "ti.linalg (sparse matrices and solvers) is not built yet",
+    "sparse_matrix_builder": "ti.linalg (sparse matrices and solvers) is not built yet",
+    "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",
+    "BitpackedFields": "quantized types are not built yet",
+    "get_addr": "raw field addresses are not exposed",
+    "ref": "real functions with reference parameters are not built yet (ti.real_func is inlined)",
+    "experimental": "Taichi's experimental namespace is not part of simgrad",
+    "extension": "Taichi's extension flags are not part of simgrad",
+    "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
+    "sparse": "sparse SNodes are not built yet",
+    "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",
+}
+
+
 def __getattr__(name):
     if name in ("GUI", "rgb_to_hex", "hex_to_rgb", "tools", "ui"):
         import simgrad.gui as _gui
@@ -128,4 +155,8 @@ def __getattr__(name):
         from simgrad.lang import ad as _ad
 
         return _ad if name == "ad" else getattr(_ad, name)
+    if name in _NOT_SUPPORTED:
+        from simgrad.errors import SimgradNotSupportedError, caller_loc
+
+        raise SimgradNotSupportedError(f"ti.{name} is not supported by simgrad: {_NOT_SUPPORTED[name]}", caller_loc())
     raise AttributeError(f"module 'simgrad' has no attribute '{name}'")

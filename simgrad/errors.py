@@ -116,3 +116,8 @@ class SimgradRuntimeError(TaichiRuntimeError):
 
 class GradientError(TaichiRuntimeError):
     """A kernel that cannot be differentiated correctly: we refuse instead of returning wrong numbers."""
+
+
+class SimgradNotSupportedError(SimgradError, NotImplementedError):
+    """A Taichi feature simgrad does not have (yet): said plainly, at the user's line, instead of an
+    AttributeError or a silently different result."""

@@ -66,7 +66,19 @@ class Param:
         if not hasattr(a, "dtype") or not hasattr(a, "shape"):
             raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' expects an ndarray, got "
                                    f"{type(a).__name__}")
-        return (str(a.dtype), len(a.shape), self.ann.element_shape_of(tuple(a.shape)))
+        arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
+        return (str(arr.dtype), len(arr.shape), self.element_shape(a))
+
+    def element_shape(self, a) -> tuple:
+        """The element shape of argument `a`: the annotation's, else a ti.ndarray object's own."""
+        arr = getattr(a, "_ndarray", a)
+        ann = self.ann
+        if isinstance(ann.dtype, MatrixType):
+            return ann.dtype.shape
+        elem = ann.element_shape_of(tuple(arr.shape))
+        if not elem and ann.dtype is None and not ann.element_dim:
+            elem = getattr(a, "element_shape", ())
+        return elem
 
 
 class KernelSource(Protocol):
@@ -242,15 +254,14 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
 def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
     """The compiler's view of an ndarray argument, its dtype, dimensions and element shape checked."""
     ann: NdarrayType = p.ann
-    arr = a if hasattr(a, "dtype") else np.asarray(a)
+    arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
     t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
     want: dt.DataType | None
+    elem = p.element_shape(a)
     if isinstance(ann.dtype, MatrixType):
-        elem = ann.dtype.shape
         want = ann.dtype.dtype
     else:
         want = dt.from_any(ann.dtype) if ann.dtype is not None else None
-        elem = ann.element_shape_of(tuple(arr.shape))
         if len(elem) > len(arr.shape) or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
             raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' of shape "
                                    f"{tuple(arr.shape)} has no trailing element shape {elem}")

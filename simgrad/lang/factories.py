@@ -114,12 +114,25 @@ def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
     return _place_new(f, shape, offset, needs_grad)
 
 
-def vector_field(n, dtype=None, shape=None, name="", offset=None, needs_grad=False, needs_dual=False, **kw):
+def vector_field(n, dtype=None, shape=None, order=None, name="", offset=None, needs_grad=False,
+                 needs_dual=False, layout=None):
+    _check_layout(layout)
     return _matrix_field(n, 0, dtype, shape, name, offset, needs_grad, needs_dual)
 
 
-def matrix_field(n, m, dtype=None, shape=None, name="", offset=None, needs_grad=False, needs_dual=False, **kw):
+def matrix_field(n, m, dtype=None, shape=None, order=None, name="", offset=None, needs_grad=False,
+                 needs_dual=False, layout=None):
+    _check_layout(layout)
     return _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual)
+
+
+def _check_layout(layout) -> None:
+    """ti.Layout.AOS or SOA: where a vector's components sit in memory. Values and indexing are the same
+    either way; simgrad stores the components side by side (AOS) in both cases today."""
+    from simgrad.lang.types import Layout
+
+    if layout is not None and not isinstance(layout, Layout):
+        raise SimgradValueError(f"layout must be ti.Layout.AOS or ti.Layout.SOA, got {layout!r}", caller_loc())
 
 
 class _Root:

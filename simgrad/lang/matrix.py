@@ -497,6 +497,13 @@ class Matrix:
 
         return matrix_field(*args, **kwargs)
 
+    @staticmethod
+    def ndarray(n, m, dtype, shape, needs_grad=False):
+        """`ti.Matrix.ndarray(n, m, dtype, shape)`: an ndarray of n x m matrices (lang/ndarray.py)."""
+        from simgrad.lang.ndarray import MatrixNdarray
+
+        return MatrixNdarray(n, m, dtype, shape, needs_grad)
+
 
 class _VectorMeta(type):
     def __instancecheck__(cls, obj):
@@ -516,6 +523,13 @@ class Vector(Matrix, metaclass=_VectorMeta):
         from simgrad.lang.factories import vector_field
 
         return vector_field(*args, **kwargs)
+
+    @staticmethod
+    def ndarray(n, dtype, shape, needs_grad=False):
+        """`ti.Vector.ndarray(n, dtype, shape)`: an ndarray of n-vectors (lang/ndarray.py)."""
+        from simgrad.lang.ndarray import VectorNdarray
+
+        return VectorNdarray(n, dtype, shape, needs_grad)
 
 
 def _is_zero(v) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from enum import Enum
+
 from simgrad import dtypes as dt
 
 
@@ -136,3 +138,10 @@ class _Types:
 types = _Types()
 for _t in dt.ALL:
     setattr(_Types, _t.name, _t)
+
+
+class Layout(Enum):
+    """Memory layout of a vector/matrix field's components: side by side (AOS) or one array each (SOA)."""
+
+    AOS = 0
+    SOA = 1

@@ -1,0 +1,129 @@
+"""ti.ndarray objects: arrays in host memory that kernels take by reference (`ti.types.ndarray()` parameters),
+with Taichi's Python-scope API. The data is one C-contiguous numpy array whose trailing axes are the
+element's (a vector or matrix); kernels receive its address and shape (runtime/launch.py reads `_ndarray`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradIndexError, SimgradNotSupportedError, SimgradTypeError, caller_loc
+from simgrad.lang.field import FieldElement
+from simgrad.lang.types import MatrixType
+
+
+class _Component:
+    """One entry of every element, indexable by the outer index: what FieldElement reads and writes."""
+
+    def __init__(self, arr: Ndarray, entry: tuple):
+        self.arr, self.entry = arr, entry
+
+    def __getitem__(self, key):
+        return self.arr._ndarray[key + self.entry].item()
+
+    def __setitem__(self, key, value) -> None:
+        self.arr._ndarray[key + self.entry] = value
+
+
+class Ndarray:
+    """An n-dimensional array of scalars, vectors or matrices; `shape` is the outer shape (as Taichi)."""
+
+    def __init__(self, dtype, shape, element_shape: tuple = (), needs_grad: bool = False):
+        if needs_grad:
+            raise SimgradNotSupportedError("ndarrays with needs_grad=True are not supported yet: gradients flow "
+                                           "through fields (ti.field(..., needs_grad=True))", caller_loc())
+        self.dtype = dt.from_any(dtype)
+        self.shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        if any(not isinstance(n, (int, np.integer)) or n < 0 for n in self.shape):
+            raise SimgradTypeError(f"ndarray shape must be non-negative integers, got {shape!r}", caller_loc())
+        self.element_shape = tuple(element_shape)
+        self.n = self.element_shape[0] if self.element_shape else 0
+        self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
+        self.name = "ndarray"
+        self.grad = None
+        self._ndarray = np.zeros(self.shape + self.element_shape, dtype=self.dtype.np)
+        self.comps = [_Component(self, e) for e in np.ndindex(*self.element_shape)] if self.element_shape else []
+
+    @property
+    def element_type(self):
+        if not self.element_shape:
+            return self.dtype
+        return MatrixType(self.n, self.m, self.dtype)
+
+    def _key(self, key) -> tuple:
+        key = key if isinstance(key, tuple) else (key,)
+        if len(key) != len(self.shape):
+            raise SimgradIndexError(f"the ndarray has {len(self.shape)} dimension(s), got {len(key)} indices",
+                                    caller_loc())
+        for k, (i, n) in enumerate(zip(key, self.shape)):
+            if not isinstance(i, (int, np.integer)) or not 0 <= i < n:
+                raise SimgradIndexError(f"index {i!r} of axis {k} is out of bounds for the ndarray of shape "
+                                        f"{self.shape}", caller_loc())
+        return tuple(int(i) for i in key)
+
+    def __getitem__(self, key):
+        key = self._key(key)
+        if not self.element_shape:
+            return self._ndarray[key].item()
+        return FieldElement(self, key)  # a live view: element assignment writes through
+
+    def __setitem__(self, key, value) -> None:
+        key = self._key(key)
+        v = value.to_numpy() if hasattr(value, "to_numpy") else np.asarray(value)
+        if v.shape not in ((), self.element_shape):
+            raise SimgradTypeError(f"cannot store a value of shape {v.shape} in an ndarray element of shape "
+                                   f"{self.element_shape}", caller_loc())
+        self._ndarray[key] = v
+
+    def to_numpy(self) -> np.ndarray:
+        return self._ndarray.copy()
+
+    def from_numpy(self, arr) -> None:
+        a = np.asarray(arr)
+        if a.shape != self._ndarray.shape:
+            raise SimgradTypeError(f"from_numpy: expected an array of shape {self._ndarray.shape}, got {a.shape}",
+                                   caller_loc())
+        self._ndarray[...] = a
+
+    def fill(self, value) -> None:
+        self._ndarray[...] = value
+
+    def copy_from(self, other: Ndarray) -> None:
+        self.from_numpy(other._ndarray)
+
+    def to_torch(self, device=None):
+        import torch
+
+        return torch.from_numpy(self.to_numpy()).to(device) if device else torch.from_numpy(self.to_numpy())
+
+    def get_type(self):
+        from simgrad.lang.types import NdarrayType
+
+        return NdarrayType(self.element_type, len(self.shape))
+
+    def __repr__(self) -> str:
+        return f"<ndarray {self.element_type} shape={self.shape}>"
+
+
+class ScalarNdarray(Ndarray):
+    def __init__(self, dtype, arr_shape, needs_grad: bool = False):
+        super().__init__(dtype, arr_shape, (), needs_grad)
+
+
+class VectorNdarray(Ndarray):
+    def __init__(self, n: int, dtype, shape, needs_grad: bool = False):
+        super().__init__(dtype, shape, (n,), needs_grad)
+
+
+class MatrixNdarray(Ndarray):
+    def __init__(self, n: int, m: int, dtype, shape, needs_grad: bool = False):
+        super().__init__(dtype, shape, (n, m), needs_grad)
+
+
+def ndarray(dtype, shape, needs_grad: bool = False) -> Ndarray:
+    """`ti.ndarray(ti.f32, shape)`, or of vectors/matrices with `ti.math.vec3`/`ti.types.matrix(...)`."""
+    if isinstance(dtype, MatrixType):
+        if dtype.m:
+            return MatrixNdarray(dtype.n, dtype.m, dtype.dtype, shape, needs_grad)
+        return VectorNdarray(dtype.n, dtype.dtype, shape, needs_grad)
+    return ScalarNdarray(dtype, shape, needs_grad)
