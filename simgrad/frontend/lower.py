@@ -547,6 +547,12 @@ class Compiler:
             raise SimgradSyntaxError(f"'{type(value).__name__}' has no attribute '{node.attr}'",
                                      self.loc(node)) from None
 
+    def eval_NamedExpr(self, node: ast.NamedExpr):
+        """`(y := expr)`: assigns y as a statement would, and is the assigned value."""
+        value = self.eval(node.value)
+        self.assign(node.target, value)
+        return self.eval(node.target)
+
     def eval_Subscript(self, node: ast.Subscript):
         ref = self.ref(node)
         if ref is not None:
@@ -557,7 +563,7 @@ class Compiler:
 
     def eval_index(self, node):
         if isinstance(node, ast.Tuple):
-            return tuple(self.eval(e) for e in node.elts)
+            return tuple(self.eval_index(e) if isinstance(e, ast.Slice) else self.eval(e) for e in node.elts)
         if isinstance(node, ast.Slice):
             return slice(*(self.eval(p) if p is not None else None for p in (node.lower, node.upper, node.step)))
         return self.eval(node)
@@ -624,7 +630,7 @@ class Compiler:
                     return None
                 key = self.eval_index(node.slice)
                 key = key if isinstance(key, tuple) else (key,)
-                if any(isinstance(k, Expr) for k in key):
+                if any(isinstance(k, Expr) for k in key) and not any(isinstance(k, slice) for k in key):
                     return DynamicElementRef(base_ref, key)
                 return base_ref.index(key if len(key) > 1 else key[0])
             if not _maybe_global(node.value):

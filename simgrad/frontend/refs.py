@@ -128,8 +128,11 @@ class MatrixRef:
         return Matrix(n=self.n, m=self.m, _entries=olds)
 
     def index(self, key):
-        """The ref of `m[key]`: a scalar ref, or a row (MatrixRef) for one index on a matrix."""
+        """The ref of `m[key]`: a scalar ref, a row (MatrixRef) for one index on a matrix, or the entries a
+        compile-time slice picks (`v[1:]`, `m[0, :]`, `m[:2, 1:]`), assignable too."""
         key = key if isinstance(key, tuple) else (key,)
+        if any(isinstance(k, slice) for k in key):
+            return self._slice(key)
         if any(isinstance(k, Expr) for k in key):
             raise SimgradTypeError(
                 "matrix elements can only be assigned with compile-time indices here (use ti.static or "
@@ -143,6 +146,21 @@ class MatrixRef:
             return MatrixRef(self.refs[r * self.m : (r + 1) * self.m], self.m, 0)
         i, j = key
         return self.refs[_check(i, self.n) * self.m + _check(j, self.m)]
+
+    def _slice(self, key: tuple):
+        dims = (self.n,) if self.m == 0 else (self.n, self.m)
+        if len(key) == 1 and self.m:
+            key = (key[0], slice(None))
+        if len(key) != len(dims):
+            raise SimgradTypeError(f"{len(key)} indices for a matrix of shape {self.shape_text()}",
+                                   context.current_loc())
+        ranges = [list(range(*k.indices(d))) if isinstance(k, slice) else [_check(k, d)] for k, d in zip(key, dims)]
+        if self.m == 0:
+            return MatrixRef([self.refs[i] for i in ranges[0]], len(ranges[0]), 0)
+        refs = [self.refs[i * self.m + j] for i in ranges[0] for j in ranges[1]]
+        if all(isinstance(k, slice) for k in key):
+            return MatrixRef(refs, len(ranges[0]), len(ranges[1]))
+        return MatrixRef(refs, len(refs), 0)
 
     def swizzle(self, name: str):
         idx = [_SWIZZLE[c] for c in name]

@@ -1,0 +1,62 @@
+"""Python forms Taichi programs use: walrus expressions, compile-time slices of local vectors/matrices
+(read and assigned), ti.grouped(ti.ndrange(...)); each against numpy / plain Python."""
+
+import numpy as np
+
+import simgrad as ti
+
+
+def test_walrus_assigns_and_yields_the_value():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def k(n: ti.i32) -> ti.i32:
+        s = 0
+        for i in range(n):
+            if (y := i * 2) > 4:
+                s += y
+        m = n
+        while (m := m - 3) > 0:  # re-evaluated at every test
+            s += 100
+        return s
+
+    assert k(5) == sum(2 * i for i in range(5) if 2 * i > 4) + 100
+    assert k(10) == sum(2 * i for i in range(10) if 2 * i > 4) + 300
+
+
+def test_slices_of_local_vectors_and_matrices_read_and_write():
+    ti.init(arch=ti.cpu)
+    out = ti.field(ti.f32, shape=8)
+
+    @ti.kernel
+    def k(a: ti.f32):
+        v = ti.Vector([a, 2 * a, 3 * a, 4 * a])
+        m = ti.Matrix([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+        u = v[1:3] + m[1, :2]  # (2a + 4, 3a + 5)
+        v[:2] = ti.Vector([-1.0, -2.0])
+        m[:, 2] = ti.Vector([7.0, 8.0])
+        out[0], out[1] = u[0], u[1]
+        out[2], out[3] = v[0], v[1]
+        out[4], out[5] = m[0, 2], m[1, 2]
+        w = m[:2, 1:]
+        out[6], out[7] = w[0, 0] + w[1, 1], v[-1]
+
+    k(1.5)
+    np.testing.assert_allclose(out.to_numpy(), [2 * 1.5 + 4, 3 * 1.5 + 5, -1, -2, 7, 8, 2 + 8, 6.0])
+
+
+def test_grouped_ndrange_with_bounds():
+    ti.init(arch=ti.cpu)
+    f = ti.field(ti.i32, shape=(5, 6))
+
+    @ti.kernel
+    def k():
+        for I in ti.grouped(ti.ndrange((1, 4), 6)):
+            f[I] = I[0] * 10 + I[1]
+
+    k()
+    want = np.zeros((5, 6), np.int32)
+    for i in range(1, 4):
+        for j in range(6):
+            want[i, j] = i * 10 + j
+    np.testing.assert_array_equal(f.to_numpy(), want)
