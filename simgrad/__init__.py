@@ -51,6 +51,7 @@ from simgrad.lang.loops import (
     static_print,
 )
 from simgrad.lang.matrix import Matrix, Vector
+from simgrad.lang.struct import Struct, StructField, dataclass
 from simgrad.lang.ndarray import MatrixNdarray, Ndarray, ScalarNdarray, VectorNdarray, ndarray
 from simgrad.lang.ops import (
     abs,
@@ -129,7 +130,6 @@ _NOT_SUPPORTED = {
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
-    **{n: "structs are not built yet" for n in ("Struct", "StructField", "dataclass")},
     "linalg": "ti.linalg (sparse matrices and solvers) is not built yet",
     "sparse_matrix_builder": "ti.linalg (sparse matrices and solvers) is not built yet",
     "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",

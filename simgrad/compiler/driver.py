@@ -15,7 +15,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradNotSupportedError, SimgradTypeError
 from simgrad.frontend.arrays import ArrayArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import Compiler
@@ -26,6 +26,7 @@ from simgrad.ir.ops import Op
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.program import Program
+from simgrad.lang.struct import StructType
 from simgrad.lang.types import MatrixType, NdarrayType, is_template
 from simgrad.passes.manager import run_pipeline
 from simgrad.runtime.launch import Launcher
@@ -50,6 +51,9 @@ class Param:
             self.ann = ann if isinstance(ann, NdarrayType) else NdarrayType()
         elif isinstance(ann, MatrixType):
             self.kind = "matrix"
+        elif isinstance(ann, StructType):
+            raise SimgradNotSupportedError(f"kernel {kernel_name}: parameter '{name}' is a struct; struct kernel "
+                                           "arguments are not supported yet (pass its members, or a struct field)")
         elif ann is inspect.Parameter.empty:
             raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
                                    "(e.g. ti.f32, ti.template(), ti.types.ndarray())")

@@ -19,7 +19,7 @@ from simgrad.errors import (
     SimgradSyntaxError,
     SimgradTypeError,
 )
-from simgrad.frontend.refs import DynamicElementRef, GlobalRef, MatrixRef, VarRef
+from simgrad.frontend.refs import LOCAL_REFS, DynamicElementRef, GlobalRef, MatrixRef, StructRef, VarRef
 from simgrad.frontend.source import FunctionSource, get_source
 from simgrad.ir import context
 from simgrad.ir import ops as O
@@ -29,8 +29,11 @@ from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.kernel import BoundFunc
 from simgrad.lang.loops import grouped, ndrange, static
 from simgrad.lang.matrix import Matrix, dtype_of
+from simgrad.lang.struct import Struct, StructField
+from simgrad.lang.types import MatrixType
 
 _BINOPS = {
     ast.Add: ops.add, ast.Sub: ops.sub, ast.Mult: ops.mul, ast.Div: ops.truediv, ast.FloorDiv: ops.floordiv,
@@ -151,7 +154,10 @@ class Compiler:
         raise SimgradNameError(f"name '{name}' is not defined", src.loc(node))
 
     def new_var(self, value, dtype=None):
-        """A fresh local initialised with `value` (a scalar or a matrix)."""
+        """A fresh local initialised with `value` (a scalar, a matrix or a struct)."""
+        if isinstance(value, Struct):
+            members = {k: self.new_var(v, _member_dtype(value, k)) for k, v in value.items()}
+            return StructRef(value._type, members)
         if isinstance(value, Matrix):
             t = dt.from_any(dtype) if dtype is not None else dtype_of(value)
             refs = [VarRef(t) for _ in value.entries]
@@ -239,7 +245,7 @@ class Compiler:
         if isinstance(target, ast.Name):
             name = target.id
             current = self._local(name)
-            if isinstance(current, (VarRef, MatrixRef)):
+            if isinstance(current, LOCAL_REFS):
                 current.store(value)
             elif isinstance(current, Expr):  # an argument or loop index: a new local shadows it
                 if name not in self.frame.scopes[-1]:  # only in its own scope: else outer reads miss it
@@ -248,7 +254,7 @@ class Compiler:
                         f"assigned here (arguments are immutable in Taichi); copy it into a local first "
                         f"({name}_ = {name})", self.loc(target))
                 self.bind(name, self.new_var(value))
-            elif isinstance(value, (Expr, Matrix, int, float, bool)) and not _is_py_matrix_const(value):
+            elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)) and not _is_py_matrix_const(value):
                 self.bind(name, self.new_var(value))
             else:
                 self.bind(name, value)
@@ -292,7 +298,7 @@ class Compiler:
         value = self.eval(node.value)
         if isinstance(node.target, ast.Name):
             ref = self._local(node.target.id)
-            if not isinstance(ref, (VarRef, MatrixRef)):
+            if not isinstance(ref, LOCAL_REFS):
                 cur = self.eval(node.target)
                 self.assign(node.target, _BINOPS[type(node.op)](cur, value))
                 return
@@ -427,7 +433,7 @@ class Compiler:
 
     def eval_Name(self, node: ast.Name):
         v = self.lookup(node.id, node)
-        if isinstance(v, (VarRef, MatrixRef)):
+        if isinstance(v, LOCAL_REFS):
             return v.load()
         if isinstance(v, Field) and v._auto_name:
             v.adopt_name(node.id)
@@ -540,6 +546,10 @@ class Compiler:
         ref = self.ref(node)
         if ref is not None:
             return ref.load()
+        if isinstance(node.value, (ast.Name, ast.Subscript, ast.Attribute)):
+            base_ref = self.ref(node.value)
+            if isinstance(base_ref, StructRef) and node.attr in base_ref.stype.methods:
+                return BoundFunc(base_ref.stype.methods[node.attr], base_ref)  # `self` is the struct, by reference
         value = self.eval(node.value)
         try:
             return getattr(value, node.attr)
@@ -622,7 +632,7 @@ class Compiler:
         """The Ref for an assignable expression, or None when it is a plain Python object."""
         if isinstance(node, ast.Name):
             v = self.lookup(node.id, node)
-            return v if isinstance(v, (VarRef, MatrixRef)) else None
+            return v if isinstance(v, LOCAL_REFS) else None
         if isinstance(node, ast.Subscript):
             base_ref = self.ref(node.value)
             if base_ref is not None:
@@ -645,6 +655,8 @@ class Compiler:
             base_ref = self.ref(node.value)
             if isinstance(base_ref, MatrixRef) and _is_swizzle(node.attr):
                 return base_ref.swizzle(node.attr)
+            if isinstance(base_ref, StructRef):
+                return base_ref.member(node.attr)
             return None
         return None
 
@@ -721,13 +733,25 @@ def global_ref(comp: Compiler, base, index, node):
         if e.dtype is not dt.i32:
             e = ops.cast_expr(e, dt.i32)
         exprs.append(e)
+    if isinstance(base, ArrayArg):
+        return base.ref(exprs)
+    return _element_ref(base, exprs)
+
+
+def _element_ref(base: Field, exprs: list):
     if isinstance(base, ScalarField):
         return GlobalRef(base, exprs, base.dtype)
     if isinstance(base, MatrixField):
         refs = [GlobalRef(c, exprs, c.dtype) for c in base.comps]
         return MatrixRef(refs, base.n, base.m)
-    assert isinstance(base, ArrayArg)
-    return base.ref(exprs)
+    assert isinstance(base, StructField)
+    return StructRef(base.stype, {k: _element_ref(f, exprs) for k, f in base.members.items()})
+
+
+def _member_dtype(value: Struct, name: str):
+    """The declared type of a struct member (a local copy keeps it), or None for an untyped ti.Struct."""
+    t = value._type.members[name] if value._type is not None else None
+    return t.dtype if isinstance(t, MatrixType) else t if isinstance(t, dt.DataType) else None
 
 
 def make_frame(func, is_kernel: bool) -> Frame:

@@ -169,6 +169,36 @@ class MatrixRef:
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)
 
 
+class StructRef:
+    """A struct of refs, one per member: a struct local, or an element of a struct field. Loads build a
+    struct value; stores and updates go member by member."""
+
+    __slots__ = ("stype", "members")
+
+    def __init__(self, stype, members: dict):
+        self.stype, self.members = stype, members
+
+    def load(self):
+        from simgrad.lang.struct import Struct
+
+        return Struct._typed(self.stype, {k: r.load() for k, r in self.members.items()})
+
+    def store(self, value) -> None:
+        values = dict(value.items()) if hasattr(value, "items") else None
+        if values is None or set(values) - set(self.members):
+            raise SimgradTypeError(f"cannot assign {type(value).__name__} to a struct of members "
+                                   f"{', '.join(self.members)}", context.current_loc())
+        for k, v in values.items():
+            self.members[k].store(v)
+
+    def atomic(self, kind: str, value):
+        raise SimgradTypeError(f"augmented assignment on a whole struct ({kind}); update its members",
+                               context.current_loc())
+
+    def member(self, name: str):
+        return self.members.get(name)
+
+
 class DynamicElementRef:
     """`v[i]` of a matrix ref with a run-time index (`for i in range(3): v[i] += 1`). Loads select among
     the entries; stores and updates go to each candidate entry under `i == k` (matrices are small)."""
@@ -225,3 +255,7 @@ _COMBINE = {
 
 def _combine(kind: str, old, value):
     return _COMBINE[kind](old, value)
+
+
+# the refs a local variable name can be bound to (assignable in place)
+LOCAL_REFS = (VarRef, MatrixRef, StructRef)

@@ -15,13 +15,15 @@ from simgrad.errors import SimgradRuntimeError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.program import get_program
+from simgrad.lang.types import MatrixType
 
 _counter = [0]
 
 
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
 # frames between the user's call and _name: ti.field, ti.types..., ti.Vector.field/ti.Matrix.field (matrix.py)
-_FACTORY_FILES = {__file__, *(os.path.join(os.path.dirname(__file__), f) for f in ("types.py", "matrix.py"))}
+_FACTORY_FILES = {__file__, *(os.path.join(os.path.dirname(__file__), f)
+                              for f in ("types.py", "matrix.py", "struct.py"))}
 _ASSIGNED = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*(?::[^=]*)?=\s*[\w.]+\(")
 
 
@@ -167,3 +169,40 @@ class FieldsBuilder:
     def finalize(self, raise_warning=True):
         self.tree.materialize()
         return self.tree
+
+
+def _struct_member(t, name: str, needs_grad: bool, needs_dual: bool) -> Field:
+    from simgrad.lang.struct import StructType
+
+    if isinstance(t, StructType):
+        return _struct_field(t, name, needs_grad, needs_dual)
+    is_float = (t.dtype if isinstance(t, MatrixType) else t).is_float
+    grad, dual = needs_grad and is_float, needs_dual and is_float
+    if isinstance(t, MatrixType):
+        f = _with_grad(lambda suffix: MatrixField(t.n, t.m, t.dtype, name + suffix), grad, dual)
+    else:
+        f = _with_grad(lambda suffix: ScalarField(t, name + suffix), grad, dual)
+    f._needs_grad = grad  # placed beside its member (place() does it)
+    return f
+
+
+def _struct_field(stype, name: str, needs_grad: bool, needs_dual: bool):
+    from simgrad.lang.struct import StructField
+
+    members = {k: _struct_member(t, f"{name}.{k}", needs_grad, needs_dual) for k, t in stype.members.items()}
+    return StructField(stype, members, name)
+
+
+def place_struct_field(stype, shape, name, offset, needs_grad: bool, needs_dual: bool):
+    """`Type.field(shape=...)`: every member in one dense node of its own tree (Taichi places a struct's
+    members together), gradients beside them; without a shape the user places it with ti.root."""
+    shape = _check_shape(shape)
+    base, auto = _name(name)
+    f = _struct_field(stype, base, needs_grad, needs_dual)
+    f._auto_name = auto
+    if shape is None:
+        return f
+    tree = get_program().new_tree()
+    node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
+    node.place(f, offset=offset)
+    return f

@@ -43,6 +43,10 @@ class Field:
     def _components(self) -> list[ScalarField]:
         raise NotImplementedError
 
+    def placeable(self) -> list[Field]:
+        """The fields place() puts under a node for this one (a struct field: its members)."""
+        return [self]
+
     @property
     def shape(self) -> tuple[int, ...]:
         return self._components()[0].shape

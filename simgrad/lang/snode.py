@@ -87,6 +87,7 @@ class SNode:
         self._check_open()
         from simgrad.lang.field import Field
 
+        fields = tuple(p for f in fields for p in (f.placeable() if isinstance(f, Field) else [f]))
         for f in fields:
             comps = f._components() if isinstance(f, Field) else None
             if comps is None:

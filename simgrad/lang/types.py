@@ -131,6 +131,13 @@ class _Types:
     vector = staticmethod(vector)
     matrix = staticmethod(matrix)
 
+    @staticmethod
+    def struct(**members):
+        """`ti.types.struct(pos=vec3, m=ti.f32)` (lang/struct.py)."""
+        from simgrad.lang.struct import StructType
+
+        return StructType(members)
+
     def __getattr__(self, name):
         return getattr(dt, name)
 

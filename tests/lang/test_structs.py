@@ -1,0 +1,119 @@
+"""Structs as Taichi has them: @ti.dataclass (members, ti.func methods with `self` by reference),
+ti.types.struct, ti.Struct.field, struct locals, nested structs, Python-scope element views, dicts in and out
+of numpy, user placement with ti.root, and gradients through struct members (checked by finite differences)."""
+
+import numpy as np
+import pytest
+
+import simgrad as ti
+
+vec2 = ti.types.vector(2, ti.f64)
+
+
+@ti.dataclass
+class Body:
+    pos: vec2
+    vel: vec2
+    mass: ti.f64
+
+    @ti.func
+    def step(self, dt):
+        self.pos += self.vel * dt
+
+    @ti.func
+    def kinetic(self):
+        return 0.5 * self.mass * self.vel.dot(self.vel)
+
+
+def test_dataclass_fields_methods_and_locals_match_numpy():
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    n = 6
+    bodies = Body.field(shape=n)
+    energy = ti.field(ti.f64, shape=())
+
+    @ti.kernel
+    def run(dt: ti.f64):
+        for i in bodies:
+            bodies[i] = Body(pos=vec2(i, 1.0), vel=vec2(1.0, -i), mass=1.0 + i)
+        for i in bodies:
+            b = bodies[i]  # a local copy: writing it leaves the field alone until stored back
+            b.step(dt)
+            b.mass *= 2.0
+            bodies[i].pos = b.pos
+            energy[None] += b.kinetic()
+
+    run(0.25)
+    i = np.arange(n)
+    np.testing.assert_allclose(bodies.pos.to_numpy(), np.stack([i + 0.25, 1.0 - 0.25 * i], -1))
+    np.testing.assert_allclose(bodies.mass.to_numpy(), 1.0 + i)  # the doubled mass was only local
+    assert energy[None] == pytest.approx(np.sum(0.5 * 2 * (1.0 + i) * (1 + i ** 2)))
+    assert bodies[2].mass == 3.0 and list(bodies[2].vel) == [1.0, -2.0]
+    bodies[2].mass = 9.0  # Python-scope member assignment writes through
+    bodies[3].vel[1] = 5.0
+    assert bodies.mass.to_numpy()[2] == 9.0 and bodies.vel.to_numpy()[3, 1] == 5.0
+    with pytest.raises(AttributeError):
+        _ = bodies[0].charge
+
+
+def test_types_struct_nested_and_struct_field_dicts():
+    ti.init(arch=ti.cpu)
+    Inner = ti.types.struct(a=ti.i32, b=ti.f32)
+    Outer = ti.types.struct(inner=Inner, w=ti.types.vector(3, ti.f32))
+    f = Outer.field(shape=(2, 3))
+    g = ti.Struct.field({"x": ti.f32, "v": ti.types.vector(2, ti.f32)}, shape=4)
+
+    @ti.kernel
+    def fill():
+        for i, j in f:
+            o = Outer(inner=Inner(a=i * 10 + j, b=0.5), w=ti.Vector([i, j, 1.0]))
+            o.inner.b += j
+            f[i, j] = o
+        for k in g:
+            g[k].x = k * 2.0
+            g[k].v = ti.Vector([k, -k])
+
+    fill()
+    d = f.to_numpy()
+    ii, jj = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
+    np.testing.assert_array_equal(d["inner"]["a"], ii * 10 + jj)
+    np.testing.assert_array_equal(d["inner"]["b"], 0.5 + jj)
+    np.testing.assert_array_equal(d["w"], np.stack([ii, jj, np.ones_like(ii)], -1))
+    g.from_numpy({"x": np.arange(4, dtype=np.float32) * 3, "v": np.ones((4, 2), np.float32)})
+    assert g[1].x == 3.0 and g.to_numpy()["v"].sum() == 8
+    with pytest.raises(ti.SimgradTypeError):
+        Outer(nope=1)
+
+
+def test_user_placed_struct_field_and_gradients_through_members():
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    P = ti.types.struct(x=ti.f64, k=ti.f64, tag=ti.i32)
+    p = P.field(needs_grad=True)
+    ti.root.dense(ti.i, 5).place(p)
+    loss = ti.field(ti.f64, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def compute():
+        for i in p:
+            loss[None] += p[i].k * ti.sin(p[i].x) * (p[i].tag + 1)
+
+    x0 = np.linspace(0.1, 1.0, 5)
+    k0 = np.linspace(2.0, 3.0, 5)
+    p.from_numpy({"x": x0, "k": k0, "tag": np.arange(5, dtype=np.int32)})
+    with ti.ad.Tape(loss=loss):
+        compute()
+    t = np.arange(5) + 1
+    np.testing.assert_allclose(p.x.grad.to_numpy(), k0 * np.cos(x0) * t, rtol=1e-12)
+    np.testing.assert_allclose(p.k.grad.to_numpy(), np.sin(x0) * t, rtol=1e-12)
+    eps = 1e-6
+    f = lambda x: np.sum(k0 * np.sin(x) * t)  # noqa: E731
+    fd = np.array([(f(x0 + eps * np.eye(5)[j]) - f(x0 - eps * np.eye(5)[j])) / (2 * eps) for j in range(5)])
+    np.testing.assert_allclose(p.x.grad.to_numpy(), fd, rtol=1e-6)
+
+
+def test_struct_kernel_arguments_are_refused_loudly():
+    ti.init(arch=ti.cpu)
+
+    with pytest.raises(ti.SimgradNotSupportedError, match="struct kernel arguments"):
+        @ti.kernel
+        def k(b: Body):
+            pass
