@@ -9,7 +9,7 @@ Inside kernels the frontend handles struct locals and elements as refs of their 
 from __future__ import annotations
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError, caller_loc
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
 from simgrad.lang import ops
 from simgrad.lang.field import Field, FieldElement, ScalarField
 from simgrad.lang.matrix import Matrix
@@ -257,6 +257,10 @@ def dataclass(cls):
     from simgrad.lang.kernel import Func
 
     ann = dict(getattr(cls, "__annotations__", {}))
+    defaults = [k for k in ann if k in vars(cls)]
+    if defaults:
+        raise SimgradSyntaxError(f"Default value in @dataclass is not supported (member '{defaults[0]}' of "
+                                 f"{cls.__name__})", caller_loc())
     methods = {k: v for k, v in vars(cls).items() if isinstance(v, Func)}
     return StructType(ann, methods, name=cls.__name__)
 

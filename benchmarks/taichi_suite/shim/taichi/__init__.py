@@ -1,0 +1,24 @@
+"""`import taichi` served by simgrad, so that Taichi's own test files run against simgrad unchanged
+(benchmarks/taichi_tests.py puts this directory first on sys.path). Nothing here fakes a result: names
+simgrad lacks raise simgrad's own errors, which then fail the tests that use them."""
+
+import sys
+import types
+
+import simgrad as _simgrad
+from simgrad import *  # noqa: F401,F403
+from simgrad import lang as _lang
+
+# submodules test files import by name
+sys.modules[__name__ + ".lang"] = _lang
+_misc = types.ModuleType(__name__ + ".lang.misc")
+_misc.get_host_arch_list = lambda: [_simgrad.cpu]  # type: ignore[attr-defined]  # the host is the CPU
+_misc.is_arch_supported = lambda arch: arch == _simgrad.cpu  # type: ignore[attr-defined]
+sys.modules[_misc.__name__] = _misc
+sys.modules[__name__ + ".math"] = _simgrad.math
+math = _simgrad.math
+lang = _lang
+
+
+def __getattr__(name):
+    return getattr(_simgrad, name)

@@ -1,0 +1,66 @@
+"""A CPU-only stand-in for Taichi's tests/test_utils.py, written for the simgrad run of Taichi's test files.
+
+`test(arch=..., exclude=..., require=..., **options)` parametrises a test with (ti.cpu, options) exactly when
+Taichi's would run it on the CPU; the upstream conftest then calls ti.init(arch=ti.cpu, **options)."""
+
+import os
+import tempfile
+
+import pytest
+import taichi as ti
+
+_CPU_NAMES = ("cpu", "x64", "arm64")
+
+
+def _is_cpu(a) -> bool:
+    return getattr(a, "name", str(a)) in _CPU_NAMES or a in (ti.cpu, ti.x64, ti.arm64)
+
+
+def _as_list(v):
+    if v is None:
+        return []
+    return list(v) if isinstance(v, (list, tuple)) else [v]
+
+
+def test(arch=None, exclude=None, require=None, **options):
+    archs = _as_list(arch)
+    runs_on_cpu = not archs or any(_is_cpu(a) for a in archs)
+    excluded = any(_is_cpu(e if not isinstance(e, (list, tuple)) else e[0]) and
+                   (not isinstance(e, (list, tuple)) or len(e) == 1 or e[1] == "Linux")
+                   for e in _as_list(exclude))
+
+    def decorator(func):
+        func.__ti_test__ = True
+        if not runs_on_cpu or excluded:
+            return pytest.mark.skip(reason="not a CPU test in Taichi's own suite")(func)
+        return pytest.mark.parametrize("req_arch,req_options", [(ti.cpu, dict(options))], ids=["arch=x64"])(func)
+
+    return decorator
+
+
+def approx(expected, **kwargs):
+    if isinstance(expected, bool):
+        return expected
+    return pytest.approx(expected, **kwargs)
+
+
+def allclose(x, y, **kwargs):
+    return x == approx(y, **kwargs)
+
+
+def get_rel_eps():
+    return 1e-6
+
+
+def make_temp_file(*args, **kwargs):
+    fd, name = tempfile.mkstemp(*args, **kwargs)
+    os.close(fd)
+    return name
+
+
+def expected_archs():
+    return [ti.cpu]
+
+
+def torch_op(*args, **kwargs):
+    raise NotImplementedError("test_utils.torch_op is not provided by the simgrad shim")

@@ -1,0 +1,145 @@
+"""Taichi's own test suite as a yardstick: run its tests/python files under taichi (CPU) and under simgrad.
+
+    python benchmarks/taichi_tests.py --taichi-repo PATH [--files test_struct.py ...] [--framework both]
+                                      [--json OUT] [--markdown]
+
+PATH is a checkout of taichi-dev/taichi at v1.7.4 (only tests/ is read; nothing is copied into this repo).
+Under taichi, the upstream tests/test_utils.py runs with TI_WANTED_ARCHS=cpu. Under simgrad, `import taichi`
+and `from tests import test_utils` are served by benchmarks/taichi_suite/shim (taichi -> simgrad, a CPU-only
+test_utils). Each file runs in its own pytest process (a crash or hang costs one file). A test counts for
+simgrad when it passes under both, minus EXCLUDED (tests of Taichi's internals).
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHIM = os.path.join(HERE, "taichi_suite", "shim")
+PLUGINS = os.path.join(HERE, "taichi_suite", "plugins")
+ROOT = os.path.dirname(HERE)
+
+# the files issue 9 names (globs under tests/python)
+DEFAULT_FILES = ["test_ad_*.py", "test_loops.py", "test_field*.py", "test_matrix*.py", "test_struct*.py",
+                 "test_dataclass.py", "test_ndarray.py", "test_function*.py", "test_return.py", "test_atomic.py",
+                 "test_cast.py", "test_types.py", "test_static*.py", "test_offset.py", "test_math_module.py",
+                 "test_linalg.py", "test_svd.py", "test_polar_decomp.py", "test_eig.py", "test_custom_struct.py",
+                 "test_api.py", "test_ast_refactor.py", "test_exception.py", "test_print.py", "test_assert.py",
+                 "test_random.py"]
+
+# tests of Taichi's internals, not of the language: (file, test name prefix) -> why
+EXCLUDED = {
+    ("test_api.py", "test_api"): "compares dir() of Taichi's internal modules (taichi.lang.*, ti.ad submodules) "
+                                 "name by name",
+    ("test_exception.py", "test_exception_"): "asserts Taichi's exact error text and its AST transformer's "
+                                              "traceback layout",
+}
+
+
+def _excluded(file: str, name: str) -> str | None:
+    for (f, prefix), why in EXCLUDED.items():
+        if f == file and name.startswith(prefix):
+            return why
+    return None
+
+
+def run_file(python: str, path: str, framework: str, repo: str, timeout: float) -> dict:
+    """{test name: outcome} for one file ('passed', 'failed', 'error', 'skipped'), or {'<file>': 'crash'}."""
+    with tempfile.TemporaryDirectory() as tmp:
+        xml = os.path.join(tmp, "out.xml")
+        env = dict(os.environ)
+        if framework == "simgrad":
+            cwd = SHIM
+            env["PYTHONPATH"] = os.pathsep.join([SHIM, PLUGINS, ROOT, env.get("PYTHONPATH", "")])
+        else:
+            cwd = repo
+            env["PYTHONPATH"] = os.pathsep.join([repo, PLUGINS, env.get("PYTHONPATH", "")])
+            env["TI_WANTED_ARCHS"] = "cpu"
+        env["TI_OFFLINE_CACHE"] = "0"
+        cmd = [python, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:randomly", "--rootdir", tmp,
+               f"--junitxml={xml}", "-o", "junit_family=xunit1", path]
+        try:
+            subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return {"<file>": "timeout"}
+        if not os.path.exists(xml):
+            return {"<file>": "crash"}
+        out = {}
+        for case in ET.parse(xml).getroot().iter("testcase"):
+            name = case.get("name", "?")
+            tags = {c.tag for c in case}
+            out[name] = ("failed" if "failure" in tags else "error" if "error" in tags
+                         else "skipped" if "skipped" in tags else "passed")
+        return out
+
+
+def summarise(results: dict) -> list[dict]:
+    rows = []
+    for file in sorted(results):
+        ti_res = results[file].get("taichi", {})
+        sg_res = results[file].get("simgrad", {})
+        counted = [n for n, o in ti_res.items() if o == "passed" and not _excluded(file, n)]
+        both = [n for n in counted if sg_res.get(n) == "passed"]
+        rows.append({"file": file, "taichi_passed": len(counted), "simgrad_passed": len(both),
+                     "simgrad_total_passed": sum(o == "passed" for o in sg_res.values()),
+                     "excluded": sum(1 for n in ti_res if _excluded(file, n)),
+                     "failing": sorted(set(counted) - set(both))})
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = ["| file | taichi passed (CPU) | simgrad passed of those | excluded |", "|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['file']} | {r['taichi_passed']} | {r['simgrad_passed']} | {r['excluded']} |")
+    t = sum(r["taichi_passed"] for r in rows)
+    s = sum(r["simgrad_passed"] for r in rows)
+    lines.append(f"| **total** | **{t}** | **{s}** ({100 * s / max(t, 1):.0f}%) | "
+                 f"{sum(r['excluded'] for r in rows)} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--taichi-repo", required=True, help="checkout of taichi-dev/taichi at v1.7.4")
+    ap.add_argument("--files", nargs="*", help="file names or globs under tests/python")
+    ap.add_argument("--framework", choices=["both", "simgrad", "taichi"], default="both")
+    ap.add_argument("--simgrad-python", default=sys.executable)
+    ap.add_argument("--taichi-python", default=os.environ.get("TAICHI_PYTHON", sys.executable))
+    ap.add_argument("--timeout", type=float, default=600, help="seconds per file")
+    ap.add_argument("--json", help="results file; merged with what it already holds")
+    ap.add_argument("--markdown", action="store_true")
+    args = ap.parse_args()
+    tests_dir = os.path.join(args.taichi_repo, "tests", "python")
+    paths: list[str] = []
+    for pattern in args.files or DEFAULT_FILES:
+        paths += sorted(glob.glob(os.path.join(tests_dir, pattern)))
+    results: dict = {}
+    if args.json and os.path.exists(args.json):
+        with open(args.json) as fh:
+            results = json.load(fh)
+    frameworks = ["taichi", "simgrad"] if args.framework == "both" else [args.framework]
+    for path in dict.fromkeys(paths):
+        file = os.path.basename(path)
+        for fw in frameworks:
+            python = args.simgrad_python if fw == "simgrad" else args.taichi_python
+            res = run_file(python, path, fw, args.taichi_repo, args.timeout)
+            results.setdefault(file, {})[fw] = res
+            print(f"{file:40s} {fw:8s} " + " ".join(f"{o}={sum(v == o for v in res.values())}"
+                                                      for o in ("passed", "failed", "error", "skipped")),
+                  flush=True)
+            if args.json:
+                with open(args.json, "w") as fh:
+                    json.dump(results, fh, indent=1)
+    if args.markdown:
+        print(markdown(summarise(results)))
+
+
+if __name__ == "__main__":
+    main()
