@@ -66,17 +66,19 @@ def run_file(python: str, path: str, framework: str, repo: str, timeout: float) 
         cmd = [python, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:randomly", "--rootdir", tmp,
                f"--junitxml={xml}", "-o", "junit_family=xunit1", path]
         try:
-            subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+            proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:
             return {"<file>": "timeout"}
         if not os.path.exists(xml):
-            return {"<file>": "crash"}
+            return {"<file>": "crash", "<tail>": proc.stdout[-2000:] + proc.stderr[-2000:]}
         out = {}
         for case in ET.parse(xml).getroot().iter("testcase"):
             name = case.get("name", "?")
             tags = {c.tag for c in case}
             out[name] = ("failed" if "failure" in tags else "error" if "error" in tags
                          else "skipped" if "skipped" in tags else "passed")
+        if not out and proc.returncode not in (0, 5):  # nothing ran: a conftest or import error
+            return {"<file>": "error", "<tail>": proc.stdout[-2000:]}
         return out
 
 
@@ -132,8 +134,8 @@ def main() -> None:
             res = run_file(python, path, fw, args.taichi_repo, args.timeout)
             results.setdefault(file, {})[fw] = res
             print(f"{file:40s} {fw:8s} " + " ".join(f"{o}={sum(v == o for v in res.values())}"
-                                                      for o in ("passed", "failed", "error", "skipped")),
-                  flush=True)
+                                                      for o in ("passed", "failed", "error", "skipped"))
+                  + (f" [{res['<file>']}]" if "<file>" in res else ""), flush=True)
             if args.json:
                 with open(args.json, "w") as fh:
                     json.dump(results, fh, indent=1)

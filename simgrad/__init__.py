@@ -29,7 +29,21 @@ TaichiIndexError = SimgradIndexError
 TaichiAssertionError = SimgradAssertionError
 TaichiRuntimeTypeError = SimgradTypeError
 from simgrad.lang import mathlib as math
-from simgrad.lang.archs import amdgpu, arm64, cpu, cuda, dx11, dx12, gles, gpu, metal, opengl, vulkan, x64
+from simgrad.lang.archs import (
+    amdgpu,
+    arm64,
+    cpu,
+    cuda,
+    dx11,
+    dx12,
+    extension,
+    gles,
+    gpu,
+    metal,
+    opengl,
+    vulkan,
+    x64,
+)
 
 x86_64 = x64
 from simgrad.lang.factories import FieldsBuilder, field, root
@@ -137,7 +151,6 @@ _NOT_SUPPORTED = {
     "get_addr": "raw field addresses are not exposed",
     "ref": "real functions with reference parameters are not built yet (ti.real_func is inlined)",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
-    "extension": "Taichi's extension flags are not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "sparse": "sparse SNodes are not built yet",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",

@@ -15,7 +15,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradNotSupportedError, SimgradTypeError
+from simgrad.errors import SimgradTypeError
 from simgrad.frontend.arrays import ArrayArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import Compiler
@@ -52,8 +52,7 @@ class Param:
         elif isinstance(ann, MatrixType):
             self.kind = "matrix"
         elif isinstance(ann, StructType):
-            raise SimgradNotSupportedError(f"kernel {kernel_name}: parameter '{name}' is a struct; struct kernel "
-                                           "arguments are not supported yet (pass its members, or a struct field)")
+            self.kind = "struct"  # passed as its leaves, one slot (or matrix of slots) each
         elif ann is inspect.Parameter.empty:
             raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
                                    "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
@@ -97,9 +96,11 @@ class KernelSource(Protocol):
 class SlotParam:
     """A parameter as one instantiation lays it out in the context buffer."""
 
-    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0):
+    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0, of=None, path=()):
         self.name, self.kind, self.slot, self.dtype = name, kind, slot, dtype
         self.count, self.ndim, self.ndim_total = count, ndim, ndim_total
+        # a leaf of struct parameter `of`: its value is `of.path[0].path[1]...`
+        self.of, self.path = of, path
 
 
 class CompiledKernel:
@@ -108,7 +109,7 @@ class CompiledKernel:
     first use (tests and Tape validation read them)."""
 
     def __init__(self, launcher: Launcher, ir: IRKernel | None, llvm_text: str | None,
-                 ret_matrix: tuple[int, int] | None, rebuild=None):
+                 ret_matrix: tuple[int, int] | StructType | None, rebuild=None):
         self.launcher = launcher
         self.launch = launcher.launch
         self._ir = ir
@@ -209,7 +210,7 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
 
 
 def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list[SlotParam], int],
-                                                                      tuple[int, int] | None]:
+                                                                      tuple[int, int] | StructType | None]:
     """Each parameter becomes what the body sees (an ARG value, a Matrix of them, an ndarray view, the
     template value itself) and its place in the context buffer."""
     b = comp.builder
@@ -233,6 +234,23 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
                 comp.bind(p.name, Matrix(n=mt.n, m=mt.m, _entries=entries))
                 out.append(SlotParam(p.name, "matrix", slot, t, count=mt.num_entries))
                 slot += mt.num_entries
+            elif p.kind == "struct":
+                out.append(SlotParam(p.name, "struct"))
+                leaves: list = []
+                for path, lt in p.ann.leaves():
+                    leaf = f"{p.name}__{'__'.join(path)}"
+                    if isinstance(lt, MatrixType):
+                        entries = [Expr(b.emit(Op.ARG, lt.dtype, (), {"slot": slot + k}))
+                                   for k in range(lt.num_entries)]
+                        leaves.append(Matrix(n=lt.n, m=lt.m, _entries=entries))
+                        out.append(SlotParam(leaf, "matrix", slot, lt.dtype, count=lt.num_entries, of=p.name,
+                                             path=path))
+                        slot += lt.num_entries
+                    else:
+                        leaves.append(Expr(b.emit(Op.ARG, lt, (), {"slot": slot})))
+                        out.append(SlotParam(leaf, "scalar", slot, lt, of=p.name, path=path))
+                        slot += 1
+                comp.bind(p.name, p.ann.from_leaves(leaves))
             else:
                 arg = _array_arg(kernel.name, p, a, slot)
                 comp.bind(p.name, arg)
@@ -240,11 +258,15 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
                                      ndim_total=arg.ndim + len(arg.element_shape)))
                 slot += arg.num_slots
         ret = kernel.signature.return_annotation
-        ret_matrix = None
+        ret_matrix: tuple[int, int] | StructType | None = None
         if ret is not inspect.Signature.empty and ret is not None:
             if isinstance(ret, MatrixType):
                 comp.return_types = [ret.dtype] * ret.num_entries
                 ret_matrix = (ret.n, ret.m)
+            elif isinstance(ret, StructType):
+                comp.return_types = [x for _, lt in ret.leaves() for x in
+                                     ([lt.dtype] * lt.num_entries if isinstance(lt, MatrixType) else [lt])]
+                ret_matrix = ret  # the launcher rebuilds the struct from the returned leaves
             elif isinstance(ret, (tuple, list)):
                 comp.return_types = [dt.from_any(r) for r in ret]
             else:
@@ -288,6 +310,16 @@ def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
         bound = meta["tape_bound"]
         launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
     ret_matrix = meta["ret_matrix"]
+    if isinstance(ret_matrix, StructType):
+        stype, inner = ret_matrix, launcher.launch
+
+        def launch_struct(*a):
+            vals = iter(inner(*a))
+            leaves = [_take_leaf(lt, vals) for _, lt in stype.leaves()]
+            return stype.from_leaves(leaves)
+
+        launcher.launch = launch_struct
+        return launcher
     if ret_matrix is not None:
         inner = launcher.launch
         n, m = ret_matrix
@@ -298,6 +330,13 @@ def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
 
         launcher.launch = launch
     return launcher
+
+
+def _take_leaf(t, vals):
+    if not isinstance(t, MatrixType):
+        return next(vals)
+    flat = [next(vals) for _ in range(t.num_entries)]
+    return Matrix(flat) if t.m == 0 else Matrix([flat[r * t.m:(r + 1) * t.m] for r in range(t.n)])
 
 
 def _read_entry(prog: Program, key: str):

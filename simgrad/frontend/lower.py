@@ -393,6 +393,9 @@ class Compiler:
         if self.return_types is None:
             raise SimgradSyntaxError("this kernel returns a value but has no return annotation (-> ti.f32)",
                                      self.loc(node))
+        if isinstance(value, Struct):  # its leaves in order, matrices by entry
+            value = [x for _, leaf in _struct_leaves(value) for x in
+                     (leaf.entries if isinstance(leaf, Matrix) else [leaf])]
         values = value.entries if isinstance(value, Matrix) else list(value) \
             if isinstance(value, (tuple, list)) else [value]
         if len(values) != len(self.return_types):
@@ -746,6 +749,13 @@ def _element_ref(base: Field, exprs: list):
         return MatrixRef(refs, base.n, base.m)
     assert isinstance(base, StructField)
     return StructRef(base.stype, {k: _element_ref(f, exprs) for k, f in base.members.items()})
+
+
+def _struct_leaves(value: Struct, prefix: tuple = ()) -> list:
+    out: list = []
+    for k, v in value.items():
+        out += _struct_leaves(v, prefix + (k,)) if isinstance(v, Struct) else [(prefix + (k,), v)]
+    return out
 
 
 def _member_dtype(value: Struct, name: str):

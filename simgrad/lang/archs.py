@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import platform
 import warnings
+from enum import Enum
 
 
 class Arch:
@@ -44,3 +45,26 @@ def resolve(arch) -> Arch:
     warnings.warn(f"arch={arch.name} is not available in this build of simgrad; falling back to the CPU "
                   f"({cpu.name})", stacklevel=4)
     return cpu
+
+
+class extension(Enum):  # noqa: N801  (Taichi's name: ti.extension.sparse, ...)
+    """Optional backend features, as Taichi names them (`require=ti.extension.adstack` in its tests)."""
+
+    sparse = "sparse"
+    quant = "quant"
+    quant_basic = "quant_basic"
+    data64 = "data64"
+    adstack = "adstack"
+    bls = "bls"
+    assertion = "assertion"
+    extfunc = "extfunc"
+    mesh = "mesh"
+    dynamic_index = "dynamic_index"
+
+
+# what the CPU backend has today (sparse SNodes and quantized types are not built yet)
+_SUPPORTED = {extension.data64, extension.adstack, extension.assertion, extension.dynamic_index, extension.bls}
+
+
+def is_extension_supported(arch, ext: extension) -> bool:
+    return resolve(arch) is cpu and ext in _SUPPORTED

@@ -52,6 +52,23 @@ class StructType:
             given[k] = v
         return Struct._typed(self, {k: _convert(t, given.get(k, 0)) for k, t in self.members.items()})
 
+    def leaves(self, prefix: tuple = ()) -> list[tuple[tuple, object]]:
+        """(path, scalar or matrix type) of every non-struct member, nested structs flattened, in order."""
+        out: list[tuple[tuple, object]] = []
+        for k, t in self.members.items():
+            out += t.leaves(prefix + (k,)) if isinstance(t, StructType) else [(prefix + (k,), t)]
+        return out
+
+    def from_leaves(self, values: list) -> Struct:
+        """The struct whose leaves (in `leaves()` order) are `values`."""
+        it = iter(values)
+
+        def build(t: StructType) -> Struct:
+            return Struct._typed(t, {k: build(m) if isinstance(m, StructType) else next(it)
+                                     for k, m in t.members.items()})
+
+        return build(self)
+
     def cast(self, value) -> Struct:
         return self(value)
 
@@ -272,4 +289,5 @@ def is_struct_value(v) -> bool:
 def member_zero(t):
     """A zero of member type `t` (what an unset member holds)."""
     return _convert(t, 0)
+
 

@@ -32,10 +32,10 @@ class Launcher:
     """Holds the context buffer of one kernel instantiation and the generated `launch` function."""
 
     def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
-                 error_table: list, program, ret_matrix: tuple[int, int] | None = None):
+                 error_table: list, program, ret_matrix: object = None):
         self.kernel_name = kernel_name
         self.params = params  # SlotParam per kernel parameter (Tape validation maps ARG slots to values)
-        self.ret_matrix = ret_matrix  # (n, m) when the kernel returns a matrix: values come back as a tuple
+        self.ret_matrix = ret_matrix  # (n, m) for a matrix, a StructType for a struct: the values come back as a tuple
         self.error_table = error_table
         self.program = program
         self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
@@ -63,7 +63,14 @@ class Launcher:
         lines = []
         names = []
         for p in params:
-            names.append(p.name)
+            if p.kind == "struct":  # its leaves follow as their own params
+                names.append(p.name)
+                continue
+            if p.of is not None:  # a leaf of a struct argument
+                env["_member"] = _member
+                lines.append(f"    {p.name} = _member({p.of}, {p.path!r})")
+            else:
+                names.append(p.name)
             if p.kind == "scalar":
                 t = p.dtype
                 scale = 8 // t.nbytes
@@ -161,6 +168,13 @@ def _flat_matrix_int(value, count, kernel, param):
     if any(isinstance(v, float) for v in vals):
         raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects integer entries, got floats")
     return vals
+
+
+def _member(value, path):
+    """value.a.b for a struct argument's leaf (struct values, struct field elements and dicts)."""
+    for name in path:
+        value = value[name] if isinstance(value, dict) else getattr(value, name)
+    return value
 
 
 def _array_info(a, kernel, param, ndim):

@@ -110,10 +110,24 @@ def test_user_placed_struct_field_and_gradients_through_members():
     np.testing.assert_allclose(p.x.grad.to_numpy(), fd, rtol=1e-6)
 
 
-def test_struct_kernel_arguments_are_refused_loudly():
+def test_struct_kernel_arguments_and_returns():
     ti.init(arch=ti.cpu)
+    v2 = ti.types.vector(2, ti.f32)
+    Inner = ti.types.struct(k=ti.i32, w=ti.f32)
+    S = ti.types.struct(p=v2, m=ti.f32, inner=Inner)
 
-    with pytest.raises(ti.SimgradNotSupportedError, match="struct kernel arguments"):
-        @ti.kernel
-        def k(b: Body):
-            pass
+    @ti.kernel
+    def scale(s: S, f: ti.f32) -> S:
+        t = s
+        t.p *= f
+        t.m += s.inner.w * s.inner.k
+        return t
+
+    @ti.kernel
+    def total(s: S) -> ti.f32:
+        return s.p.sum() + s.m + s.inner.k
+
+    r = scale(S(p=v2(1, 2), m=3.0, inner=Inner(k=2, w=0.5)), 2.0)
+    assert list(r.p) == [2.0, 4.0] and r.m == 4.0 and r.inner.k == 2 and r.inner.w == 0.5
+    assert total(r) == 12.0
+    assert total({"p": [1.0, 1.0], "m": 0.5, "inner": {"k": 3, "w": 0.0}}) == 5.5

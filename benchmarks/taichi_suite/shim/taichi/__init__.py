@@ -3,7 +3,7 @@
 simgrad lacks raise simgrad's own errors, which then fail the tests that use them."""
 
 import sys
-import types
+import types as _pytypes
 
 import simgrad as _simgrad
 from simgrad import *  # noqa: F401,F403
@@ -11,7 +11,7 @@ from simgrad import lang as _lang
 
 # submodules test files import by name
 sys.modules[__name__ + ".lang"] = _lang
-_misc = types.ModuleType(__name__ + ".lang.misc")
+_misc = _pytypes.ModuleType(__name__ + ".lang.misc")
 _misc.get_host_arch_list = lambda: [_simgrad.cpu]  # type: ignore[attr-defined]  # the host is the CPU
 _misc.is_arch_supported = lambda arch: arch == _simgrad.cpu  # type: ignore[attr-defined]
 sys.modules[_misc.__name__] = _misc
