@@ -143,6 +143,13 @@ class _Root:
     def __getattr__(self, name):
         return getattr(get_program().root_tree.root, name)
 
+    def lazy_grad(self) -> None:
+        """Place the gradient of every float field not yet in memory, beside its primal: the fields under
+        ti.root and those made by ti.field(shape=...) (their own trees here; under ti.root in Taichi)."""
+        for tree in get_program().trees:
+            if not tree.materialized:
+                tree.root.lazy_grad()
+
     def __repr__(self):
         return "ti.root"
 
