@@ -121,3 +121,8 @@ class GradientError(TaichiRuntimeError):
 class SimgradNotSupportedError(SimgradError, NotImplementedError):
     """A Taichi feature simgrad does not have (yet): said plainly, at the user's line, instead of an
     AttributeError or a silently different result."""
+
+
+class AccessRuleError(GradientError, SimgradAssertionError):
+    """The global data access rule checked at run time (Tape(validation=True), debug mode) failed: a
+    TaichiAssertionError, as Taichi raises for it."""

@@ -313,7 +313,14 @@ class Compiler:
     def visit_If(self, node: ast.If) -> None:
         cond = self.eval(node.test)
         if not isinstance(cond, (Expr, Matrix)):
-            self.visit_block(node.body if cond else node.orelse)
+            # a Python value decides at compile time; unless it is ti.static(...), Taichi still treats the
+            # body as nested, so a for loop inside is not an outermost (parallel) loop
+            nested = not _is_static_call(node.test)
+            self.depth += nested
+            try:
+                self.visit_block(node.body if cond else node.orelse)
+            finally:
+                self.depth -= nested
             return
         if isinstance(cond, Matrix):
             raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",
@@ -689,6 +696,14 @@ def _is_array_arg(v) -> bool:
     from simgrad.frontend.arrays import ArrayArg
 
     return isinstance(v, ArrayArg)
+
+
+def _is_static_call(node: ast.expr) -> bool:
+    """`ti.static(...)` / `static(...)` as written in the source."""
+    if not isinstance(node, ast.Call):
+        return False
+    f = node.func
+    return (isinstance(f, ast.Attribute) and f.attr == "static") or (isinstance(f, ast.Name) and f.id == "static")
 
 
 def _is_py_matrix_const(v) -> bool:

@@ -13,3 +13,8 @@ class _Runtime:
 
 def get_runtime() -> _Runtime:
     return _Runtime()
+
+
+def current_cfg():
+    """The ti.init configuration (arch, default_fp, default_ip, debug, ...), as Taichi's current_cfg()."""
+    return get_program().config

@@ -117,6 +117,10 @@ class Matrix:
             raise IndexError(f"index {key} out of range for a {self.n}x{self.m} matrix")
         return (i % self.n) * self.m + (j % self.m)
 
+    def __call__(self, *key):
+        """`v(0)`, `m(i, j)`: Taichi's older element syntax, the same as v[0], m[i, j]."""
+        return self[key if len(key) > 1 else key[0]]
+
     def __getitem__(self, key):
         if isinstance(key, slice) or (isinstance(key, tuple) and any(isinstance(k, slice) for k in key)):
             return self._slice(key)

@@ -19,9 +19,10 @@ _PY_NUM = (int, float, bool)
 
 
 def _np_scalar(x):
+    """A numpy scalar, or a 0-d numpy array (a compile-time constant either way)."""
     import numpy as np
 
-    return isinstance(x, np.generic)
+    return isinstance(x, np.generic) or (isinstance(x, np.ndarray) and x.ndim == 0)
 
 
 def is_matrix(x) -> bool:

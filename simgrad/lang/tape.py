@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import functools
 import hashlib
+from typing import Any
 
 import numpy as np
 
+from simgrad import dtypes as dt
 from simgrad.autodiff.validate import differentiable, user_name
-from simgrad.errors import GradientError, SimgradError
+from simgrad.errors import AccessRuleError, GradientError, SimgradError
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
@@ -34,15 +36,25 @@ class Tape:
             if loss.grad is None or loss.grad.snode is None:
                 raise SimgradError(f"the loss field {loss.name} has no gradient: create it with "
                                    "needs_grad=True (or place it before ti.root.lazy_grad())")
+        if grad_check is not None and (not isinstance(grad_check, (list, tuple)) or
+                                       not all(isinstance(f, Field) for f in grad_check)):
+            raise SimgradError("Tape(grad_check=...) takes a list of fields whose gradients to check")
+        if grad_check and (loss is None or loss.dtype is not dt.f64):
+            raise SimgradError("Tape(grad_check=...) needs an f64 loss (finite differences in f32 are too coarse "
+                               "to check against), as in Taichi")
         self.loss = loss
         self.clear_gradients = clear_gradients
         self.validation = validation
+        self.grad_check: list[Any] = list(grad_check or [])
+        self._before: list | None = None
         self.entries: list = []
         self.snapshots: dict = {}
         self.gradient_evaluated = False
         self._outer = None
 
     def __enter__(self):
+        if self.grad_check:
+            self._before = _save_memory()  # what the checks replay the recorded kernels from
         if self.loss is not None:
             self.loss.fill(0)
         if self.clear_gradients:
@@ -69,7 +81,53 @@ class Tape:
         if self.loss is not None:
             self.loss.grad.fill(1)
             self.grad()
+        if self.grad_check:
+            self._check_gradients()
         return False
+
+    def _check_gradients(self) -> None:
+        """Tape(grad_check=[x, ...]): compare each x.grad with central differences of the loss along random
+        directions (replaying the recorded kernels from the state before the Tape), at decreasing steps;
+        one step within 1% passes, as Taichi's check. Every field is put back as it was after backward."""
+        assert self._before is not None and self.loss is not None
+        after = _save_memory()
+        before = self._before
+        rng = np.random.default_rng(0)
+        try:
+            for x in self.grad_check:
+                if x is self.loss:
+                    continue
+                if x.grad is None or x.grad.snode is None:
+                    raise SimgradError(f"grad_check: field {x.name} has no gradient")
+                grad = x.grad.to_numpy().astype(np.float64)
+                x0 = x.to_numpy().astype(np.float64)
+                errors = []
+                for eps in 2.0 ** np.arange(-3, -30, -2):
+                    t = rng.random(x0.shape)
+                    pos, neg = (self._replayed_loss(before, x, x0 + s * eps * t) for s in (1, -1))
+                    numeric = (pos - neg) * 0.5 / eps
+                    autodiff = float(np.sum(grad * t))
+                    err = abs(autodiff - numeric)
+                    errors.append(err / (abs(autodiff) + 1e-20))
+                    if err * 100 <= abs(autodiff) or err == 0:
+                        break
+                else:
+                    raise GradientError(f"grad check failed for field {x.name}: relative error "
+                                        f"{min(errors):.3g} against central differences (expected <= 0.01)")
+        finally:
+            _restore_memory(after)
+
+    def _replayed_loss(self, before: list, x: Any, value: np.ndarray) -> float:
+        _restore_memory(before)
+        x.from_numpy(value.astype(x.to_numpy().dtype))
+        outer, ad_hooks.recorder = ad_hooks.recorder, None
+        try:
+            for fn, args in self.entries:
+                fn(*args)
+        finally:
+            ad_hooks.recorder = outer
+        assert self.loss is not None
+        return float(self.loss.to_numpy())
 
     def insert(self, fn, args) -> None:
         self.entries.append((fn, args))
@@ -85,6 +143,20 @@ class Tape:
                 snap.check()
             fn.grad(*args)
         self.gradient_evaluated = True
+
+
+def _save_memory() -> list:
+    """Copies of every SNode tree's buffer (what a grad check restores between replays)."""
+    from simgrad.lang.program import get_program
+
+    prog = get_program()
+    prog.materialize_all()
+    return [(t.buffer, t.buffer.copy()) for t in prog.trees if t.buffer is not None]
+
+
+def _restore_memory(saved: list) -> None:
+    for buf, copy in saved:
+        buf[...] = copy
 
 
 def clear_all_gradients(gradient_type=None) -> None:
@@ -215,7 +287,7 @@ class Snapshot:
         for f, digest in self.prints.items():
             if now[f] != digest:
                 loc = self.reads[f][0]
-                raise GradientError(
+                raise AccessRuleError(
                     f"global data access rule violated: field '{user_name(f)}' was modified after kernel "
                     f"{self.kernel.name} read it, so its gradient would be computed from different values. "
                     "Keep every state a differentiated kernel reads unchanged until backward (e.g. store "
