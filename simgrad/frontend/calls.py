@@ -46,6 +46,17 @@ def _builtin_range(*args):
     return RangeSpec(*args)
 
 
+def _reduce_bool(x, how: str):
+    """all()/any() of a matrix of kernel values is the matrix's own .all()/.any() (as in Taichi); of a
+    Python iterable, Python's."""
+    if isinstance(x, Matrix):
+        return x.all() if how == "all" else x.any()
+    items = list(x)
+    if any(isinstance(v, (Expr, Matrix)) for v in items):
+        return Matrix(items).all() if how == "all" else Matrix(items).any()
+    return builtins.all(items) if how == "all" else builtins.any(items)
+
+
 _BUILTINS = {
     builtins.range: _builtin_range,
     builtins.int: _builtin_int,
@@ -57,6 +68,8 @@ _BUILTINS = {
     builtins.len: _builtin_len,
     builtins.round: _builtin_round,
     builtins.bool: _builtin_bool,
+    builtins.all: lambda x: _reduce_bool(x, "all"),
+    builtins.any: lambda x: _reduce_bool(x, "any"),
 }
 
 

@@ -262,7 +262,7 @@ def emit_fill(field, value) -> None:
         idx = [ops.cast_expr(ops.to_expr(i, dt.i32), dt.i32) for i in idx]
         refs = [GlobalRef(c, idx, c.dtype) for c in comps]
         if isinstance(field, MatrixField):
-            MatrixRef(refs, field.n, field.m).store(value)
+            MatrixRef(refs, field.n, field.ncols).store(value)
         else:
             refs[0].store(value)
 

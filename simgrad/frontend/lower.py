@@ -761,7 +761,7 @@ def _element_ref(base: Field, exprs: list):
         return GlobalRef(base, exprs, base.dtype)
     if isinstance(base, MatrixField):
         refs = [GlobalRef(c, exprs, c.dtype) for c in base.comps]
-        return MatrixRef(refs, base.n, base.m)
+        return MatrixRef(refs, base.n, base.ncols)
     assert isinstance(base, StructField)
     return StructRef(base.stype, {k: _element_ref(f, exprs) for k, f in base.members.items()})
 

@@ -154,6 +154,14 @@ class MatrixRef:
         if len(key) != len(dims):
             raise SimgradTypeError(f"{len(key)} indices for a matrix of shape {self.shape_text()}",
                                    context.current_loc())
+        for k in key:
+            if isinstance(k, slice) and any(isinstance(p, Expr) for p in (k.start, k.stop, k.step)):
+                raise SimgradTypeError("slice bounds must be compile-time values (Taichi does not support "
+                                       "variables in slice now)", context.current_loc())
+        if any(isinstance(k, Expr) for k in key):  # m[:, j] = v with a run-time j: each entry chosen at run time
+            rows = [list(range(*k.indices(d))) if isinstance(k, slice) else [k] for k, d in zip(key, dims)]
+            refs = [DynamicElementRef(self, (i, j)) for i in rows[0] for j in rows[1]]
+            return MatrixRef(refs, len(refs), 0)
         ranges = [list(range(*k.indices(d))) if isinstance(k, slice) else [_check(k, d)] for k, d in zip(key, dims)]
         if self.m == 0:
             return MatrixRef([self.refs[i] for i in ranges[0]], len(ranges[0]), 0)
@@ -207,6 +215,10 @@ class DynamicElementRef:
 
     def __init__(self, base: MatrixRef, key: tuple):
         self.base, self.key = base, key
+
+    @property
+    def dtype(self):
+        return self.base.dtype
 
     def load(self):
         return self.base.load()[self.key if len(self.key) > 1 else self.key[0]]

@@ -78,8 +78,8 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
     f = make("")
     if not f.dtype.is_float:
         if needs_grad or needs_dual:  # was an AttributeError on the missing gradient (Taichi refuses it too)
-            raise SimgradRuntimeError(f"{f.dtype} is not supported for a field with needs_grad=True or "
-                                      "needs_dual=True: gradients need a floating-point type")
+            raise SimgradRuntimeError(f"{f.dtype} is not supported for field with `needs_grad=True` or "
+                                      "`needs_dual=True`. (Gradients need a floating-point type.)")
         return f
     f.grad = make(".grad")
     for c, g in zip(f._components(), f.grad._components()):

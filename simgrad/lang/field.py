@@ -299,7 +299,7 @@ class MatrixField(Field):
     """A field of n x m matrices (m == 0: n-vectors), stored as n*m scalar component fields."""
 
     def __init__(self, n: int, m: int, dtype, name: str = "field", ndim: int | None = None):
-        self.n, self.m = n, m
+        self.n, self.ncols = n, m  # ncols 0: a vector field
         self.dtype = dt.from_any(dtype)
         self.name = name
         self.comps = [ScalarField(self.dtype, f"{name}[{c}]") for c in range(n * max(m, 1))]
@@ -307,12 +307,17 @@ class MatrixField(Field):
         self.dual = None
 
     @property
+    def m(self) -> int:
+        """Columns as Taichi counts them: 1 for a vector field."""
+        return max(self.ncols, 1)
+
+    @property
     def is_vector(self) -> bool:
-        return self.m == 0
+        return self.ncols == 0
 
     @property
     def entry_shape(self) -> tuple[int, ...]:
-        return (self.n,) if self.m == 0 else (self.n, self.m)
+        return (self.n,) if self.ncols == 0 else (self.n, self.ncols)
 
     def _components(self):
         return self.comps
@@ -320,16 +325,16 @@ class MatrixField(Field):
     def get_scalar_field(self, *indices: int) -> ScalarField:
         """The scalar field of one entry (`v.get_scalar_field(i)`, `m.get_scalar_field(i, j)`), to place the
         entries of a vector/matrix field separately (SoA)."""
-        want = 1 if self.m == 0 else 2
+        want = 1 if self.ncols == 0 else 2
         if len(indices) != want or not all(isinstance(k, (int, np.integer)) for k in indices):
             raise SimgradError(f"get_scalar_field of {self.name} takes {want} integer index(es), got {indices!r}",
                                caller_loc())
         r = int(indices[0])
         c = int(indices[1]) if want == 2 else 0
-        if not (0 <= r < self.n and 0 <= c < max(self.m, 1)):
+        if not (0 <= r < self.n and 0 <= c < max(self.ncols, 1)):
             raise SimgradError(f"get_scalar_field{indices!r} is outside the {self.entry_shape} entries of "
                                f"{self.name}", caller_loc())
-        return self.comps[r * max(self.m, 1) + c]
+        return self.comps[r * max(self.ncols, 1) + c]
 
     def _stacked(self, arrays: list[np.ndarray]) -> np.ndarray:
         a = np.stack(arrays, axis=-1)
@@ -425,7 +430,7 @@ class FieldElement(Matrix):
         object.__setattr__(self, "_field", field)
         object.__setattr__(self, "_key", key)
         object.__setattr__(self, "n", field.n)
-        object.__setattr__(self, "m", field.m)
+        object.__setattr__(self, "m", field.ncols)
 
     @property  # type: ignore[override]
     def entries(self):

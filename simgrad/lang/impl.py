@@ -10,6 +10,14 @@ class _Runtime:
     def prog(self) -> Program:
         return get_program()
 
+    @property
+    def default_fp(self):
+        return get_program().config.default_fp
+
+    @property
+    def default_ip(self):
+        return get_program().config.default_ip
+
 
 def get_runtime() -> _Runtime:
     return _Runtime()

@@ -10,6 +10,7 @@ import numbers
 import numpy as np
 
 from simgrad import dtypes as dt
+from simgrad.errors import SimgradTypeError
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -78,6 +79,12 @@ class Matrix:
 
     @staticmethod
     def _map(fn, *args) -> Matrix:
+        # a list, tuple or numpy array beside a matrix is a matrix of the same shape (`m == [[0, 1], [2, 3]]`),
+        # never one scalar operand
+        args = tuple(Matrix(a.tolist() if hasattr(a, "tolist") else list(a))
+                     if isinstance(a, (list, tuple)) or (hasattr(a, "ndim") and getattr(a, "ndim", 0) > 0
+                                                          and not isinstance(a, Matrix)) else a
+                     for a in args)
         mats = [a for a in args if isinstance(a, Matrix)]
         shape = mats[0].shape
         for a in mats[1:]:
@@ -140,6 +147,16 @@ class Matrix:
             key = (key[0], slice(None))
         if len(key) != len(dims):
             raise IndexError(f"{len(key)} indices for a matrix of shape {self.shape}")
+        for k in key:
+            if isinstance(k, slice) and any(isinstance(p, Expr) for p in (k.start, k.stop, k.step)):
+                raise SimgradTypeError("slice bounds must be compile-time values (Taichi does not support "
+                                       "variables in slice now)", _loc())
+        if any(isinstance(k, Expr) for k in key):  # m[:, j] with a run-time j: each entry picked at run time
+            rows = [list(range(*k.indices(d))) if isinstance(k, slice) else [k] for k, d in zip(key, dims)]
+            picked = [self._dynamic_get((i, j)) for i in rows[0] for j in rows[1]]
+            if all(isinstance(k, slice) for k in key):
+                return Matrix([picked[r * len(rows[1]):(r + 1) * len(rows[1])] for r in range(len(rows[0]))])
+            return Matrix(picked)
         ranges = [range(*k.indices(d)) if isinstance(k, slice) else [int(k) % d] for k, d in zip(key, dims)]
         if self.m == 0:
             return Matrix([self.entries[i] for i in ranges[0]])
@@ -569,3 +586,9 @@ def check_dynamic_index(key, dims) -> None:
             ok = ops.logical_and(ops.ge(k, 0), ops.lt(k, d))
             comp.builder.emit(Op.ASSERT, None, (ops.ne(ok, 0).stmt,),
                               {"message": f"index out of range for a local vector/matrix dimension of size {d}"})
+
+
+def _loc():
+    from simgrad.ir import context
+
+    return context.current_loc()

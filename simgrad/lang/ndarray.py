@@ -39,6 +39,7 @@ class Ndarray:
         self.element_shape = tuple(element_shape)
         self.n = self.element_shape[0] if self.element_shape else 0
         self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
+        self.ncols = self.m  # what element views read (0: vectors)
         self.name = "ndarray"
         self.grad = None
         self._ndarray = np.zeros(self.shape + self.element_shape, dtype=self.dtype.np)

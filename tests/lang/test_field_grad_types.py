@@ -13,7 +13,7 @@ import simgrad as ti
 ])
 def test_integer_field_with_gradient_is_refused(make):
     with pytest.raises(ti.SimgradRuntimeError,
-                       match="not supported for a field with needs_grad=True or needs_dual=True"):
+                       match="not supported for field with `needs_grad=True` or `needs_dual=True`"):
         make()
 
 

@@ -90,3 +90,24 @@ def test_access_rule_violation_is_a_taichi_assertion_error():
         with ti.ad.Tape(loss=loss, validation=True):
             read()
             overwrite()
+
+
+def test_matrix_compared_with_nested_lists_elementwise_in_both_scopes():
+    """Was silently wrong: a list beside a matrix was taken as one scalar operand (every entry compared
+    with the whole list, giving all zeros)."""
+    ti.init(arch=ti.cpu)
+    m = ti.Matrix([[0, 1], [2, 3]])
+    assert (m == [[0, 1], [2, 3]]).all() and not (m == [[0, 1], [2, 4]]).all()
+    np.testing.assert_array_equal((ti.Vector([1, 2]) * (3, 4)).to_numpy(), [3, 8])
+    f = ti.Matrix.field(2, 2, ti.i32, shape=3)
+    ok = ti.field(ti.i32, shape=2)
+
+    @ti.kernel
+    def k():
+        for i in range(3):
+            f[i] = [[i, i + 1], [i + 2, i + 3]]
+        ok[0] = all(f[1] == [[1, 2], [3, 4]])
+        ok[1] = any(f[2] == [[0, 0], [0, 0]])
+
+    k()
+    assert (f[1] == [[1, 2], [3, 4]]).all() and list(ok.to_numpy()) == [1, 0]

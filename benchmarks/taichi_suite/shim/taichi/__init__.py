@@ -15,6 +15,7 @@ _misc = _pytypes.ModuleType(__name__ + ".lang.misc")
 _misc.get_host_arch_list = lambda: [_simgrad.cpu]  # type: ignore[attr-defined]  # the host is the CPU
 _misc.is_arch_supported = lambda arch: arch == _simgrad.cpu  # type: ignore[attr-defined]
 sys.modules[_misc.__name__] = _misc
+sys.modules[__name__ + ".lang.exception"] = _simgrad  # the Taichi exception names are simgrad's
 sys.modules[__name__ + ".math"] = _simgrad.math
 math = _simgrad.math
 lang = _lang
