@@ -76,18 +76,34 @@ def _shape_of(comp, target, node):
                              comp.loc(node))
 
 
+class StaticJump(Exception):
+    """A break/continue met directly in a ti.static loop's body (no run-time loop or if in between):
+    it ends the unrolling, or this unrolled iteration, at compile time."""
+
+    def __init__(self, is_break: bool):
+        self.is_break = is_break
+
+
 def _unroll(comp, node: ast.For) -> None:
     seq = comp.eval(node.iter)
-    for item in seq:
-        comp.frame.scopes.append({})
-        try:
-            if isinstance(node.target, ast.Name):
-                comp.bind(node.target.id, item)
-            else:
-                comp._bind_target(node.target, item)
-            comp.visit_block(node.body)
-        finally:
-            comp.frame.scopes.pop()
+    # where a jump must be to belong to this loop: same frame, no run-time loop or branch opened since
+    comp.static_loops.append((comp.frame, len(comp.loop_stack), comp.frame.dynamic_depth))
+    try:
+        for item in seq:
+            comp.frame.scopes.append({})
+            try:
+                if isinstance(node.target, ast.Name):
+                    comp.bind(node.target.id, item)
+                else:
+                    comp._bind_target(node.target, item)
+                comp.visit_block(node.body)
+            except StaticJump as jump:
+                if jump.is_break:
+                    break
+            finally:
+                comp.frame.scopes.pop()
+    finally:
+        comp.static_loops.pop()
 
 
 _I32_MAX = (1 << 31) - 1

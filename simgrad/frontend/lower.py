@@ -13,6 +13,7 @@ import operator
 
 from simgrad import dtypes as dt
 from simgrad.errors import (
+    SimgradAssertionError,
     SimgradError,
     SimgradIndexError,
     SimgradNameError,
@@ -103,6 +104,7 @@ class Compiler:
         self.return_types: list | None = None
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
+        self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
 
     @property
     def frame(self) -> Frame:
@@ -375,6 +377,11 @@ class Compiler:
         self._loop_jump(node, Op.CONTINUE)
 
     def _loop_jump(self, node, op: Op) -> None:
+        if self.static_loops and self.static_loops[-1] == (self.frame, len(self.loop_stack),
+                                                           self.frame.dynamic_depth):
+            from simgrad.frontend.loops import StaticJump
+
+            raise StaticJump(op is Op.BREAK)
         if not self.loop_stack:
             raise SimgradSyntaxError(f"'{op.name.lower()}' outside a run-time loop (inside ti.static loops it "
                                      "is not supported)", self.loc(node))
@@ -413,15 +420,18 @@ class Compiler:
             self.builder.emit(Op.RET_STORE, None, (e.stmt,), {"slot": slot})
 
     def visit_Assert(self, node: ast.Assert) -> None:
+        """Asserts exist only in debug mode, as in Taichi (not even evaluated otherwise); one whose condition
+        is known at compile time fails then and there, with the run-time assertion's error class."""
+        if not self.debug:
+            return
         cond = self.eval(node.test)
         msg = self.eval(node.msg) if node.msg is not None else None
         text = msg if isinstance(msg, str) else ast.unparse(node.test)
         if not isinstance(cond, Expr):
             if not cond:
-                raise SimgradSyntaxError(f"assertion failed at compile time: {text}", self.loc(node))
+                raise SimgradAssertionError(f"assertion failed at compile time: {text}", self.loc(node))
             return
-        if self.debug:
-            self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt,), {"message": text})
+        self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt,), {"message": text})
 
     def visit_For(self, node: ast.For) -> None:
         from simgrad.frontend.loops import lower_for

@@ -32,7 +32,8 @@ def _check_static(v) -> None:
     else:
         parts = [v]
     if any(isinstance(p, Expr) for p in parts):
-        raise SimgradSyntaxError("ti.static() needs a compile-time value, but this depends on a run-time value "
+        raise SimgradSyntaxError("ti.static() arguments must be compile-time constants, but this depends on a "
+                                 "run-time value "
                                  "(a kernel argument, a field element or a local variable); use a ti.template() "
                                  "parameter or a Python constant, or drop ti.static for a run-time loop/branch",
                                  context.current_loc())

@@ -22,7 +22,7 @@ nan = _m.nan
 
 vec2, vec3, vec4 = _vector(2), _vector(3), _vector(4)
 ivec2, ivec3, ivec4 = _vector(2, int), _vector(3, int), _vector(4, int)
-uvec2, uvec3, uvec4 = _vector(2, "u32"), _vector(3, "u32"), _vector(4, "u32")
+uvec2, uvec3, uvec4 = _vector(2, _dt.u32), _vector(3, _dt.u32), _vector(4, _dt.u32)
 mat2, mat3, mat4 = _matrix(2, 2), _matrix(3, 3), _matrix(4, 4)
 
 sqrt, sin, cos, tan, asin, acos, atan2 = ops.sqrt, ops.sin, ops.cos, ops.tan, ops.asin, ops.acos, ops.atan2

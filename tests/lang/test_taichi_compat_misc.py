@@ -111,3 +111,34 @@ def test_matrix_compared_with_nested_lists_elementwise_in_both_scopes():
 
     k()
     assert (f[1] == [[1, 2], [3, 4]]).all() and list(ok.to_numpy()) == [1, 0]
+
+
+def test_break_and_continue_in_static_loops_and_asserts_only_in_debug():
+    ti.init(arch=ti.cpu)
+    x = ti.field(ti.i32, 5)
+    y = ti.field(ti.i32, 5)
+
+    @ti.kernel
+    def k(v: ti.i32):
+        for i in ti.static(range(5)):
+            x[i] = 1
+            if ti.static(i == 2):
+                break
+        for i in ti.static(range(5)):
+            if ti.static(i == 2):
+                continue
+            y[i] = v
+        assert v < 0, "compiled out without debug=True, as in Taichi"
+        assert 1 == 2
+
+    k(7)
+    np.testing.assert_array_equal(x.to_numpy(), [1, 1, 1, 0, 0])
+    np.testing.assert_array_equal(y.to_numpy(), [7, 7, 0, 7, 7])
+    ti.init(arch=ti.cpu, debug=True)
+
+    @ti.kernel
+    def known_false():
+        assert 1 == 2, "known at compile time"
+
+    with pytest.raises(ti.TaichiAssertionError, match="known at compile time"):
+        known_false()
