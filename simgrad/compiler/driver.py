@@ -298,7 +298,7 @@ def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
     if ann.ndim is not None and ann.ndim != ndim:
         raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
                                f"{ann.ndim} dimension(s), got {ndim}")
-    return ArrayArg(p.name, slot, t, ndim, elem)
+    return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary)
 
 
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:

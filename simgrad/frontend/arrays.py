@@ -9,13 +9,16 @@ from simgrad.frontend.refs import GlobalRef, MatrixRef
 from simgrad.ir import context
 from simgrad.ir.fieldref import ArrayRef
 from simgrad.ir.ops import Op
+from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 
 
 class ArrayArg:
     """How a kernel sees an ndarray parameter while it is compiled."""
 
-    def __init__(self, name: str, slot: int, dtype: dt.DataType, ndim: int, element_shape: tuple = ()):
+    def __init__(self, name: str, slot: int, dtype: dt.DataType, ndim: int, element_shape: tuple = (),
+                 boundary: str = "unsafe"):
+        self.boundary = boundary
         self.name, self.slot, self.dtype, self.ndim = name, slot, dtype, ndim
         self.element_shape = element_shape
         self.comps = [ArrayRef(name, slot, dtype, ndim, element_shape, c)
@@ -37,6 +40,8 @@ class ArrayArg:
         return f"arg{self.slot}"
 
     def ref(self, indices):
+        if self.boundary == "clamp":  # ti.types.ndarray(boundary="clamp")
+            indices = [ops.max(0, ops.min(i, self.shape_expr(k) - 1)) for k, i in enumerate(indices)]
         refs = [GlobalRef(c, indices, self.dtype) for c in self.comps]
         if not self.element_shape:
             return refs[0]

@@ -14,9 +14,17 @@ class _Runtime:
     def default_fp(self):
         return get_program().config.default_fp
 
+    @default_fp.setter
+    def default_fp(self, t) -> None:
+        get_program().set_default_types(fp=t)
+
     @property
     def default_ip(self):
         return get_program().config.default_ip
+
+    @default_ip.setter
+    def default_ip(self, t) -> None:
+        get_program().set_default_types(ip=t)
 
 
 def get_runtime() -> _Runtime:

@@ -66,8 +66,7 @@ class Program:
         Program.generation += 1
         self.generation = Program.generation
         self.config = Config(**kw)
-        dt.Defaults.fp = self.config.default_fp
-        dt.Defaults.ip = self.config.default_ip
+        self.set_default_types(self.config.default_fp, self.config.default_ip)
         self.memory = Memory()
         self.trees: list = []
         self._open_tree = None
@@ -118,6 +117,13 @@ class Program:
 
             self._code = CodeSpace(self.jit)
         return self._code.link(obj, symbols)
+
+    def set_default_types(self, fp=None, ip=None) -> None:
+        """default_fp / default_ip (ti.init, or get_runtime().default_ip = ... as Taichi's tests do)."""
+        if fp is not None:
+            self.config.default_fp = dt.Defaults.fp = dt.from_any(fp)
+        if ip is not None:
+            self.config.default_ip = dt.Defaults.ip = dt.from_any(ip)
 
     def release(self) -> None:
         """Free this program's native code (ti.reset / the next ti.init). Kernels notice the new program

@@ -5,6 +5,7 @@ from __future__ import annotations
 from enum import Enum
 
 from simgrad import dtypes as dt
+from simgrad.errors import SimgradNotSupportedError, SimgradTypeError
 
 
 class Template:
@@ -106,6 +107,13 @@ class NdarrayType:
         # trailing axes that form each element (a vector or matrix): a count taken from the array, or a shape
         self.element_dim = element_dim
         self.element_shape = tuple(element_shape) if element_shape is not None else None
+        if needs_grad:
+            raise SimgradNotSupportedError("ti.types.ndarray(needs_grad=True): gradients through ndarray "
+                                           "arguments are not supported yet; use fields with needs_grad=True")
+        if boundary not in (None, "unsafe", "clamp"):
+            raise SimgradTypeError(f"ndarray boundary must be 'unsafe' or 'clamp', got {boundary!r}")
+        # "clamp": every index is clamped into the array (an out-of-range read gets the edge element)
+        self.boundary = boundary or "unsafe"
 
     def element_shape_of(self, shape: tuple) -> tuple:
         """The element shape of an array of `shape` passed for this parameter (() for scalars)."""
@@ -123,8 +131,45 @@ def ndarray(dtype=None, ndim=None, **kw) -> NdarrayType:
     return NdarrayType(dtype, ndim, **kw)
 
 
+class _PrimitiveTypes:
+    """`ti.types.primitive_types`: the scalar types and Taichi's lists of them."""
+
+    def __init__(self) -> None:
+        for t in dt.ALL:
+            setattr(self, t.name, t)
+        self.real_types = [dt.f16, dt.f32, dt.f64, float]
+        self.integer_types = [dt.i8, dt.i16, dt.i32, dt.i64, dt.u1, dt.u8, dt.u16, dt.u32, dt.u64, int, bool]
+        self.all_types = self.real_types + self.integer_types
+
+    def __getattr__(self, name):
+        return getattr(dt, name)
+
+
+def is_real(t) -> bool:
+    return dt.from_any(t).is_float
+
+
+def is_integral(t) -> bool:
+    return not dt.from_any(t).is_float
+
+
+def is_signed(t) -> bool:
+    t = dt.from_any(t)
+    return t.is_float or t.is_signed
+
+
+def is_tensor(t) -> bool:
+    return isinstance(t, MatrixType)
+
+
 class _Types:
     """The `ti.types` namespace."""
+
+    primitive_types = _PrimitiveTypes()
+    is_real = staticmethod(is_real)
+    is_integral = staticmethod(is_integral)
+    is_signed = staticmethod(is_signed)
+    is_tensor = staticmethod(is_tensor)
 
     template = staticmethod(template)
     ndarray = staticmethod(ndarray)

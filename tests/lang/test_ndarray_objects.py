@@ -85,3 +85,19 @@ def test_ndarray_with_gradients_is_refused_not_silently_zero():
     ti.init(arch=ti.cpu)
     with pytest.raises(ti.SimgradNotSupportedError, match="needs_grad"):
         ti.ndarray(ti.f32, shape=4, needs_grad=True)
+
+
+def test_boundary_clamp_clamps_every_index_and_needs_grad_is_refused():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def read(x: ti.types.ndarray(boundary="clamp"), i: ti.i32, j: ti.i32) -> ti.f32:
+        return x[i, j]
+
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    for i, j in [(-1, 0), (-5, 2), (1, 9), (7, 7), (2, 1)]:
+        assert read(a, i, j) == a[min(max(i, 0), 2), min(max(j, 0), 3)]
+    with pytest.raises(ti.SimgradTypeError, match="boundary"):
+        ti.types.ndarray(boundary="wrap")
+    with pytest.raises(ti.SimgradNotSupportedError, match="needs_grad"):
+        ti.types.ndarray(needs_grad=True)

@@ -16,6 +16,18 @@ _misc.get_host_arch_list = lambda: [_simgrad.cpu]  # type: ignore[attr-defined] 
 _misc.is_arch_supported = lambda arch: arch == _simgrad.cpu  # type: ignore[attr-defined]
 sys.modules[_misc.__name__] = _misc
 sys.modules[__name__ + ".lang.exception"] = _simgrad  # the Taichi exception names are simgrad's
+_util = _pytypes.ModuleType(__name__ + ".lang.util")
+
+
+def _has(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+_util.has_pytorch = lambda: _has("torch")  # type: ignore[attr-defined]
+_util.has_paddle = lambda: _has("paddle")  # type: ignore[attr-defined]
+sys.modules[_util.__name__] = _util
 sys.modules[__name__ + ".math"] = _simgrad.math
 math = _simgrad.math
 lang = _lang
