@@ -606,6 +606,9 @@ class Compiler:
     def eval_ListComp(self, node: ast.ListComp):
         return self._comprehension(node, list)
 
+    def eval_DictComp(self, node: ast.DictComp):
+        return self._comprehension(node, dict)
+
     def eval_GeneratorExp(self, node):
         return self._comprehension(node, list)
 
@@ -614,7 +617,8 @@ class Compiler:
 
         def rec(gens):
             if not gens:
-                out.append(self.eval(node.elt))
+                out.append((self.eval(node.key), self.eval(node.value)) if isinstance(node, ast.DictComp)
+                           else self.eval(node.elt))
                 return
             g = gens[0]
             iterable = self.eval(g.iter)

@@ -78,6 +78,23 @@ class grouped:
     def __init__(self, target):
         self.target = target
 
+    def __iter__(self):
+        """`ti.static(ti.grouped(...))` unrolling: one integer vector per index, in row-major order."""
+        import itertools
+
+        from simgrad.lang.matrix import Matrix
+
+        t = self.target
+        if isinstance(t, ndrange):
+            ranges = [range(int(b), int(e)) for b, e in t.bounds]
+        elif hasattr(t, "shape"):  # a field: its indices (offsets included)
+            offset = getattr(t._components()[0], "offset", None) if hasattr(t, "_components") else None
+            offset = offset or (0,) * len(t.shape)
+            ranges = [range(o, o + n) for o, n in zip(offset, t.shape)]
+        else:
+            raise SimgradSyntaxError(f"cannot unroll ti.grouped over a {type(t).__name__}")
+        return (Matrix(list(idx)) for idx in itertools.product(*ranges))
+
 
 _loop_config: dict = {}
 

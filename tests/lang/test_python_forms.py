@@ -60,3 +60,17 @@ def test_grouped_ndrange_with_bounds():
         for j in range(6):
             want[i, j] = i * 10 + j
     np.testing.assert_array_equal(f.to_numpy(), want)
+
+
+def test_dict_comprehension_and_static_grouped_unrolling():
+    ti.init(arch=ti.cpu)
+    f = ti.field(ti.i32, shape=(2, 3))
+
+    @ti.kernel
+    def k(v: ti.i32):
+        d = {i: i * 10 for i in range(3) if i != 1}
+        for I in ti.static(ti.grouped(ti.ndrange(2, 3))):
+            f[I] = I[0] * 100 + d.get(I[1], v)
+
+    k(7)
+    np.testing.assert_array_equal(f.to_numpy(), [[0, 7, 20], [100, 107, 120]])
