@@ -166,6 +166,9 @@ def inline(comp, fn, args, kwargs, node):
             frame.scopes[0][name] = comp.new_var(value, ann)
         else:
             frame.scopes[0][name] = comp.new_var(value)
+    frame.entry_block = comp.builder.block  # where its early-return locals are declared
+    frame.entry_index = len(comp.builder.block.stmts)
+    frame.loop_base = len(comp.loop_stack)
     comp.frames.append(frame)
     try:
         comp.visit_block(frame.src.tree.body)
@@ -173,7 +176,7 @@ def inline(comp, fn, args, kwargs, node):
         raise
     finally:
         comp.frames.pop()
-    rv = frame.return_value
+    rv = frame.ret_var.load() if frame.ret_var is not None else frame.return_value
     ret_ann = frame.src.tree.returns
     if ret_ann is not None and rv is not None:
         ann = comp.eval(ret_ann)

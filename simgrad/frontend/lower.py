@@ -25,7 +25,7 @@ from simgrad.frontend.source import FunctionSource, get_source
 from simgrad.ir import context
 from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
-from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.nodes import Block, Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -86,6 +86,15 @@ class Frame:
         self.return_value = None
         self.has_returned = False
         self.dynamic_depth = 0  # run-time control flow nesting inside this frame
+        # early returns from run-time control flow in a ti.func: the value and a flag live in locals declared
+        # at the function's entry (entry_block/entry_index); the rest of the body is guarded by the flag
+        self.entry_block: Block | None = None
+        self.entry_index = 0
+        self.loop_base = 0  # run-time loops open when the function was entered
+        self.ret_var: VarRef | MatrixRef | None = None
+        self.ret_flag: VarRef | None = None
+        self.dynamic_returns = 0
+        self.returned_here = False
 
 
 class Compiler:
@@ -190,10 +199,70 @@ class Compiler:
         return self.frame.src.loc(node)
 
     def visit_block(self, stmts: list[ast.stmt]) -> None:
-        for s in stmts:
-            if self.frame.has_returned:
+        for k, s in enumerate(stmts):
+            frame = self.frame
+            if frame.has_returned:
                 raise SimgradSyntaxError("code after a return statement is not supported", self.loc(s))
+            before = frame.dynamic_returns
             self.visit_stmt(s)
+            if frame.returned_here:  # `return` inside run-time control flow: the rest of this block is dead
+                frame.returned_here = False
+                return
+            if frame.dynamic_returns != before:  # `s` may have returned: leave loops, guard what follows
+                assert frame.ret_flag is not None
+                if len(self.loop_stack) > frame.loop_base:
+                    stop = self.builder.emit(Op.IF, None, (ops.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    with self.dynamic(stop.blocks[0]):
+                        self._loop_jump(s, Op.BREAK)
+                rest = stmts[k + 1:]
+                if rest:
+                    guard = self.builder.emit(Op.IF, None, (ops.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    with self.dynamic(guard.blocks[0]):
+                        self.visit_block(rest)
+                return
+
+    def _entry_var(self, dtype) -> VarRef:
+        """A local of the current ti.func declared (zeroed) at its entry, whatever block we are in now."""
+        frame = self.frame
+        assert frame.entry_block is not None
+        alloca = Builder.detached(Op.ALLOCA, dtype, (), None, self.builder.loc, frame.entry_block)
+        zero = Builder.detached(Op.LOCAL_STORE, None, (alloca, self.builder.const(0, dtype)), None,
+                                self.builder.loc, frame.entry_block)
+        frame.entry_block.stmts[frame.entry_index:frame.entry_index] = [alloca, zero]
+        frame.entry_index += 2
+        ref = VarRef.__new__(VarRef)
+        ref.alloca = alloca
+        return ref
+
+    def _dynamic_return(self, value, node) -> None:
+        """`return v` inside run-time control flow of a ti.func: store v and the flag, leave the loops of
+        this function (break), and let visit_block skip or guard everything after it."""
+        frame = self.frame
+        if frame.entry_block is None:
+            raise SimgradSyntaxError("Return inside non-static if/for is not supported here", self.loc(node))
+        if frame.ret_flag is None:
+            frame.ret_flag = self._entry_var(dt.i32)
+            ann = self.eval(frame.src.tree.returns) if frame.src.tree.returns is not None else None
+            if isinstance(value, Matrix):
+                t = ann.dtype if isinstance(ann, MatrixType) else dtype_of(value)
+                frame.ret_var = MatrixRef([self._entry_var(t) for _ in value.entries], value.n, value.m)
+            elif isinstance(value, (Expr, int, float)) and not isinstance(value, bool):
+                t = ann if isinstance(ann, dt.DataType) else ops.to_expr(value).dtype
+                frame.ret_var = self._entry_var(t)
+            elif value is not None:
+                raise SimgradSyntaxError(f"a {type(value).__name__} cannot be returned from inside run-time "
+                                         "control flow", self.loc(node))
+        if value is not None:
+            if frame.ret_var is None:
+                raise SimgradSyntaxError("this function returns a value on some paths and nothing on others",
+                                         self.loc(node))
+            frame.ret_var.store(value)
+        assert frame.ret_flag is not None
+        frame.ret_flag.store(1)
+        if len(self.loop_stack) > frame.loop_base:
+            self._loop_jump(node, Op.BREAK)
+        frame.dynamic_returns += 1
+        frame.returned_here = True
 
     def visit_stmt(self, node: ast.stmt) -> None:
         saved = self.builder.loc
@@ -393,11 +462,14 @@ class Compiler:
 
     def visit_Return(self, node: ast.Return) -> None:
         frame = self.frame
-        if frame.dynamic_depth:
+        if frame.is_kernel and frame.dynamic_depth:
             raise SimgradSyntaxError(
-                "return inside run-time if/for/while is not supported; assign the result to a variable "
+                "Return inside non-static if/for is not supported in a kernel; assign the result to a variable "
                 "and return it at the end", self.loc(node))
         value = self.eval(node.value) if node.value is not None else None
+        if frame.dynamic_depth or frame.ret_flag is not None:
+            self._dynamic_return(value, node)
+            return
         if frame.is_kernel:
             self.emit_kernel_return(value, node)
         frame.return_value = value
@@ -420,11 +492,11 @@ class Compiler:
             self.builder.emit(Op.RET_STORE, None, (e.stmt,), {"slot": slot})
 
     def visit_Assert(self, node: ast.Assert) -> None:
-        """Asserts exist only in debug mode, as in Taichi (not even evaluated otherwise); one whose condition
-        is known at compile time fails then and there, with the run-time assertion's error class."""
+        """The condition is evaluated (its calls run, as in Taichi) but checked only in debug mode; one known
+        at compile time fails then and there, with the run-time assertion's error class."""
+        cond = self.eval(node.test)
         if not self.debug:
             return
-        cond = self.eval(node.test)
         msg = self.eval(node.msg) if node.msg is not None else None
         text = msg if isinstance(msg, str) else ast.unparse(node.test)
         if not isinstance(cond, Expr):

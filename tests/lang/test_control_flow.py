@@ -521,3 +521,59 @@ def test_guarded_ternary_and_bool_ops_are_differentiable():
         k()
     assert loss[None] == sum(xs[i] * 2 if i % 2 == 0 else xs[i] ** 2 for i in range(n)) + 2
     np.testing.assert_array_equal(x.grad.to_numpy(), [2 if i % 2 == 0 else 2 * xs[i] for i in range(n)])
+
+
+def test_early_returns_from_ti_func_inside_runtime_control_flow():
+    """`return` inside run-time if/for/while of a ti.func (Taichi allows it only in real_func): the value and
+    a flag are locals at the function's entry, loops of the function are left, the rest is guarded."""
+    ti.init(arch=ti.cpu)
+    x = ti.field(ti.i32, shape=())
+
+    @ti.func
+    def foo(val: ti.i32) -> ti.i32:
+        if x[None] > 10:
+            if x[None] > 20:
+                return 1
+            x[None] += 1
+        x[None] += val
+        return 0
+
+    @ti.func
+    def first_over(n: ti.i32, limit: ti.i32) -> ti.i32:
+        for i in range(n):
+            for j in range(3):
+                if i * 3 + j > limit:
+                    return i * 10 + j
+        return -1
+
+    @ti.func
+    def count_to(k: ti.i32) -> ti.i32:
+        i = 1
+        while i:
+            if i == k:
+                return i * 100
+            i += 1
+        return 0
+
+    @ti.kernel
+    def run() -> ti.i32:
+        return foo(15) * 100 + foo(10) * 10 + foo(100)
+
+    @ti.kernel
+    def par(limit: ti.i32) -> ti.i32:
+        s = 0
+        for n in range(8):
+            s += first_over(n, limit) + count_to(n + 1)
+        return s
+
+    assert run() == 1 and x[None] == 26
+
+    def first_over_py(n, limit):
+        for i in range(n):
+            for j in range(3):
+                if i * 3 + j > limit:
+                    return i * 10 + j
+        return -1
+
+    for limit in (0, 7, 30):
+        assert par(limit) == sum(first_over_py(n, limit) + (n + 1) * 100 for n in range(8))

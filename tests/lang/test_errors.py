@@ -141,7 +141,7 @@ def test_return_inside_runtime_if_is_rejected():
             return 1
         return 0
 
-    _raises_located(k, 1, match="return inside run-time if", line_text="return 1")
+    _raises_located(k, 1, match="Return inside non-static if/for is not supported", line_text="return 1")
 
 
 def test_assigning_an_argument_inside_a_loop_is_rejected():
