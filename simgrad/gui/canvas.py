@@ -94,8 +94,30 @@ class ImageCanvas:
         if isinstance(res, numbers.Number):
             res = (res, res)
         self.res = (int(res[0]), int(res[1]))
-        self.img = np.zeros(self.res + (3,), np.float32)
+        self._img = np.zeros(self.res + (3,), np.float32)
+        # Drawing is deferred: primitives are validated and their data copied at once, but rasterised
+        # only when the pixels are looked at.  A headless GUI that shows frames without saving them
+        # (show() clears) then costs nothing, as Taichi's C++ canvas nearly does.
+        self._fill: tuple | None = None
+        self._pending: list = []
         self.clear(background)
+
+    @property
+    def img(self) -> np.ndarray:
+        """The pixels, float32 RGB of shape (W, H, 3), with every pending primitive drawn."""
+        if self._fill is not None:
+            row = np.tile(np.asarray(self._fill, np.float32), (self.res[1], 1))
+            self._img[:] = row
+            self._fill = None
+        pending, self._pending = self._pending, []
+        for draw in pending:
+            draw(self._pixels())
+        return self._img
+
+    @img.setter
+    def img(self, value) -> None:
+        self._fill, self._pending = None, []
+        self._img = value
 
     @property
     def _scale(self):
@@ -103,17 +125,22 @@ class ImageCanvas:
 
     # -- whole-image operations -------------------------------------------------------------
     def clear(self, color=0x000000):
-        """Fill the whole canvas with one colour: one row is built and copied into every column (numpy
-        broadcasting a 3-vector over the image is ~20x slower, and GUI.show clears every frame)."""
-        row = np.tile(np.asarray(as_rgb(color), np.float32), (self.res[1], 1))
-        self.img[:] = row
+        """Fill the whole canvas with one colour, dropping what is pending (filled when looked at: one row
+        copied into every column, as numpy broadcasting a 3-vector over the image is ~20x slower)."""
+        self._fill = tuple(float(v) for v in np.asarray(as_rgb(color), np.float64).reshape(3))
+        self._pending = []
 
     def set_image(self, img):
         """Replace the canvas with an image in (W, H[, C]) layout (see :func:`cook_image`)."""
         arr = cook_image(img)
         if arr.shape[:2] != self.res:
             raise ValueError(f"Image resolution {arr.shape[:2]} does not match canvas resolution {self.res}")
-        self.img[...] = arr
+        self.replace(arr)
+
+    def replace(self, rgb: np.ndarray) -> None:
+        """Overwrite every pixel with float RGB of shape (W, H, 3); what was pending is dropped."""
+        self._fill, self._pending = None, []
+        self._pixels()[...] = rgb
 
     def to_uint8(self) -> np.ndarray:
         """The canvas as uint8 RGB of shape (W, H, 3), rounded like ``ti.tools.imwrite``."""
@@ -164,7 +191,7 @@ class ImageCanvas:
         n = len(A)
         r = _per_item(radius, n, "radius")
         if vertex_colors is not None:
-            vc = np.asarray(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
+            vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
         else:
             rgb = as_rgb(color, n)
         D = B - A
@@ -216,7 +243,7 @@ class ImageCanvas:
         P = np.stack([_points(a), _points(b), _points(c)], axis=1) * self._scale
         n = len(P)
         if vertex_colors is not None:
-            vc = np.asarray(vertex_colors, dtype=np.float64).reshape(n, 3, 3)
+            vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 3, 3)
         else:
             rgb = as_rgb(color, n)
         area2 = raster.triangle_area2(P)
@@ -288,13 +315,15 @@ class ImageCanvas:
         j = int(round(p[1])) - 1 - rows
         inside = (i >= 0) & (i < self.res[0]) & (j >= 0) & (j < self.res[1])
         rgb = np.broadcast_to(as_rgb(color), (int(inside.sum()), 3))
-        raster.composite(self._pixels(), i[inside], j[inside], m[rows, cols][inside], rgb)
+        alpha = m[rows, cols][inside]
+        i, j = i[inside], j[inside]
+        self._pending.append(lambda img: raster.composite(img, i, j, alpha, rgb))
 
     # -- rasterisation ----------------------------------------------------------------------
     def _pixels(self):
-        if not self.img.flags.c_contiguous or self.img.dtype != np.float32:
-            self.img = np.ascontiguousarray(self.img, dtype=np.float32)
-        return self.img
+        if not self._img.flags.c_contiguous or self._img.dtype != np.float32:
+            self._img = np.ascontiguousarray(self._img, dtype=np.float32)
+        return self._img
 
     def _draw(self, owner, x0, y0, x1, y1, shade):
-        raster.rasterize(self._pixels(), owner, x0, y0, x1, y1, shade)
+        self._pending.append(lambda img: raster.rasterize(img, owner, x0, y0, x1, y1, shade))

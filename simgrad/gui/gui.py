@@ -172,7 +172,7 @@ class GUI:
         arr = cook_image(img)
         if arr.shape[:2] != self.res:
             raise ValueError(f"Image resolution {arr.shape[:2]} does not match GUI resolution {self.res}")
-        self.canvas.img[...] = arr
+        self.canvas.replace(arr)
 
     def get_image(self):
         """The canvas as float32 RGBA of shape (W, H, 4), like Taichi's."""

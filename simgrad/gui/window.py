@@ -61,7 +61,7 @@ class Canvas:
         arr = cook_image(img)
         if arr.shape[:2] != self._canvas.res:
             arr = imresize(arr, *self._canvas.res)
-        self._canvas.img[...] = arr
+        self._canvas.replace(arr)
 
     def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None):
         """Circles at ``centers`` with ``radius`` a fraction of the window height."""

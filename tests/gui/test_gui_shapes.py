@@ -267,3 +267,25 @@ def test_text_renders_below_and_right_of_pos(gui):
     assert xs.size > 5
     assert xs.min() >= int(0.25 * W) - 1 and ys.max() < int(0.75 * H)
     assert ys.min() > int(0.75 * H) - 20
+
+
+def test_deferred_drawing_snapshots_its_inputs_and_show_clears(gui, tmp_path):
+    """Primitives are rasterised when the pixels are looked at: what the user changes in their arrays
+    afterwards must not show, a bad argument must still fail at the call, and show() must clear."""
+    pos = np.array([[0.25, 0.5]])
+    colors = np.array([0x00FF00])
+    gui.circles(pos, radius=4, color=colors)
+    pos[0, 0] = 0.75
+    colors[0] = 0xFF0000
+    img = gui.get_image()[..., :3]
+    np.testing.assert_allclose(img[int(0.25 * W), H // 2], rgb(0x00FF00), atol=1e-6)
+    np.testing.assert_allclose(img[int(0.75 * W), H // 2], 0.0, atol=1e-6)
+    with pytest.raises(ValueError):
+        gui.circles(np.zeros((3, 3)))
+    gui.triangle((0.1, 0.1), (0.9, 0.1), (0.5, 0.9), color=0xFFFFFF)
+    gui.show(str(tmp_path / "frame.png"))  # saved with the triangle, then cleared
+    assert (tmp_path / "frame.png").exists()
+    np.testing.assert_allclose(gui.get_image()[..., :3], 0.0, atol=1e-6)
+    gui.circle((0.5, 0.5), radius=3, color=0xFFFFFF)
+    gui.clear(0x0000FF)  # a clear drops what was drawn before it
+    np.testing.assert_allclose(gui.get_image()[..., :3], np.broadcast_to(rgb(0x0000FF), (W, H, 3)), atol=1e-6)
