@@ -40,6 +40,13 @@ EXCLUDED = {
                                  "name by name",
     ("test_exception.py", "test_exception_"): "asserts Taichi's exact error text and its AST transformer's "
                                               "traceback layout",
+    ("test_ad_ndarray.py", "test_ad_sum_vector"): "passes under Taichi only because bool() of any Taichi Matrix is "
+                                                  "True: `assert p[i] == [a[i] * 2, a[i] * 3]` compares a vector "
+                                                  "with two vectors and is false entry by entry",
+    ("test_ad_ndarray.py", "test_ad_vector_arg"): "`assert p[i] == [a[i] * 2, a[i] * 2]` broadcasts a 2-vector "
+                                                  "against a 2x2 nested list (Taichi's Python scope follows numpy; "
+                                                  "simgrad refuses operands of different shapes) and asserts the "
+                                                  "truth of a Matrix, which is always True",
     ("test_ad_basics.py", "test_ad_rand"): "asserts Taichi's C++ message 'RandStmt not supported' (simgrad "
                                            "refuses ti.random in a differentiated kernel too, in its own words)",
 }
@@ -58,7 +65,15 @@ def run_file(python: str, path: str, framework: str, repo: str, timeout: float) 
         xml = os.path.join(tmp, "out.xml")
         env = dict(os.environ)
         if framework == "simgrad":
-            cwd = SHIM
+            # upstream tests/ is a package whose test_utils needs taichi's C++ core: the file runs from a
+            # stand-in package (tests/ with the shim's test_utils, tests/python linked to upstream's)
+            cwd = tmp
+            pkg = os.path.join(tmp, "tests")
+            os.mkdir(pkg)
+            open(os.path.join(pkg, "__init__.py"), "w").close()
+            os.symlink(os.path.join(SHIM, "tests", "test_utils.py"), os.path.join(pkg, "test_utils.py"))
+            os.symlink(os.path.dirname(os.path.abspath(path)), os.path.join(pkg, "python"))
+            path = os.path.join(pkg, "python", os.path.basename(path))
             env["PYTHONPATH"] = os.pathsep.join([SHIM, PLUGINS, ROOT, env.get("PYTHONPATH", "")])
         else:
             cwd = repo

@@ -34,7 +34,7 @@ from simgrad.autodiff.rules import NEEDS_VALUES, REVERSE, ZERO_GRADIENT
 from simgrad.autodiff.structurize import structurize
 from simgrad.errors import GradientError
 from simgrad.ir.builder import Builder
-from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 
@@ -56,7 +56,7 @@ def _grad_of(ptr: Stmt):
     """The gradient field of the element `ptr` points to, or None when it has no placed gradient or
     ti.stop_grad covers the access."""
     target = ptr.attrs["target"]
-    if isinstance(target, FieldRef) and target.grad is not None and not ptr.attrs.get("stop_grad"):
+    if isinstance(target, (FieldRef, ArrayRef)) and target.grad is not None and not ptr.attrs.get("stop_grad"):
         return target.grad
     return None
 

@@ -10,13 +10,18 @@ is lang-level: lang/tape.py.
 from __future__ import annotations
 
 from simgrad.errors import GradientError, Loc
-from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 
 
 def differentiable(target) -> bool:
+    """A field with a placed gradient (what the Tape's run-time checks watch)."""
     return isinstance(target, FieldRef) and target.dtype.is_float and target.grad is not None
+
+
+def _has_adjoint(target) -> bool:
+    return isinstance(target, (FieldRef, ArrayRef)) and target.dtype.is_float and target.grad is not None
 
 
 def user_name(target) -> str:
@@ -31,7 +36,10 @@ def check_access_rules(kernel: Kernel) -> None:
             continue
         ptr = s.operands[0]
         target = ptr.attrs["target"]
-        if not differentiable(target):
+        if isinstance(target, ArrayRef) and target.shape_slot >= 0:
+            raise GradientError(f"Cannot automatically differentiate through a grad tensor: kernel "
+                                f"{kernel.name.removesuffix('_grad')} accesses '{target.name}'", s.loc)
+        if not _has_adjoint(target):
             continue
         key = (id(target), tuple(id(o) for o in ptr.operands))
         if s.op is Op.GLOBAL_LOAD:
@@ -40,10 +48,14 @@ def check_access_rules(kernel: Kernel) -> None:
             where = read[key]
             name = kernel.name.removesuffix("_grad")
             raise GradientError(
-                f"kernel {name} overwrites an element of field '{user_name(target)}' that it read "
+                f"kernel {name} overwrites an element of {_kind(target)} '{user_name(target)}' that it read "
                 f"(at line {where.line if where else '?'}); its adjoint would replay the read with the new "
                 "value and give a wrong gradient. Write the result to another field or time step "
                 "(e.g. x[t + 1] = f(x[t])).", s.loc)
+
+
+def _kind(target) -> str:
+    return "field" if isinstance(target, FieldRef) else "ndarray"
 
 
 def check_and_adjoint(kernel: Kernel) -> bool:

@@ -195,9 +195,9 @@ class FunctionText:
         return self.array_bases[arg.slot]
 
     def array_shape(self, arg, dim: int) -> str:
-        key = (arg.slot, dim)
+        key = (arg.extents_slot, dim)
         if key not in self.array_shapes:
-            self.array_shapes[key] = self.ctx_slot(abi.CTX_ARGS + arg.slot + 1 + dim, "i64")
+            self.array_shapes[key] = self.ctx_slot(abi.CTX_ARGS + arg.extents_slot + 1 + dim, "i64")
         return self.array_shapes[key]
 
     def tape(self) -> tuple[str, str, str]:

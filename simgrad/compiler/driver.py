@@ -70,7 +70,19 @@ class Param:
             raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' expects an ndarray, got "
                                    f"{type(a).__name__}")
         arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
-        return (str(arr.dtype), len(arr.shape), self.element_shape(a))
+        return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a, kernel_name))
+
+    def with_grad(self, a, kernel_name: str) -> bool:
+        """Whether kernels see the gradient of ndarray argument `a`: the annotation's needs_grad, else whether
+        it has one (a ti.ndarray with needs_grad=True, a torch tensor that requires grad)."""
+        has = getattr(a, "grad", None) is not None if hasattr(a, "_ndarray") else \
+            bool(getattr(a, "requires_grad", False))
+        want = self.ann.needs_grad
+        if want and not has:
+            raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{self.name}' is annotated "
+                                   "needs_grad=True but has no gradient (create it with ti.ndarray(..., "
+                                   "needs_grad=True), or pass a tensor that requires grad)")
+        return has if want is None else bool(want)
 
     def element_shape(self, a) -> tuple:
         """The element shape of argument `a`: the annotation's, else a ti.ndarray object's own."""
@@ -96,8 +108,10 @@ class KernelSource(Protocol):
 class SlotParam:
     """A parameter as one instantiation lays it out in the context buffer."""
 
-    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0, of=None, path=()):
+    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0, of=None, path=(),
+                 grad_slot=-1):
         self.name, self.kind, self.slot, self.dtype = name, kind, slot, dtype
+        self.grad_slot = grad_slot  # an ndarray's gradient base pointer, -1 when the kernel does not see one
         self.count, self.ndim, self.ndim_total = count, ndim, ndim_total
         # a leaf of struct parameter `of`: its value is `of.path[0].path[1]...`
         self.of, self.path = of, path
@@ -255,7 +269,7 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
                 arg = _array_arg(kernel.name, p, a, slot)
                 comp.bind(p.name, arg)
                 out.append(SlotParam(p.name, "ndarray", slot, arg.dtype, ndim=arg.ndim,
-                                     ndim_total=arg.ndim + len(arg.element_shape)))
+                                     ndim_total=arg.ndim + len(arg.element_shape), grad_slot=arg.grad_slot))
                 slot += arg.num_slots
         ret = kernel.signature.return_annotation
         ret_matrix: tuple[int, int] | StructType | None = None
@@ -298,7 +312,7 @@ def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
     if ann.ndim is not None and ann.ndim != ndim:
         raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
                                f"{ann.ndim} dimension(s), got {ndim}")
-    return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary)
+    return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary, grad=t.is_float and p.with_grad(a, kernel_name))
 
 
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:

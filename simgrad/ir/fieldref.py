@@ -46,6 +46,14 @@ class ArrayRef:
     ndim: int
     element_shape: tuple = ()
     comp: int = 0
+    #: the same component of the argument's gradient array (its base in another slot), None when none
+    grad: ArrayRef | None = None
+    #: the slot whose following slots hold the extents (a gradient array reads its primal's)
+    shape_slot: int = -1
+
+    @property
+    def extents_slot(self) -> int:
+        return self.slot if self.shape_slot < 0 else self.shape_slot
 
     @property
     def num_components(self) -> int:

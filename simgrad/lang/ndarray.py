@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradIndexError, SimgradNotSupportedError, SimgradTypeError, caller_loc
+from simgrad.errors import SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.lang.field import FieldElement
 from simgrad.lang.types import MatrixType
 
@@ -29,9 +29,6 @@ class Ndarray:
     """An n-dimensional array of scalars, vectors or matrices; `shape` is the outer shape (as Taichi)."""
 
     def __init__(self, dtype, shape, element_shape: tuple = (), needs_grad: bool = False):
-        if needs_grad:
-            raise SimgradNotSupportedError("ndarrays with needs_grad=True are not supported yet: gradients flow "
-                                           "through fields (ti.field(..., needs_grad=True))", caller_loc())
         self.dtype = dt.from_any(dtype)
         self.shape = (shape,) if isinstance(shape, int) else tuple(shape)
         if any(not isinstance(n, (int, np.integer)) or n < 0 for n in self.shape):
@@ -41,9 +38,16 @@ class Ndarray:
         self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
         self.ncols = self.m  # what element views read (0: vectors)
         self.name = "ndarray"
-        self.grad = None
         self._ndarray = np.zeros(self.shape + self.element_shape, dtype=self.dtype.np)
         self.comps = [_Component(self, e) for e in np.ndindex(*self.element_shape)] if self.element_shape else []
+        self.grad: Ndarray | None = None
+        if needs_grad:
+            if not self.dtype.is_float:
+                raise SimgradRuntimeError(f"{self.dtype} is not supported for ndarray with needs_grad=True: "
+                                          "gradients need a floating-point type", caller_loc())
+            # the adjoint buffer kernels' .grad accumulate into (and a Tape seeds, for a loss)
+            grad = self.grad = object.__new__(type(self))
+            Ndarray.__init__(grad, self.dtype, self.shape, self.element_shape)
 
     @property
     def element_type(self):
@@ -52,6 +56,8 @@ class Ndarray:
         return MatrixType(self.n, self.m, self.dtype)
 
     def _key(self, key) -> tuple:
+        if key is None and not self.shape:  # x[None] of a 0-d ndarray
+            return ()
         key = key if isinstance(key, tuple) else (key,)
         if len(key) != len(self.shape):
             raise SimgradIndexError(f"the ndarray has {len(self.shape)} dimension(s), got {len(key)} indices",

@@ -27,7 +27,9 @@ class Tape:
     """`with ti.ad.Tape(loss=loss): forward()` computes d loss / d (every field with a gradient)."""
 
     def __init__(self, loss=None, clear_gradients: bool = True, validation: bool = False, grad_check=None):
-        if loss is not None:
+        if loss is not None and not isinstance(loss, Field):
+            _check_array_loss(loss)
+        elif loss is not None:
             if not isinstance(loss, Field):
                 raise SimgradError(f"Tape(loss=...) expects a scalar field, got {type(loss).__name__}")
             if not isinstance(loss, ScalarField) or loss.shape != ():
@@ -39,7 +41,7 @@ class Tape:
         if grad_check is not None and (not isinstance(grad_check, (list, tuple)) or
                                        not all(isinstance(f, Field) for f in grad_check)):
             raise SimgradError("Tape(grad_check=...) takes a list of fields whose gradients to check")
-        if grad_check and (loss is None or loss.dtype is not dt.f64):
+        if grad_check and (not isinstance(loss, Field) or loss.dtype is not dt.f64):
             raise SimgradError("Tape(grad_check=...) needs an f64 loss (finite differences in f32 are too coarse "
                                "to check against), as in Taichi")
         self.loss = loss
@@ -56,7 +58,7 @@ class Tape:
         if self.grad_check:
             self._before = _save_memory()  # what the checks replay the recorded kernels from
         if self.loss is not None:
-            self.loss.fill(0)
+            _fill(self.loss, 0.0)
         if self.clear_gradients:
             clear_all_gradients()
         self._outer = ad_hooks.recorder
@@ -79,7 +81,11 @@ class Tape:
         if exc_type is not None:
             return False
         if self.loss is not None:
-            self.loss.grad.fill(1)
+            if self.loss.grad is None:  # a tensor's gradient appears once a kernel that needs it ran
+                import torch
+
+                self.loss.grad = torch.ones_like(self.loss)
+            _fill(self.loss.grad, 1.0)
             self.grad()
         if self.grad_check:
             self._check_gradients()
@@ -143,6 +149,34 @@ class Tape:
                 snap.check()
             fn.grad(*args)
         self.gradient_evaluated = True
+
+
+def _check_array_loss(loss) -> None:
+    """A Tape's loss may also be a one-element ti.ndarray with needs_grad=True or a torch tensor that
+    requires grad (as in Taichi); gradients of ndarrays are not cleared on entry."""
+    if hasattr(loss, "_ndarray"):
+        if loss._ndarray.size != 1:
+            raise SimgradError(f"the loss of a Tape must be an ndarray of one element, got shape {loss.shape}")
+        if loss.grad is None:
+            raise SimgradError("the loss ndarray has no gradient: create it with ti.ndarray(..., needs_grad=True)")
+    elif hasattr(loss, "requires_grad") and hasattr(loss, "numel"):
+        if loss.numel() != 1:
+            raise SimgradError(f"the loss of a Tape must be a tensor of one element, got shape {tuple(loss.shape)}")
+        if not loss.requires_grad:
+            raise SimgradError("the loss tensor does not require grad: create it with requires_grad=True")
+    else:
+        raise SimgradError(f"Tape(loss=...) expects a scalar field, a one-element ndarray or a tensor, got "
+                           f"{type(loss).__name__}")
+
+
+def _fill(x, value: float) -> None:
+    if hasattr(x, "fill_"):  # a torch tensor (a leaf that requires grad is filled without recording)
+        import torch
+
+        with torch.no_grad():
+            x.fill_(value)
+    else:
+        x.fill(value)
 
 
 def _save_memory() -> list:

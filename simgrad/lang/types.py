@@ -5,7 +5,7 @@ from __future__ import annotations
 from enum import Enum
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradNotSupportedError, SimgradTypeError
+from simgrad.errors import SimgradTypeError
 
 
 class Template:
@@ -107,9 +107,8 @@ class NdarrayType:
         # trailing axes that form each element (a vector or matrix): a count taken from the array, or a shape
         self.element_dim = element_dim
         self.element_shape = tuple(element_shape) if element_shape is not None else None
-        if needs_grad:
-            raise SimgradNotSupportedError("ti.types.ndarray(needs_grad=True): gradients through ndarray "
-                                           "arguments are not supported yet; use fields with needs_grad=True")
+        # True/False: whether kernels see the argument's gradient; None: whenever the argument has one
+        self.needs_grad = needs_grad
         if boundary not in (None, "unsafe", "clamp"):
             raise SimgradTypeError(f"ndarray boundary must be 'unsafe' or 'clamp', got {boundary!r}")
         # "clamp": every index is clamped into the array (an out-of-range read gets the edge element)

@@ -96,6 +96,10 @@ class Launcher:
                 lines.append(f"    _buf[{CTX_ARGS + p.slot}] = _p")
                 for d in range(p.ndim):
                     lines.append(f"    _buf[{CTX_ARGS + p.slot + 1 + d}] = _s[{d}]")
+                if getattr(p, "grad_slot", -1) >= 0:
+                    env["_grad_of"] = _grad_info
+                    lines.append(f"    _buf[{CTX_ARGS + p.grad_slot}] = _grad_of({p.name}, _s, {self.kernel_name!r}, "
+                                 f"{p.name!r}, {p.ndim_total})")
         lines.append("    _call(_addr)")
         lines.append("    if _err[0]: _fail()")
         if returns:
@@ -175,6 +179,23 @@ def _member(value, path):
     for name in path:
         value = value[name] if isinstance(value, dict) else getattr(value, name)
     return value
+
+
+def _grad_info(a, shape, kernel, param, ndim):
+    """The base address of the gradient of ndarray argument `a` (a ti.ndarray's .grad, a tensor's .grad, made
+    zero when the tensor has none yet, as Taichi does)."""
+    grad = getattr(a, "grad", None)
+    if grad is None and hasattr(a, "data_ptr") and getattr(a, "requires_grad", False):
+        import torch
+
+        grad = a.grad = torch.zeros_like(a)
+    if grad is None:
+        raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' has no gradient")
+    ptr, gshape = _array_info(grad, kernel, param + ".grad", ndim)
+    if tuple(gshape) != tuple(shape):
+        raise SimgradTypeError(f"kernel {kernel}: the gradient of '{param}' has shape {tuple(gshape)}, "
+                               f"its array {tuple(shape)}")
+    return ptr
 
 
 def _array_info(a, kernel, param, ndim):
