@@ -47,6 +47,11 @@ EXCLUDED = {
                                                   "against a 2x2 nested list (Taichi's Python scope follows numpy; "
                                                   "simgrad refuses operands of different shapes) and asserts the "
                                                   "truth of a Matrix, which is always True",
+    ("test_ad_global_data_access_rule_checker.py", "test_adjoint_checkbit"): "reads Taichi's C++ SNode "
+                                                                             "(x.snode.ptr.has_adjoint_checkbit())",
+    ("test_ad_global_data_access_rule_checker.py", "test_autodiff_mode_recovered"): "reads the kernel's internal "
+                                                                                    "autodiff_mode enum",
+    ("test_ad_snode_grad_type.py", "test_"): "reads Taichi's C++ SNode (x.snode.ptr.get_snode_grad_type())",
     ("test_ad_basics.py", "test_ad_rand"): "asserts Taichi's C++ message 'RandStmt not supported' (simgrad "
                                            "refuses ti.random in a differentiated kernel too, in its own words)",
 }

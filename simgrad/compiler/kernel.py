@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 
+from simgrad.autodiff.forward import make_forward
 from simgrad.autodiff.validate import check_and_adjoint
 from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, Param, compile_kernel
 from simgrad.errors import SimgradTypeError, caller_loc
@@ -47,6 +48,7 @@ class Kernel(KernelDef):
         self._generation = -1
         self._simple_launch = None
         self._grad_instances: dict = {}
+        self._fwd_instances: dict = {}  # forward-mode (tangent-carrying) instances, run inside ti.ad.FwdMode
         self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
@@ -60,8 +62,8 @@ class Kernel(KernelDef):
         if self._generation != prog.generation:
             self._reset(prog)
         launch = self._simple_launch
-        if launch is None or len(args) != self._nparams:
-            launch = self._launch_for(args)
+        if launch is None or len(args) != self._nparams or ad_hooks.forward_mode is not None:
+            launch = self._launch_for(args, "fwd" if ad_hooks.forward_mode is not None else "")
         if prog.config.kernel_profiler:
             t0 = time.perf_counter()
             out = launch(*args)
@@ -87,44 +89,48 @@ class Kernel(KernelDef):
     def _reset(self, prog: Program) -> None:
         self._instances.clear()
         self._grad_instances.clear()
+        self._fwd_instances.clear()
         self._keep.clear()
         self._simple_launch = None
         self._generation = prog.generation
 
-    def _launch_for(self, args, grad: bool = False):
-        return self._instance_for(args, grad).launch
+    def _launch_for(self, args, mode: str = ""):
+        """mode "": the kernel; "grad": its adjoint; "fwd": it with forward-mode tangents."""
+        return self._instance_for(args, mode).launch
 
     def instance(self, args) -> CompiledKernel:
         """The (compiled) forward instance these arguments launch."""
-        return self._instance_for(args, grad=False)
+        return self._instance_for(args, "")
 
-    def _instance_for(self, args, grad: bool) -> CompiledKernel:
+    def _instance_for(self, args, mode: str) -> CompiledKernel:
         if len(args) != self._nparams:
             names = ", ".join(p.name for p in self.params)
             raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
                                    f"got {len(args)}")
         keep: list = []
         key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
-        cache = self._grad_instances if grad else self._instances
+        cache = {"": self._instances, "grad": self._grad_instances, "fwd": self._fwd_instances}[mode]
         inst = cache.get(key)
         if inst is None:
             with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
                 inst = cache.get(key)
                 if inst is None:
-                    inst = self._compile_instance(args, grad, key, keep, cache)
+                    inst = self._compile_instance(args, mode, key, keep, cache)
         return inst
 
-    def _compile_instance(self, args, grad: bool, key, keep: list, cache: dict) -> CompiledKernel:
+    def _compile_instance(self, args, mode: str, key, keep: list, cache: dict) -> CompiledKernel:
         t0 = time.perf_counter()
         try:
-            return self._compile_uncounted(args, grad, key, keep, cache)
+            return self._compile_uncounted(args, mode, key, keep, cache)
         finally:
             get_program().compile_seconds += time.perf_counter() - t0
 
-    def _compile_uncounted(self, args, grad: bool, key, keep: list, cache: dict) -> CompiledKernel:
+    def _compile_uncounted(self, args, mode: str, key, keep: list, cache: dict) -> CompiledKernel:
         prog = get_program()
-        if grad:
+        if mode == "grad":
             inst = compile_kernel(self, prog, args, transform=check_and_adjoint, name_suffix="_grad")
+        elif mode == "fwd":
+            inst = compile_kernel(self, prog, args, transform=make_forward, name_suffix="_fwd")
         else:
             inst = compile_kernel(self, prog, args)
             if self._simple:
@@ -155,7 +161,7 @@ class GradKernel:
         prog = get_program()
         if k._generation != prog.generation:
             k._reset(prog)
-        launch = k._launch_for(args, grad=True)
+        launch = k._launch_for(args, "grad")
         if prog.config.kernel_profiler:
             t0 = time.perf_counter()
             launch(*args)

@@ -55,7 +55,7 @@ class ArrayArg:
         view = ArrayArg.__new__(ArrayArg)
         view.__dict__.update(self.__dict__)
         view.name, view.grad_slot = f"{self.name}.grad", -1
-        view.comps = [c.grad for c in self.comps]
+        view.comps = [c.grad for c in self.comps if c.grad is not None]
         return view
 
     def ref(self, indices):

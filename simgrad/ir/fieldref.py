@@ -26,6 +26,8 @@ class FieldRef:
     kinds: tuple = ("dense",)
     #: the lang-level field this describes; opaque below lang (Tape validation reads values through it)
     owner: object = field(default=None, repr=False)
+    #: the record of the placed dual (forward-mode tangent) field, None when there is none
+    dual: FieldRef | None = None
 
     @property
     def shape(self) -> tuple:

@@ -1,5 +1,6 @@
 """The `ti.ad` namespace."""
 
-from simgrad.lang.tape import Tape, clear_all_gradients, grad_for, grad_replaced, no_grad
+from simgrad.lang.forward_mode import FwdMode
+from simgrad.lang.tape import SNodeGradType, Tape, clear_all_gradients, grad_for, grad_replaced, no_grad
 
-__all__ = ["Tape", "clear_all_gradients", "grad_for", "grad_replaced", "no_grad"]
+__all__ = ["FwdMode", "SNodeGradType", "Tape", "clear_all_gradients", "grad_for", "grad_replaced", "no_grad"]

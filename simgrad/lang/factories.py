@@ -67,9 +67,10 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
-    if needs_grad and f.grad is not None and f.grad.snode is None:
-        gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
-        gnode.place(f.grad, offset=offset)
+    for wanted, g in ((needs_grad, f.grad), (getattr(f, "_needs_dual", False), getattr(f, "dual", None))):
+        if wanted and g is not None and g.snode is None:
+            gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
+            gnode.place(g, offset=offset)
     return f
 
 
@@ -86,10 +87,13 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
         c.grad = g
         g.is_primal = False
     f.grad.is_primal = False
-    if needs_dual:
-        f.dual = make(".dual")
-        for c, d in zip(f._components(), f.dual._components()):
-            c.dual = d
+    # and an (unplaced) dual for forward mode, placed by needs_dual or ti.root.lazy_dual()
+    f.dual = make(".dual")
+    for c, d in zip(f._components(), f.dual._components()):
+        c.dual = d
+        d.is_primal, d.is_dual = False, True
+    f.dual.is_primal, f.dual.is_dual = False, True
+    f._needs_dual = needs_dual
     return f
 
 
@@ -150,6 +154,12 @@ class _Root:
             if not tree.materialized:
                 tree.root.lazy_grad()
 
+    def lazy_dual(self) -> None:
+        """Place the dual (forward-mode tangent) of every float field not yet in memory, beside its primal."""
+        for tree in get_program().trees:
+            if not tree.materialized:
+                tree.root.lazy_dual()
+
     def __repr__(self):
         return "ti.root"
 
@@ -173,6 +183,9 @@ class FieldsBuilder:
     def lazy_grad(self):
         self.root.lazy_grad()
 
+    def lazy_dual(self):
+        self.root.lazy_dual()
+
     def finalize(self, raise_warning=True):
         self.tree.materialize()
         return self.tree
@@ -190,6 +203,7 @@ def _struct_member(t, name: str, needs_grad: bool, needs_dual: bool) -> Field:
     else:
         f = _with_grad(lambda suffix: ScalarField(t, name + suffix), grad, dual)
     f._needs_grad = grad  # placed beside its member (place() does it)
+    f._needs_dual = dual
     return f
 
 

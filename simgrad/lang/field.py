@@ -39,6 +39,8 @@ class Field:
     grad: Field | None
     dual: Field | None
     _needs_grad: bool  # ti.field(needs_grad=...): placing the field places its gradient (lang/factories.py)
+    is_primal = True  # False for gradients and duals
+    is_dual = False
 
     def _components(self) -> list[ScalarField]:
         raise NotImplementedError
@@ -128,6 +130,7 @@ class ScalarField(Field):
         self.layout: Layout | None = None  # set when its tree is materialised
         self._shape: tuple[int, ...] | None = None
         self.is_primal = True
+        self.is_dual = False
 
     def _components(self):
         return [self]
@@ -136,13 +139,14 @@ class ScalarField(Field):
         """The IR's record of this field (the same object while name and layout stay, so analyses can key
         on its identity within a kernel)."""
         assert self.layout is not None, f"field {self.name} is not materialised"
-        g = self.grad
+        g, d = self.grad, getattr(self, "dual", None)
         grad = g.ref() if isinstance(g, ScalarField) and g.layout is not None else None
-        key = (self.name, self.layout, self.offset, id(grad))
+        dual = d.ref() if isinstance(d, ScalarField) and d.layout is not None else None
+        key = (self.name, self.layout, self.offset, id(grad), id(dual))
         cached = getattr(self, "_ref", None)
         if cached is None or cached[0] != key:
             kinds = tuple(n.kind for n in self._snode.path() if n.kind not in ("root", "place"))
-            ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, kinds, owner=self)
+            ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, kinds, owner=self, dual=dual)
             self._ref = cached = (key, ref)
         return cached[1]
 
@@ -267,6 +271,9 @@ class ScalarField(Field):
 
 
 def _unplaced_message(c: ScalarField) -> str:
+    if c.is_dual:
+        return (f"field {c.name[:-5]} has no dual: {c.name} exists only when the field is created with "
+                f"needs_dual=True (or placed and followed by ti.root.lazy_dual())")
     if not c.is_primal:
         primal = c.name[:-5] if c.name.endswith(".grad") else c.name
         return (f"field {primal} has no gradient: {c.name} exists only when the field is created with "

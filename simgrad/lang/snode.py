@@ -104,6 +104,9 @@ class SNode:
         for f in fields:
             if getattr(f, "_needs_grad", False) and f.grad is not None and f.grad.snode is None:
                 self.place(f.grad, offset=offset)
+            dual = getattr(f, "dual", None)
+            if getattr(f, "_needs_dual", False) and dual is not None and dual.snode is None:
+                self.place(dual, offset=offset)
         return self
 
     def lazy_grad(self) -> None:
@@ -112,6 +115,13 @@ class SNode:
             g = node.field.grad if node.kind == "place" else None
             if g is not None and g.snode is None and node.field.is_primal:
                 node.parent.place(g)
+
+    def lazy_dual(self) -> None:
+        """Place the dual of every float field under this node, beside its primal (forward mode)."""
+        for node in list(self._walk()):
+            d = getattr(node.field, "dual", None) if node.kind == "place" else None
+            if d is not None and d.snode is None and node.field.is_primal:
+                node.parent.place(d)
 
     def _walk(self):
         yield self

@@ -7,6 +7,7 @@ Kernels decorated with @ti.ad.no_grad run forward and are skipped backward. A fu
 
 from __future__ import annotations
 
+import enum
 import functools
 import hashlib
 from typing import Any
@@ -193,17 +194,33 @@ def _restore_memory(saved: list) -> None:
         buf[...] = copy
 
 
-def clear_all_gradients(gradient_type=None) -> None:
-    """Zero every placed gradient field of the program."""
+class SNodeGradType(enum.Enum):
+    """What a placed field is to autodiff (Taichi's names)."""
+
+    PRIMAL = 0
+    ADJOINT = 1
+    DUAL = 2
+    ADJOINT_CHECKBIT = 3
+
+
+def clear_all_gradients(gradient_type=SNodeGradType.ADJOINT) -> None:
+    """Zero every placed gradient field of the program (gradient_type=SNodeGradType.DUAL: every dual)."""
     from simgrad.lang.program import get_program
 
+    if gradient_type is None:
+        gradient_type = SNodeGradType.ADJOINT
+    if gradient_type not in (SNodeGradType.ADJOINT, SNodeGradType.DUAL):
+        return  # primal values are not gradients; simgrad keeps no check bits
+    duals = gradient_type is SNodeGradType.DUAL
     prog = get_program()
     prog.materialize_all()
     for tree in prog.trees:
         for node in tree.root._walk():
-            if node.kind == "place" and not node.field.is_primal and node.field.view is not None:
+            if node.kind != "place" or node.field.is_primal or node.field.is_dual != duals:
+                continue
+            if node.field.view is not None:
                 node.field.view[...] = 0
-            elif node.kind == "place" and not node.field.is_primal:
+            else:
                 node.field.fill(0)
 
 

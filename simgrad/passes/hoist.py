@@ -9,7 +9,7 @@ loop that runs zero times cannot fail because of what was hoisted out of it.
 
 from __future__ import annotations
 
-from simgrad.ir.nodes import Kernel, Stmt
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 
 _SAFE = {Op.CONST, Op.ADD, Op.SUB, Op.MUL, Op.NEG, Op.MIN, Op.MAX, Op.BIT_AND, Op.BIT_OR, Op.BIT_XOR, Op.BIT_NOT,
@@ -32,21 +32,31 @@ def _movable(s: Stmt, loop: Stmt, inside: set) -> bool:
 
 def hoist(kernel: Kernel) -> bool:
     changed = False
-    out = []
+    out: list[Stmt] = []
     for loop in kernel.body.stmts:
         if loop.op is Op.RANGE_FOR and loop.attrs.get("parallel"):
-            inner = loop.blocks[0]
-            inside = {id(x) for x in inner.stmts}  # top level of the body: nested values never qualify
-            keep = []
-            for s in inner.stmts:
-                if _movable(s, loop, inside):
-                    inside.discard(id(s))
-                    s.block = kernel.body
-                    out.append(s)
-                    changed = True
-                else:
-                    keep.append(s)
-            inner.stmts = keep
+            # every value computed in the loop, nested serial loops and branches included (`a = k + t * n`
+            # evaluated in an inner loop of an adjoint is still one slice for the whole launch)
+            inside = {id(x) for x in walk(loop.blocks[0])}
+            changed |= _hoist_block(loop.blocks[0], loop, inside, kernel, out)
         out.append(loop)
     kernel.body.stmts = out
+    return changed
+
+
+def _hoist_block(block: Block, loop: Stmt, inside: set, kernel: Kernel, out: list) -> bool:
+    """Move the movable statements of `block` and of the blocks nested in it, in order, to `out`."""
+    changed = False
+    keep = []
+    for s in block.stmts:
+        if _movable(s, loop, inside):
+            inside.discard(id(s))
+            s.block = kernel.body
+            out.append(s)
+            changed = True
+            continue
+        for b in s.blocks:
+            changed |= _hoist_block(b, loop, inside, kernel, out)
+        keep.append(s)
+    block.stmts = keep
     return changed

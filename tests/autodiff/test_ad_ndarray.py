@@ -3,10 +3,9 @@ checked against central differences in float64, and the errors around them."""
 
 import numpy as np
 import pytest
+from ad_util import f64, fd_grad, rel_err
 
 import simgrad as ti
-
-from ad_util import f64, fd_grad, rel_err
 
 
 def test_scalar_ndarray_kernel_grad_matches_finite_differences():

@@ -81,13 +81,7 @@ def test_matrix_ndarray_from_numpy_and_element_dim_annotation():
         m.from_numpy(np.zeros((3, 2)))
 
 
-def test_ndarray_with_gradients_is_refused_not_silently_zero():
-    ti.init(arch=ti.cpu)
-    with pytest.raises(ti.SimgradNotSupportedError, match="needs_grad"):
-        ti.ndarray(ti.f32, shape=4, needs_grad=True)
-
-
-def test_boundary_clamp_clamps_every_index_and_needs_grad_is_refused():
+def test_boundary_clamp_clamps_every_index():
     ti.init(arch=ti.cpu)
 
     @ti.kernel
@@ -99,5 +93,3 @@ def test_boundary_clamp_clamps_every_index_and_needs_grad_is_refused():
         assert read(a, i, j) == a[min(max(i, 0), 2), min(max(j, 0), 3)]
     with pytest.raises(ti.SimgradTypeError, match="boundary"):
         ti.types.ndarray(boundary="wrap")
-    with pytest.raises(ti.SimgradNotSupportedError, match="needs_grad"):
-        ti.types.ndarray(needs_grad=True)

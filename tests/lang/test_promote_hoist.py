@@ -10,7 +10,7 @@ from simgrad.ir.ops import Op
 
 
 def _ir(kernel, *args):
-    return kernel._instance_for(args, grad=False).ir
+    return kernel._instance_for(args, "").ir
 
 
 def test_locals_assigned_once_reassigned_or_updated_keep_python_semantics():

@@ -15,7 +15,7 @@ def four_threads():
 
 
 def _text(kernel, *args):
-    return kernel._instance_for(args, grad=False).llvm_text
+    return kernel._instance_for(args, "").llvm_text
 
 
 def test_p2g_scatter_into_small_grid_matches_numpy():
@@ -233,7 +233,7 @@ def test_adjoint_of_a_gather_scatters_into_a_private_gradient_copy():
     for k in range(4):
         np.add.at(g, (np.arange(n) * 3 + k * 11) % cells, (k + 1.0) * og)
     np.testing.assert_allclose(d.grad.to_numpy(), g, rtol=1e-12)
-    assert "_private" in gather._instance_for((), grad=True).llvm_text
+    assert "_private" in gather._instance_for((), "grad").llvm_text
 
 
 def test_reading_another_slice_of_the_field_keeps_privatisation_reading_maybe_the_same_one_does_not():

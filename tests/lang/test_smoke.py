@@ -79,7 +79,7 @@ def test_vector_scatter_under_contention_is_exact():
             g[idx[p]] += ti.Vector([1.0, 2.0])
 
     scatter()
-    assert "cmpxchg ptr" in scatter._instance_for((), grad=False).llvm_text
+    assert "cmpxchg ptr" in scatter._instance_for((), "").llvm_text
     counts = np.bincount(np.arange(n) % 3, minlength=cells).astype(np.float32)
     np.testing.assert_array_equal(g.to_numpy(), np.stack([counts, 2 * counts], axis=1))
 
@@ -129,7 +129,7 @@ def test_owned_updates_of_a_3d_struct_for_need_no_atomics():
             h[i, j, 0] += 1.0  # not owned: four iterations share it
 
     def atomics(kernel):
-        text = kernel._instance_for((), grad=False).llvm_text
+        text = kernel._instance_for((), "").llvm_text
         task = text[text.index("_task1("):]
         task = task[:task.index("\n}\n")]
         return task.count("cmpxchg") + task.count("atomicrmw")

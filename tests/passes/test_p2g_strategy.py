@@ -60,7 +60,7 @@ def test_p2g_and_its_adjoint_keep_their_strategies(golden):
     p2g(0)
     p2g.grad(0)
     fwd, fwd_forms = _summary(p2g.instance((0,)).ir)
-    bwd, bwd_forms = _summary(p2g._instance_for((0,), grad=True).ir)
+    bwd, bwd_forms = _summary(p2g._instance_for((0,), "grad").ir)
     assert fwd_forms == Counter({("grid_v[0]", "private|pair"): 9, ("grid_v[1]", "private|pair"): 9,
                                  ("grid_m", "private|atomic"): 9})
     assert {form for (_name, form) in bwd_forms} == {"plain"}  # each particle gradient is owned by its p

@@ -28,6 +28,11 @@ def _has(module: str) -> bool:
 _util.has_pytorch = lambda: _has("torch")  # type: ignore[attr-defined]
 _util.has_paddle = lambda: _has("paddle")  # type: ignore[attr-defined]
 sys.modules[_util.__name__] = _util
+# Taichi's enums module: the names test files import (their values are never compared with simgrad's)
+_enums = _pytypes.ModuleType(__name__ + ".lang.enums")
+for _name in ("AutodiffMode", "SNodeGradType", "Layout"):
+    setattr(_enums, _name, getattr(_simgrad, _name, None) or _pytypes.SimpleNamespace())
+sys.modules[_enums.__name__] = _enums
 sys.modules[__name__ + ".math"] = _simgrad.math
 math = _simgrad.math
 lang = _lang
