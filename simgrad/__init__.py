@@ -49,6 +49,7 @@ x86_64 = x64
 from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
+from simgrad.compiler import fill as _fill  # installs the compiled zeroing of large gradients
 from simgrad.lang.kernel import data_oriented, func, pyfunc
 
 real_func = func  # inlined like a ti.func (a recursive one is refused with a located error)

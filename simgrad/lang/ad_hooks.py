@@ -4,3 +4,7 @@ recorder = None
 
 # the ti.ad.FwdMode being entered (None outside): kernels launched meanwhile run their forward-mode instance
 forward_mode = None
+
+# `zero_fields(groups)`: zeroes groups of scalar fields placed under one SNode each with one compiled kernel
+# (compiler/fill.py installs it); clear_all_gradients uses it for large gradients
+zero_fields = None

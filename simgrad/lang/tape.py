@@ -214,14 +214,24 @@ def clear_all_gradients(gradient_type=SNodeGradType.ADJOINT) -> None:
     duals = gradient_type is SNodeGradType.DUAL
     prog = get_program()
     prog.materialize_all()
+    native: dict[int, list] = {}  # parent SNode -> the large gradients placed under it
     for tree in prog.trees:
         for node in tree.root._walk():
             if node.kind != "place" or node.field.is_primal or node.field.is_dual != duals:
                 continue
-            if node.field.view is not None:
-                node.field.view[...] = 0
+            f = node.field
+            if ad_hooks.zero_fields is not None and int(np.prod(f.shape)) >= _NATIVE_ZEROING:
+                native.setdefault(id(node.parent), []).append(f)
+            elif f.view is not None:
+                f.view[...] = 0
             else:
-                node.field.fill(0)
+                f.fill(0)
+    if native:
+        ad_hooks.zero_fields(list(native.values()))
+
+
+# gradients of at least this many elements are zeroed by a compiled kernel, one pass over their cells
+_NATIVE_ZEROING = 1 << 16
 
 
 def no_grad(kernel):

@@ -337,3 +337,25 @@ def test_tape_exception_inside_does_not_run_backward():
         step2()
     assert not np.any(x.grad.to_numpy())
     assert np.any(y.grad.to_numpy())
+
+
+def test_clear_all_gradients_zeroes_large_interleaved_gradients_and_keeps_primals():
+    """Large gradients are zeroed by a compiled kernel (one pass over the cells), small ones by numpy;
+    either way every gradient entry is 0 afterwards and the primals placed beside them are untouched."""
+    import simgrad.lang.tape as tape
+
+    x = ti.Vector.field(2, ti.f32)
+    m = ti.Matrix.field(2, 2, ti.f32)
+    s = ti.field(ti.f32, shape=7, needs_grad=True)
+    ti.root.dense(ti.i, 300).dense(ti.j, 250).place(x, m)
+    ti.root.lazy_grad()
+    assert 300 * 250 >= tape._NATIVE_ZEROING
+    rng = np.random.default_rng(0)
+    prim = [rng.random((300, 250, 2)), rng.random((300, 250, 2, 2)), rng.random(7)]
+    for f, p in zip((x, m, s), prim):
+        f.from_numpy(p.astype(np.float32))
+        f.grad.from_numpy(p.astype(np.float32) + 1)
+    ti.ad.clear_all_gradients()
+    for f, p in zip((x, m, s), prim):
+        assert not f.grad.to_numpy().any()
+        np.testing.assert_array_equal(f.to_numpy(), p.astype(np.float32))
