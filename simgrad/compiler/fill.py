@@ -15,7 +15,7 @@ from simgrad.lang.types import template
 
 
 @kernel
-def _zero(groups: template()):
+def _zero(groups: template()):  # type: ignore[valid-type]
     for group in static(groups):
         for I in grouped(group[0]):
             for f in static(group):

@@ -1,5 +1,9 @@
 """The one hook kernels call on launch so a Tape can record them (None when no tape is recording)."""
 
+from __future__ import annotations
+
+from collections.abc import Callable
+
 recorder = None
 
 # the ti.ad.FwdMode being entered (None outside): kernels launched meanwhile run their forward-mode instance
@@ -7,4 +11,4 @@ forward_mode = None
 
 # `zero_fields(groups)`: zeroes groups of scalar fields placed under one SNode each with one compiled kernel
 # (compiler/fill.py installs it); clear_all_gradients uses it for large gradients
-zero_fields = None
+zero_fields: Callable[[list], None] | None = None

@@ -215,19 +215,20 @@ def clear_all_gradients(gradient_type=SNodeGradType.ADJOINT) -> None:
     prog = get_program()
     prog.materialize_all()
     native: dict[int, list] = {}  # parent SNode -> the large gradients placed under it
+    zero = ad_hooks.zero_fields
     for tree in prog.trees:
         for node in tree.root._walk():
             if node.kind != "place" or node.field.is_primal or node.field.is_dual != duals:
                 continue
             f = node.field
-            if ad_hooks.zero_fields is not None and int(np.prod(f.shape)) >= _NATIVE_ZEROING:
+            if zero is not None and int(np.prod(f.shape)) >= _NATIVE_ZEROING:
                 native.setdefault(id(node.parent), []).append(f)
             elif f.view is not None:
                 f.view[...] = 0
             else:
                 f.fill(0)
-    if native:
-        ad_hooks.zero_fields(list(native.values()))
+    if native and zero is not None:
+        zero(list(native.values()))
 
 
 # gradients of at least this many elements are zeroed by a compiled kernel, one pass over their cells
