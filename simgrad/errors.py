@@ -114,6 +114,11 @@ class SimgradRuntimeError(TaichiRuntimeError):
     pass
 
 
+class SimgradOutOfBoundError(SimgradIndexError, SimgradAssertionError):
+    """An index out of bounds found at run time (debug mode): an IndexError, and an assertion failure as
+    Taichi reports it ("Out of bound access")."""
+
+
 class GradientError(TaichiRuntimeError):
     """A kernel that cannot be differentiated correctly: we refuse instead of returning wrong numbers."""
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradTypeError, SimgradValueError
 from simgrad.frontend.arrays import ArrayArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import Compiler
@@ -88,6 +88,15 @@ class Param:
         """The element shape of argument `a`: the annotation's, else a ti.ndarray object's own."""
         arr = getattr(a, "_ndarray", a)
         ann = self.ann
+        if isinstance(ann.dtype, MatrixType) and (ann.dtype.n is None or ann.dtype.m is None):
+            # ti.types.vector() / matrix(): the element shape is the argument's own, of that rank
+            rank = 1 if ann.dtype.m == 0 else 2
+            elem = tuple(getattr(a, "element_shape", ()) or ())
+            if len(elem) != rank:
+                raise SimgradValueError(f"Invalid value for argument {self.name}: a "
+                                        f"{'vector' if rank == 1 else 'matrix'} ndarray is required, got "
+                                        f"element shape {elem}")
+            return elem
         if isinstance(ann.dtype, MatrixType):
             return ann.dtype.shape
         elem = ann.element_shape_of(tuple(arr.shape))
@@ -292,27 +301,47 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
 
 
 def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
-    """The compiler's view of an ndarray argument, its dtype, dimensions and element shape checked."""
+    """The compiler's view of an ndarray argument, its dtype, dimensions and element shape checked (Taichi's
+    messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
     ann: NdarrayType = p.ann
     arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
     t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
     want: dt.DataType | None
     elem = p.element_shape(a)
+    own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray") else None
     if isinstance(ann.dtype, MatrixType):
-        want = ann.dtype.dtype
+        want = ann.dtype.dtype if ann.dtype._dtype is not None or ann.dtype.n is not None else None
     else:
         want = dt.from_any(ann.dtype) if ann.dtype is not None else None
-        if len(elem) > len(arr.shape) or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
-            raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' of shape "
-                                   f"{tuple(arr.shape)} has no trailing element shape {elem}")
+    if want is not None and not isinstance(ann.dtype, MatrixType) and own:
+        raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
+                               f"{_tensor(own, t)}")
+    if (own is not None and own != elem) or len(elem) > len(arr.shape) \
+            or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
+        # never reinterpret the memory: a (2, 3) matrix element is not a 2-vector followed by more
+        given = _tensor(own, t) if own is not None else f"an array of shape {tuple(arr.shape)}"
+        raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required element "
+                                f"type: {_element_type_text(ann, elem, want or t)}, but {given} is provided")
     if want is not None and want is not t:
-        raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
-                               f"dtype {want}, got {t}")
+        raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
+                               f"{_tensor(own if own is not None else elem, t)}")
     ndim = len(arr.shape) - len(elem)
     if ann.ndim is not None and ann.ndim != ndim:
-        raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{p.name}' must have "
-                               f"{ann.ndim} dimension(s), got {ndim}")
+        raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required "
+                                f"ndim={ann.ndim}, but {ndim}d ndarray with shape {tuple(arr.shape)} is provided")
     return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary, grad=t.is_float and p.with_grad(a, kernel_name))
+
+
+def _tensor(shape: tuple, t) -> str:
+    return f"[Tensor ({', '.join(map(str, shape))}) {t}]" if shape else str(t)
+
+
+def _element_type_text(ann: NdarrayType, elem: tuple, want) -> str:
+    """The annotation's element type as Taichi names it: VectorType[2, i32], MatrixType[2,2, f32], f32."""
+    mt = ann.dtype
+    if isinstance(mt, MatrixType) and mt.n is not None:
+        return f"VectorType[{mt.n}, {want}]" if mt.m == 0 else f"MatrixType[{mt.n},{mt.m}, {want}]"
+    return _tensor(elem, want)
 
 
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:

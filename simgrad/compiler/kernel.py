@@ -123,7 +123,9 @@ class Kernel(KernelDef):
         try:
             return self._compile_uncounted(args, mode, key, keep, cache)
         finally:
-            get_program().compile_seconds += time.perf_counter() - t0
+            prog = get_program()
+            prog.compile_seconds += time.perf_counter() - t0
+            prog.instantiations += 1
 
     def _compile_uncounted(self, args, mode: str, key, keep: list, cache: dict) -> CompiledKernel:
         prog = get_program()
@@ -141,6 +143,10 @@ class Kernel(KernelDef):
 
     def _key_part(self, p: Param, a, keep):
         if p.kind == "template":
+            if hasattr(a, "_ndarray"):
+                raise SimgradTypeError(f"kernel {self.name}: Ndarray shouldn't be passed in via `ti.template()` "
+                                       f"(parameter '{p.name}'), please annotate your kernel using "
+                                       "`ti.types.ndarray(...)` instead", caller_loc())
             return _template_key(a, keep)
         if p.kind == "ndarray":
             return p.ndarray_key(a, self.name)

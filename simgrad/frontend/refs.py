@@ -106,14 +106,16 @@ class MatrixRef:
         return Matrix(n=self.n, m=self.m, _entries=[r.load() for r in self.refs])
 
     def _values(self, value) -> list:
-        if isinstance(value, Matrix):
-            if len(value.entries) != len(self.refs):
-                raise SimgradTypeError(
-                    f"cannot assign a {value.shape} matrix to a {self.shape_text()} one", context.current_loc()
-                )
-            return value.entries
         if isinstance(value, (list, tuple)):
-            return Matrix(list(value)).entries
+            value = Matrix(list(value))
+        if isinstance(value, Matrix):
+            if value.shape != ((self.n,) if self.m == 0 else (self.n, self.m)):
+                # never store a prefix: a 2-vector into a 3-vector must not leave the third entry behind
+                raise SimgradTypeError(
+                    f"cannot assign '{_tensor_text(value.shape, _entry_type(value.entries[0]))}' to "
+                    f"'{_tensor_text((self.n,) if self.m == 0 else (self.n, self.m), self.dtype)}': a "
+                    f"{value.shape} matrix to a {self.shape_text()} one", context.current_loc())
+            return value.entries
         return [value] * len(self.refs)
 
     def shape_text(self) -> str:
@@ -175,6 +177,17 @@ class MatrixRef:
         if len(idx) == 1:
             return self.refs[idx[0]]
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)
+
+
+def _tensor_text(shape: tuple, dtype) -> str:
+    """A matrix type as Taichi's messages print it: [Tensor (3) i32], [Tensor (2, 2) f32]."""
+    return f"[Tensor ({', '.join(str(d) for d in shape)}) {dtype}]"
+
+
+def _entry_type(v):
+    if isinstance(v, Expr):
+        return v.dtype
+    return "i32" if isinstance(v, int) else "f32" if isinstance(v, float) else type(v).__name__
 
 
 class StructRef:

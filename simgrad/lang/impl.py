@@ -18,6 +18,10 @@ class _Runtime:
     def default_fp(self, t) -> None:
         get_program().set_default_types(fp=t)
 
+    def get_num_compiled_functions(self) -> int:
+        """Kernel instantiations made by this program (Taichi's count of compiled kernels)."""
+        return get_program().instantiations
+
     @property
     def default_ip(self):
         return get_program().config.default_ip

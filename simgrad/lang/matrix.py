@@ -585,7 +585,8 @@ def check_dynamic_index(key, dims) -> None:
         if isinstance(k, Expr):
             ok = ops.logical_and(ops.ge(k, 0), ops.lt(k, d))
             comp.builder.emit(Op.ASSERT, None, (ops.ne(ok, 0).stmt,),
-                              {"message": f"index out of range for a local vector/matrix dimension of size {d}"})
+                              {"message": f"Out of bound access: index out of range for a local vector/matrix "
+                                          f"dimension of size {d}"})
 
 
 def _loc():

@@ -30,9 +30,12 @@ class Ndarray:
 
     def __init__(self, dtype, shape, element_shape: tuple = (), needs_grad: bool = False):
         self.dtype = dt.from_any(dtype)
-        self.shape = (shape,) if isinstance(shape, int) else tuple(shape)
-        if any(not isinstance(n, (int, np.integer)) or n < 0 for n in self.shape):
-            raise SimgradTypeError(f"ndarray shape must be non-negative integers, got {shape!r}", caller_loc())
+        self.shape = (shape,) if isinstance(shape, (int, np.integer, float)) else tuple(shape)
+        if any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 < n < 2**31
+               for n in self.shape):
+            raise SimgradRuntimeError(f"{shape!r} is not a valid shape for ndarray: each extent must be an "
+                                      "integer in [1, 2**31)", caller_loc())
+        self.shape = tuple(int(n) for n in self.shape)
         self.element_shape = tuple(element_shape)
         self.n = self.element_shape[0] if self.element_shape else 0
         self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
@@ -60,7 +63,7 @@ class Ndarray:
             return ()
         key = key if isinstance(key, tuple) else (key,)
         if len(key) != len(self.shape):
-            raise SimgradIndexError(f"the ndarray has {len(self.shape)} dimension(s), got {len(key)} indices",
+            raise SimgradIndexError(f"{len(self.shape)}d ndarray indexed with {len(key)}d indices: {key!r}",
                                     caller_loc())
         for k, (i, n) in enumerate(zip(key, self.shape)):
             if not isinstance(i, (int, np.integer)) or not 0 <= i < n:
@@ -81,6 +84,13 @@ class Ndarray:
             raise SimgradTypeError(f"cannot store a value of shape {v.shape} in an ndarray element of shape "
                                    f"{self.element_shape}", caller_loc())
         self._ndarray[key] = v
+
+    def _get_element_size(self) -> int:
+        """Bytes per element (Taichi's name)."""
+        return int(self.dtype.np.itemsize * max(1, int(np.prod(self.element_shape))))
+
+    def _get_nelement(self) -> int:
+        return int(np.prod(self.shape))
 
     def to_numpy(self) -> np.ndarray:
         return self._ndarray.copy()

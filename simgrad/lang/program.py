@@ -72,6 +72,7 @@ class Program:
         self._open_tree = None
         self.profiler = Profiler()
         self.compile_seconds = 0.0  # time spent instantiating kernels (compiles and kernel-cache hits)
+        self.instantiations = 0  # kernel instances made (compiled or taken from the kernel cache)
         self.error = np.zeros(4, dtype=np.int64)
         self._pool = None
         self._rng: np.ndarray | None = None

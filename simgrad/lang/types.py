@@ -89,11 +89,13 @@ class MatrixType:
         return f"vector({self.n}, {self._dtype})" if self.m == 0 else f"matrix({self.n}, {self.m}, {self._dtype})"
 
 
-def vector(n: int, dtype=None) -> MatrixType:
+def vector(n=None, dtype=None) -> MatrixType:
+    """`ti.types.vector(n, dtype)`; without n (an ndarray annotation) any length, from the argument."""
     return MatrixType(n, 0, dtype)
 
 
-def matrix(n: int, m: int, dtype=None) -> MatrixType:
+def matrix(n=None, m=None, dtype=None) -> MatrixType:
+    """`ti.types.matrix(n, m, dtype)`; without n and m (an ndarray annotation) any shape, from the argument."""
     return MatrixType(n, m, dtype)
 
 

@@ -9,7 +9,13 @@ import threading
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradAssertionError, SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
+from simgrad.errors import (
+    SimgradAssertionError,
+    SimgradOutOfBoundError,
+    SimgradRuntimeError,
+    SimgradTypeError,
+    caller_loc,
+)
 from simgrad.runtime.abi import (
     CTX_ARGS,
     CTX_NTHREADS,
@@ -133,8 +139,9 @@ class Launcher:
         kind, loc, detail = self.error_table[code - 1] if 0 < code <= len(self.error_table) else ("?", None, "")
         if kind == "index":
             name, dim, shape = detail
-            raise SimgradIndexError(f"index {value} is out of bounds in dimension {dim} of {name} "
-                                    f"(shape {shape})", loc)
+            where = f"of ndarray {name}" if shape == "ndarray" else f"of {name} (shape {shape})"
+            raise SimgradOutOfBoundError(f"Out of bound access: index {value} is out of bounds in dimension "
+                                         f"{dim} {where}", loc)
         if kind == "assert":
             raise SimgradAssertionError(f"assertion failed: {detail}", loc)
         if kind == "adstack":

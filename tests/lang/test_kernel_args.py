@@ -197,10 +197,19 @@ def test_ndarray_wrong_dtype_or_ndim_is_an_error():
         for i in a:
             a[i] = 1
 
-    with pytest.raises(TypeError, match=r"kernel k: ndarray argument 'a' must have dtype f32"):
+    @ti.kernel
+    def vec(a: ti.types.ndarray(dtype=ti.types.vector(2, ti.f32))):
+        for i in a:
+            a[i] = [1, 2]
+
+    with pytest.raises(TypeError, match=r"kernel k: Expect element type f32 for argument a, but get f64"):
         k(np.zeros(3, np.float64))
-    with pytest.raises(TypeError, match=r"'a' must have 1 dimension"):
+    with pytest.raises(ValueError, match=r"argument a - required ndim=1, but 2d ndarray with shape \(3, 3\)"):
         k(np.zeros((3, 3), np.float32))
+    with pytest.raises(ValueError, match=r"required element type: VectorType\[2, f32\], but \[Tensor \(2, 3\) "):
+        vec(ti.Matrix.ndarray(2, 3, ti.f32, shape=4))  # a matrix element is never read as a vector
+    with pytest.raises(ValueError, match=r"required element type"):
+        vec(np.zeros((4, 3), np.float32))
     with pytest.raises(TypeError, match="C-contiguous"):
         k(np.zeros(6, np.float32)[::2])
 

@@ -294,3 +294,37 @@ def test_kernel_runtime_index_into_local_matrix_variable():
 
     k()
     np.testing.assert_allclose(out.to_numpy(), [10, 20, 30, 1, 2, 3, 4])
+
+
+def test_assigning_a_matrix_of_another_shape_is_refused_never_a_prefix():
+    """A 2-vector stored into a 3-vector (field, ndarray or local) used to store two entries and leave
+    the third: now a located error, as Taichi's 'cannot assign [Tensor (2) i32] to [Tensor (3) i32]'."""
+    v = ti.Vector.field(3, ti.i32, shape=2)
+
+    @ti.kernel
+    def into_field():
+        for i in v:
+            v[i] = [1, 2]
+
+    @ti.kernel
+    def into_ndarray(a: ti.types.ndarray(dtype=ti.types.vector(3, ti.i32))):
+        for i in a:
+            a[i] = ti.Vector([1, 2])
+
+    @ti.kernel
+    def into_local() -> ti.i32:
+        a = ti.Vector([1, 2, 3])
+        a = [1, 2]
+        return a[2]
+
+    @ti.kernel
+    def matrix_into_matrix():
+        m = ti.Matrix([[1.0, 0.0], [0.0, 1.0]])
+        m = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+
+    for k, args in ((into_field, ()), (into_ndarray, (np.zeros((2, 3), np.int32),)), (into_local, ()),
+                    (matrix_into_matrix, ())):
+        with pytest.raises(ti.TaichiCompilationError, match=r"cannot assign '\[Tensor \(2\) i32\]'|"
+                                                            r"cannot assign '\[Tensor \(2, 3\) f32\]'"):
+            k(*args)
+    assert not v.to_numpy().any()

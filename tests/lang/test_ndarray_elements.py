@@ -24,7 +24,7 @@ def test_element_dim_1_gives_vectors():
     load(a)
     np.testing.assert_array_equal(x.to_numpy(), a * 2)
     b = np.arange(8, dtype=np.float32).reshape(4, 2)  # another element size compiles another instance
-    with pytest.raises(SimgradTypeError, match=r"cannot assign a \(2,\) matrix to a \(3,\) one"):
+    with pytest.raises(SimgradTypeError, match=r"cannot assign .*a \(2,\) matrix to a \(3,\) one"):
         load(b)  # a 2-vector into a 3-vector field
 
 
@@ -60,5 +60,6 @@ def test_element_dim_2_and_a_wrong_trailing_shape():
     def first(y: ti.types.ndarray(element_shape=(3,))) -> ti.f32:
         return y[0][0]
 
-    with pytest.raises(SimgradTypeError, match="trailing element shape"):
+    with pytest.raises(ValueError, match=r"Invalid value for argument y - required element type: \[Tensor \(3\) "
+                                         r"f32\], but an array of shape \(4, 2\) is provided"):
         first(np.zeros((4, 2), np.float32))
