@@ -50,9 +50,9 @@ from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.compiler import fill as _fill  # installs the compiled zeroing of large gradients
-from simgrad.lang.kernel import data_oriented, func, pyfunc
+from simgrad.lang.kernel import data_oriented, func, pyfunc, real_func
 
-real_func = func  # inlined like a ti.func (a recursive one is refused with a located error)
+
 from simgrad.lang.loops import (
     assume_in_range,
     block_local,
@@ -104,7 +104,7 @@ from simgrad.lang.ops import (
     zero,
 )
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
-from simgrad.lang.types import Layout, template, types
+from simgrad.lang.types import Layout, ref, template, types
 from simgrad.lang.atomics import (
     atomic_add,
     atomic_and,
@@ -150,7 +150,6 @@ _NOT_SUPPORTED = {
     "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",
     "BitpackedFields": "quantized types are not built yet",
     "get_addr": "raw field addresses are not exposed",
-    "ref": "real functions with reference parameters are not built yet (ti.real_func is inlined)",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "sparse": "sparse SNodes are not built yet",

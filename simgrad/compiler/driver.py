@@ -247,6 +247,8 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
                 out.append(SlotParam(p.name, "template"))
             elif p.kind == "scalar":
                 t = dt.from_any(p.ann)
+                if t is dt.u1:  # a ti.u1 (bool) argument travels as an i32, 0 or 1
+                    t = dt.i32
                 comp.bind(p.name, Expr(b.emit(Op.ARG, t, (), {"slot": slot})))
                 out.append(SlotParam(p.name, "scalar", slot, t))
                 slot += 1

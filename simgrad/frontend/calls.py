@@ -78,9 +78,10 @@ def call(comp, node: ast.Call):
     kind = getattr(fn, "atomic_kind", None)
     if kind is not None:
         return _atomic(comp, node, kind)
+    by_ref = _template_params(fn)
     args = []
-    for a in node.args:
-        v = comp.eval(a)
+    for k, a in enumerate(node.args):
+        v = _by_reference(comp, a) if k in by_ref else comp.eval(a)
         if type(v).__name__ == "_Starred":
             args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
         else:
@@ -90,7 +91,7 @@ def call(comp, node: ast.Call):
         if kw.arg is None:
             kwargs.update(comp.eval(kw.value))
         else:
-            kwargs[kw.arg] = comp.eval(kw.value)
+            kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
     if fn is builtins.print:
         from simgrad.frontend.printing import emit_print
 
@@ -125,6 +126,35 @@ def call(comp, node: ast.Call):
 _FILLS = (ScalarField.fill, MatrixField.fill)
 
 
+def _template_params(fn) -> set:
+    """Positions and names of a ti.func's ti.template() parameters (a local passed there is passed by
+    reference, as in Taichi: `x = 1` in the callee assigns the caller's variable)."""
+    from simgrad.lang.kernel import BoundFunc, Func
+    from simgrad.lang.types import by_reference
+
+    shift = 0
+    if isinstance(fn, BoundFunc):
+        fn, shift = fn.func, 1
+    if not isinstance(fn, Func):
+        return set()
+    out: set = set()
+    for k, (name, p) in enumerate(fn.signature.parameters.items()):
+        if by_reference(p.annotation):
+            out.update((k - shift, name))
+    return out
+
+
+def _by_reference(comp, node: ast.expr):
+    """A local variable itself when `node` names one, else its value."""
+    from simgrad.frontend.lower import LOCAL_REFS
+
+    if isinstance(node, ast.Name):
+        v = comp.lookup(node.id, node)
+        if isinstance(v, LOCAL_REFS):
+            return v
+    return comp.eval(node)
+
+
 def _atomic(comp, node: ast.Call, kind: str):
     if len(node.args) != 2:
         raise SimgradSyntaxError(f"ti.atomic_{kind}(dest, value) takes two arguments", comp.loc(node))
@@ -139,7 +169,7 @@ def inline(comp, fn, args, kwargs, node):
     """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
     from simgrad.frontend.lower import Frame
     from simgrad.frontend.source import get_source
-    from simgrad.lang.types import MatrixType, is_template
+    from simgrad.lang.types import MatrixType, by_reference
 
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
@@ -156,9 +186,10 @@ def inline(comp, fn, args, kwargs, node):
         raise SimgradTypeError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
     bound.apply_defaults()
     frame = Frame(get_source(fn.func), False)
+    frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
-        if is_template(ann) or not isinstance(value, (Expr, Matrix, int, float)) or isinstance(value, bool):
+        if by_reference(ann) or not isinstance(value, (Expr, Matrix, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
         elif isinstance(ann, MatrixType):
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
@@ -170,16 +201,26 @@ def inline(comp, fn, args, kwargs, node):
     frame.entry_index = len(comp.builder.block.stmts)
     frame.loop_base = len(comp.loop_stack)
     comp.frames.append(frame)
+    ann = None
     try:
         comp.visit_block(frame.src.tree.body)
+        if frame.src.tree.returns is not None:  # in the callee's scope: its closure may define the type
+            ann = sig.return_annotation
+            if isinstance(ann, str) or ann is inspect.Signature.empty:
+                ann = comp.eval(frame.src.tree.returns)
     except SimgradError:
         raise
     finally:
         comp.frames.pop()
     rv = frame.ret_var.load() if frame.ret_var is not None else frame.return_value
-    ret_ann = frame.src.tree.returns
-    if ret_ann is not None and rv is not None:
-        ann = comp.eval(ret_ann)
+    if frame.real and ann is None and rv is not None:
+        raise SimgradSyntaxError(f"the return value must be annotated: real function {fn.name} returns a value "
+                                 "(add -> ti.f32 or another type)", comp.loc(node))
+    if ann is not None and ann is not None.__class__ and rv is None and not frame.has_returned \
+            and frame.ret_var is None:
+        raise SimgradSyntaxError(f"Function has a return type but does not have a return statement "
+                                 f"(ti.func {fn.name})", comp.loc(node))
+    if ann is not None and rv is not None:
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
             rv = ops.cast(rv, ann)
     return rv

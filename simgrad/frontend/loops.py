@@ -127,7 +127,7 @@ def _emit_loop(comp, begin, end, body) -> None:
     t = _index_type(begin, end)
     b = ops.cast_expr(ops.to_expr(begin, t), t)
     e = ops.cast_expr(ops.to_expr(end, t), t)
-    top = comp.depth == 0 and not comp.loop_stack
+    top = comp.depth == 0 and not comp.loop_stack and not any(f.real for f in comp.frames)
     parallel = top and not cfg.get("serialize", False)
     attrs = {"parallel": parallel, "top": top}
     if cfg.get("block_dim"):

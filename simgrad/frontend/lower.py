@@ -95,6 +95,7 @@ class Frame:
         self.ret_flag: VarRef | None = None
         self.dynamic_returns = 0
         self.returned_here = False
+        self.real = False  # a ti.real_func: its loops are serial (it is a function the kernel calls)
 
 
 class Compiler:
@@ -192,6 +193,9 @@ class Compiler:
         context.push(self)
         try:
             self.visit_block(self.frame.src.tree.body)
+            if self.return_types and not self.frame.has_returned:
+                raise SimgradSyntaxError("Kernel has a return type but does not have a return statement",
+                                         self.loc(self.frame.src.tree))
         finally:
             context.pop()
 
@@ -201,8 +205,8 @@ class Compiler:
     def visit_block(self, stmts: list[ast.stmt]) -> None:
         for k, s in enumerate(stmts):
             frame = self.frame
-            if frame.has_returned:
-                raise SimgradSyntaxError("code after a return statement is not supported", self.loc(s))
+            if frame.has_returned:  # after a compile-time return (a taken ti.static branch, unrolled loop)
+                return
             before = frame.dynamic_returns
             self.visit_stmt(s)
             if frame.returned_here:  # `return` inside run-time control flow: the rest of this block is dead
@@ -476,6 +480,8 @@ class Compiler:
         frame.has_returned = True
 
     def emit_kernel_return(self, value, node) -> None:
+        if value is None and self.return_types is None:  # a bare `return` / `return None`
+            return
         if self.return_types is None:
             raise SimgradSyntaxError("this kernel returns a value but has no return annotation (-> ti.f32)",
                                      self.loc(node))

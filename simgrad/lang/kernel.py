@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
 from simgrad.ir import context
 
 
@@ -22,6 +22,8 @@ class KernelDef:
 
 class Func:
     """@ti.func: inlined into the kernels that call it."""
+
+    real = False  # @ti.real_func
 
     def __init__(self, func):
         self.func = func
@@ -64,6 +66,20 @@ def func(fn=None, **kw):
     if fn is None:
         return lambda f: Func(f)
     return Func(fn)
+
+
+def real_func(fn):
+    """@ti.real_func: inlined like a ti.func (a recursive one is refused with a located error), with Taichi's
+    rules for real functions: every parameter annotated, the return value annotated, loops serial."""
+    import inspect
+
+    for name, p in inspect.signature(fn).parameters.items():
+        if p.annotation is inspect.Parameter.empty:
+            raise SimgradSyntaxError(f"Argument {name} of real function {fn.__name__} must be type annotated",
+                                     caller_loc())
+    f = Func(fn)
+    f.real = True
+    return f
 
 
 def pyfunc(fn):

@@ -25,6 +25,23 @@ def is_template(ann) -> bool:
     return isinstance(ann, Template) or ann is Template
 
 
+class RefType:
+    """`ti.ref(ti.f32)`: a real function's parameter passed by reference (assigning it assigns the caller's
+    variable), as a local passed for a ti.template() parameter is."""
+
+    def __init__(self, dtype=None):
+        self.dtype = dtype
+
+
+def ref(dtype=None) -> RefType:
+    return RefType(dtype)
+
+
+def by_reference(ann) -> bool:
+    """Whether a ti.func parameter with this annotation takes a caller's local variable itself."""
+    return is_template(ann) or isinstance(ann, RefType)
+
+
 class MatrixType:
     """`ti.types.vector(3, ti.f32)` / `ti.types.matrix(2, 2, ti.f64)`; callable to build a value."""
 

@@ -577,3 +577,118 @@ def test_early_returns_from_ti_func_inside_runtime_control_flow():
 
     for limit in (0, 7, 30):
         assert par(limit) == sum(first_over_py(n, limit) + (n + 1) * 100 for n in range(8))
+
+
+def test_returns_at_compile_time_and_their_errors():
+    """A return in a taken ti.static branch or unrolled loop ends the function there; a bare return ends a
+    kernel without a value; a kernel or ti.func annotated with a return type must return (Taichi's words)."""
+
+    @ti.kernel
+    def pick(a: ti.template()) -> ti.i32:
+        if ti.static(a == 1):
+            return 10
+        elif ti.static(a == 2):
+            return 20
+        return 30
+
+    @ti.kernel
+    def squares() -> ti.i32:
+        s = 0
+        for i in ti.static(range(10)):
+            s += i * i
+            if ti.static(i == 4):
+                return s
+
+    out = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def bare():
+        out[None] = 5
+        return
+
+    assert (pick(1), pick(2), pick(7)) == (10, 20, 30)
+    assert squares() == sum(i * i for i in range(5))
+    bare()
+    assert out[None] == 5
+
+    @ti.kernel
+    def no_return() -> ti.i32:
+        out[None] = 1
+
+    with pytest.raises(ti.TaichiSyntaxError, match="Kernel has a return type but does not have a return"):
+        no_return()
+
+    @ti.func
+    def f() -> ti.i32:
+        out[None] = 2
+
+    @ti.kernel
+    def calls_f() -> ti.i32:
+        return f()
+
+    with pytest.raises(ti.TaichiCompilationError, match="Function has a return type but does not have a return"):
+        calls_f()
+
+
+def test_template_and_ref_parameters_take_the_callers_variable():
+    @ti.func
+    def set_one(x: ti.template()):
+        x = 1
+
+    @ti.func
+    def bump(x: ti.template()):
+        x += 1
+
+    @ti.func
+    def by_value(x):
+        x = 100
+
+    @ti.real_func
+    def double(a: ti.ref(ti.f32)):
+        a += a
+
+    @ti.kernel
+    def run() -> ti.f32:
+        a = 0
+        set_one(a)
+        bump(a)
+        by_value(a)
+        b = 2.5
+        double(b)
+        return a * 10.0 + b
+
+    assert run() == 25.0
+
+
+def test_real_func_rules_and_serial_loops():
+    with pytest.raises(ti.TaichiSyntaxError, match="must be type annotated"):
+
+        @ti.real_func
+        def add(a, b: ti.i32) -> ti.i32:
+            return a + b
+
+    @ti.real_func
+    def first_square_over(n: ti.i32) -> ti.i32:
+        for i in range(100):  # a real function's loop is serial: returning from it is allowed
+            if i * i > n:
+                return i
+        return -1
+
+    @ti.real_func
+    def unannotated(a: ti.i32):
+        return a + 1
+
+    @ti.kernel
+    def run(n: ti.i32, flag: ti.u1) -> ti.i32:
+        r = first_square_over(n)
+        if flag:
+            r += 1000
+        return r
+
+    @ti.kernel
+    def bad() -> ti.i32:
+        return unannotated(1)
+
+    assert run(50, False) == 8 and run(50, True) == 1008
+    with pytest.raises(ti.TaichiCompilationError, match="return value must be annotated"):
+        bad()
