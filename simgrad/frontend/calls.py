@@ -74,6 +74,12 @@ _BUILTINS = {
 
 
 def call(comp, node: ast.Call):
+    target = _local_matrix_method(comp, node, "fill")
+    if target is not None:  # `m.fill(v)` on a local matrix assigns it (a loaded copy would be dropped)
+        if len(node.args) != 1 or node.keywords:
+            raise SimgradTypeError("fill() takes one value", comp.loc(node))
+        target.store(comp.eval(node.args[0]))
+        return None
     fn = comp.eval(node.func)
     kind = getattr(fn, "atomic_kind", None)
     if kind is not None:
@@ -124,6 +130,18 @@ def call(comp, node: ast.Call):
 
 
 _FILLS = (ScalarField.fill, MatrixField.fill)
+
+
+def _local_matrix_method(comp, node: ast.Call, name: str):
+    """The assignable matrix (a local, a field or ndarray element, a struct member) of a call
+    `m.<name>(...)`, else None."""
+    f = node.func
+    if isinstance(f, ast.Attribute) and f.attr == name and isinstance(f.value, (ast.Name, ast.Subscript,
+                                                                                   ast.Attribute)):
+        v = comp.ref(f.value)
+        if isinstance(v, MatrixRef):
+            return v
+    return None
 
 
 def _template_params(fn) -> set:

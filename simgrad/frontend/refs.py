@@ -8,7 +8,7 @@ from __future__ import annotations
 import itertools
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradIndexError, SimgradTypeError
 from simgrad.ir import context
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
@@ -140,12 +140,13 @@ class MatrixRef:
                 "matrix elements can only be assigned with compile-time indices here (use ti.static or "
                 "a Python int)", context.current_loc()
             )
+        if len(key) != (1 if self.m == 0 else 2):
+            raise SimgradIndexError(f"Expected {1 if self.m == 0 else 2} indices, got {len(key)}: index a "
+                                    f"{self.shape_text()} matrix as " + ("v[i]" if self.m == 0 else "m[i, j]"),
+                                    context.current_loc())
         if self.m == 0:
             (i,) = key
             return self.refs[_check(i, self.n)]
-        if len(key) == 1:
-            r = _check(key[0], self.n)
-            return MatrixRef(self.refs[r * self.m : (r + 1) * self.m], self.m, 0)
         i, j = key
         return self.refs[_check(i, self.n) * self.m + _check(j, self.m)]
 

@@ -10,7 +10,7 @@ import numbers
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradIndexError, SimgradTypeError
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -112,7 +112,7 @@ class Matrix:
         key = tuple(int(k) for k in key)
         if self.m == 0:
             if len(key) != 1:
-                raise IndexError(f"a vector takes one index, got {len(key)}")
+                raise SimgradIndexError(f"Expected 1 indices, got {len(key)}: a vector takes one index", _loc())
             (i,) = key
             if not -self.n <= i < self.n:
                 raise IndexError(f"index {i} out of range for a {self.n}-vector")
@@ -135,8 +135,13 @@ class Matrix:
         if idx is not None:
             return self.entries[idx]
         key = key if isinstance(key, tuple) else (key,)
+        if self.m and len(key) == 1 and _in_kernel():  # Taichi 1.7: m[i, j] only (numpy-like rows in Python)
+            raise SimgradIndexError(f"Expected 2 indices, got 1: index a {self.n}x{self.m} matrix as m[i, j]",
+                                    _loc())
         if self.m and len(key) == 1 and not isinstance(key[0], Expr):
             return self._row(int(key[0]))
+        if len(key) != (1 if self.m == 0 else 2):
+            raise SimgradIndexError(f"Expected {1 if self.m == 0 else 2} indices, got {len(key)}", _loc())
         return self._dynamic_get(key)
 
     def _slice(self, key):
@@ -341,8 +346,9 @@ class Matrix:
 
     # -- methods (Taichi's names) -------------------------------------------------------------------
     def transpose(self) -> Matrix:
-        if self.m == 0:
-            return Matrix([[e for e in self.entries]])
+        if self.m == 0:  # Taichi 1.7 refuses it too (a vector has one axis)
+            raise SimgradTypeError("`transpose()` cannot apply to a vector. If you want something like "
+                                   "`a @ b.transpose()`, write `a.outer_product(b)` instead.", _loc())
         return Matrix([[self.entries[i * self.m + j] for i in range(self.n)] for j in range(self.m)])
 
     @property
@@ -408,7 +414,7 @@ class Matrix:
 
     def trace(self):
         if self.n != self.m:
-            raise ValueError(f"trace of a non-square {self.shape} matrix")
+            raise SimgradTypeError(f"expected a square matrix, got shape {self.shape}", _loc())
         return _sum([self.entries[i * self.m + i] for i in range(self.n)])
 
     def _e(self, i, j):
@@ -587,6 +593,12 @@ def check_dynamic_index(key, dims) -> None:
             comp.builder.emit(Op.ASSERT, None, (ops.ne(ok, 0).stmt,),
                               {"message": f"Out of bound access: index out of range for a local vector/matrix "
                                           f"dimension of size {d}"})
+
+
+def _in_kernel() -> bool:
+    from simgrad.ir import context
+
+    return context.current() is not None
 
 
 def _loc():

@@ -341,7 +341,7 @@ def test_runtime_index_into_vector_and_matrix_elements():
         for r in range(2):
             for c in range(3):
                 m[None][r, c] = r * 10 + c
-        m[None][1][2] = 99
+        m[None][1, 2] = 99
 
     @ti.kernel
     def read(i: ti.i32, j: ti.i32) -> ti.f32:

@@ -199,7 +199,7 @@ def test_kernel_methods_against_numpy():
         vals = [v.dot(w), v.norm(), v.norm(0.3), v.norm_sqr(), v.norm_inv(), c[0], c[1], c[2], o[2, 1],
                 mm[2, 1], mv[1], vm[2], Mt[0, 2], M.determinant(), M.inverse()[1, 2], M.trace(), M.norm(),
                 nv[0], nv2[2], v.sum(), v.max(), v.min(), ele[1], (v @ w), v.x + 10.0 * v.zyx[0],
-                M[1][2], ti.max(v, w)[0], (v < w)[1], M.sum()]
+                M[1, 2], ti.max(v, w)[0], (v < w)[1], M.sum()]
         for j in ti.static(range(len(vals))):
             out[j] = vals[j]
 
@@ -251,7 +251,7 @@ def test_kernel_constructors_swizzles_and_local_updates():
         v.zw = ti.Vector([5.0, 6.0])
         m = ti.Matrix([[1.0, 2.0], [3.0, 4.0]])
         m[1, 0] = 9.0
-        m[0][1] = 5.0
+        m[0, 1] = 5.0
         m += 1.0
         m *= 2.0
         vals = [I.sum(), I[1, 1], Z.sum(), O.sum(), D[2, 2] + D[0, 1], R[0, 1], C[0, 1], u[1] + 10 * u[0],
@@ -328,3 +328,41 @@ def test_assigning_a_matrix_of_another_shape_is_refused_never_a_prefix():
                                                             r"cannot assign '\[Tensor \(2, 3\) f32\]'"):
             k(*args)
     assert not v.to_numpy().any()
+
+
+def test_kernel_matrix_indexing_takes_one_index_per_axis():
+    """As Taichi 1.7: in kernels a matrix is indexed m[i, j] and a vector v[i]; a row m[i] or v[i, j] is a
+    located error (Python scope keeps numpy-like rows)."""
+
+    @ti.kernel
+    def row():
+        m = ti.Matrix([[1, 2, 3], [4, 5, 6]])
+        print(m[0])
+
+    @ti.kernel
+    def two_on_vector():
+        v = ti.Vector([1, 2, 3])
+        print(v[0, 0])
+
+    with pytest.raises(ti.TaichiCompilationError, match=r"Expected 2 indices, got 1"):
+        row()
+    with pytest.raises(ti.TaichiCompilationError, match=r"Expected 1 indices, got 2"):
+        two_on_vector()
+    assert list(ti.Matrix([[1, 2], [3, 4]])[1]) == [3, 4]
+
+
+def test_fill_of_a_local_or_element_matrix_assigns_it():
+    """`m.fill(v)` on a kernel's local matrix, field element or struct member used to fill a loaded copy
+    (the write was dropped)."""
+    v = ti.Vector.field(3, ti.f32, shape=2)
+
+    @ti.kernel
+    def k() -> ti.f32:
+        m = ti.Matrix([[0.0, 0.0], [0.0, 0.0]])
+        m.fill(1.5)
+        for i in v:
+            v[i].fill(2.5)
+        return m.sum()
+
+    assert k() == 6.0
+    np.testing.assert_array_equal(v.to_numpy(), 2.5)
