@@ -502,7 +502,7 @@ class Compiler:
         msg = self.eval(node.msg) if node.msg is not None else None
         if msg is not None and not isinstance(msg, (str, FormattedString)):
             msg = str(msg)
-        text = msg if isinstance(msg, str) else ast.unparse(node.test)
+        text: str | list = msg if isinstance(msg, str) else ast.unparse(node.test)
         if not isinstance(cond, Expr):
             if not cond:
                 raise SimgradAssertionError(f"assertion failed at compile time: {text}", self.loc(node))

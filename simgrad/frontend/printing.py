@@ -18,7 +18,6 @@ from __future__ import annotations
 import ast
 import re
 import string
-from typing import Union
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradSyntaxError, SimgradTypeError
@@ -31,7 +30,7 @@ from simgrad.lang.matrix import Matrix
 _PRINTF = re.compile(r"^%?([-+ #0]*)(\d*)(?:\.(\d*))?(hh|h|ll|l|j|z|t|L)?([a-zA-Z]?)$")
 _SIGNED, _UNSIGNED, _FLOAT = "di", "uxXo", "eEfFgGaA"
 
-Piece = Union[str, tuple]  # literal text, or (Expr, printf conversion such as "%.2f" / None: the type's own)
+Piece = str | tuple  # literal text, or (Expr, printf conversion such as "%.2f" / None: the type's own)
 
 
 def _default(t: dt.DataType) -> str:
@@ -86,7 +85,8 @@ class FormattedString:
     def template(self) -> list:
         """The pieces with each value as (position, conversion, type name): what the launcher needs to
         format an assert message from the values the kernel reported."""
-        out, k = [], 0
+        out: list = []
+        k = 0
         for p in self.pieces:
             if isinstance(p, str):
                 out.append(p)
@@ -199,7 +199,7 @@ def str_format(fmt: str, args: tuple, kwargs: dict) -> str | FormattedString:
         if not spec and not isinstance(v, (Expr, Matrix, FormattedString)):
             pieces.append(repr(v) if conversion == "r" else str(v))
         else:
-            pieces += _format(v, spec)
+            pieces += _format(v, spec or "")
     expected = max(auto, top + 1)
     if expected != len(args):
         raise SimgradSyntaxError(f"Expected {expected} positional argument(s), but received {len(args)} "

@@ -220,8 +220,8 @@ def _array_info(a, kernel, param, ndim):
 
 
 def assert_message(template: list, values: list) -> str:
-    """The message of a failed assert from its template (frontend/printing.py FormattedString.template) and the values the
-    kernel reported (raw 64-bit words: floats as f64 bits, integers extended)."""
+    """The message of a failed assert from its template (frontend/printing.py FormattedString.template)
+    and the values the kernel reported (raw 64-bit words: floats as f64 bits, integers extended)."""
     out = []
     for p in template:
         if isinstance(p, str):
