@@ -573,8 +573,38 @@ def lower_print(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 
 def lower_assert(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    """A failed assert reports its code; the values of a formatted message (operands after the condition)
+    go to the error buffer's argument words, written only by the report that won (the launcher formats)."""
     code = g.error_code("assert", s.loc, s.attrs["message"])
-    g._check(f, f.v(s.operands[0]), code, "0")
+    cond, *values = s.operands
+    if not values:
+        g._check(f, f.v(cond), code, "0")
+        return
+    c = f.tmp("ok")
+    f.emit(f"{c} = icmp ne i32 {f.v(cond)}, 0")
+    good, bad, store = f.label("ok"), f.label("fail"), f.label("fail_args")
+    f.emit(f"br i1 {c}, label %{good}, label %{bad}, !prof !1")
+    f.start_block(bad)
+    ep, err, r, won = (f.tmp("ae") for _ in range(4))
+    f.emit(f"{ep} = getelementptr i64, ptr %ctx, i64 {abi.CTX_ERR}")
+    f.emit(f"{err} = load ptr, ptr {ep}")
+    f.emit(f"{r} = cmpxchg ptr {err}, i64 0, i64 {code} monotonic monotonic")
+    f.emit(f"{won} = extractvalue {{ i64, i1 }} {r}, 1")
+    f.emit(f"br i1 {won}, label %{store}, label %{good}")
+    f.start_block(store)
+    for k, v in enumerate(values):
+        if v.type.is_float:
+            word = f.tmp("aw")
+            f.emit(f"{word} = bitcast double {arith.lower_cast(f, v, dt.f64)} to i64")
+        else:
+            word = arith.lower_cast(f, v, dt.i64 if v.type.is_signed else dt.u64)
+        p = f.tmp("ap")
+        f.emit(f"{p} = getelementptr i64, ptr {err}, i64 {abi.ERR_ARGS + k}")
+        f.emit(f"store i64 {word}, ptr {p}")
+    f.emit(f"br label %{good}")
+    f.start_block(good)
+    if "!1 = " not in "".join(g.module.globals):
+        g.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
 
 
 def lower_tape_reset(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

@@ -98,6 +98,10 @@ def call(comp, node: ast.Call):
             kwargs.update(comp.eval(kw.value))
         else:
             kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
+    if isinstance(getattr(fn, "__self__", None), str) and getattr(fn, "__name__", "") == "format":
+        from simgrad.frontend.printing import str_format
+
+        return str_format(fn.__self__, tuple(args), kwargs)
     if fn is builtins.print:
         from simgrad.frontend.printing import emit_print
 

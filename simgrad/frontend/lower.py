@@ -503,13 +503,25 @@ class Compiler:
         cond = self.eval(node.test)
         if not self.debug:
             return
+        from simgrad.frontend.printing import FormattedString
+
         msg = self.eval(node.msg) if node.msg is not None else None
-        text = msg if isinstance(msg, str) else ast.unparse(node.test)
+        if msg is not None and not isinstance(msg, (str, FormattedString)):
+            msg = str(msg)
+        text: str | list = msg if isinstance(msg, str) else ast.unparse(node.test)
         if not isinstance(cond, Expr):
             if not cond:
                 raise SimgradAssertionError(f"assertion failed at compile time: {text}", self.loc(node))
             return
-        self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt,), {"message": text})
+        args: tuple = ()
+        if isinstance(msg, FormattedString):  # formatted on the host from the values the kernel reports
+            from simgrad.runtime.abi import ERR_MAX_ARGS
+
+            if len(msg.values) > ERR_MAX_ARGS:
+                raise SimgradSyntaxError(f"an assert message can show at most {ERR_MAX_ARGS} kernel values, "
+                                         f"this one has {len(msg.values)}", self.loc(node))
+            args, text = tuple(v.stmt for v in msg.values), msg.template()
+        self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt, *args), {"message": text})
 
     def visit_For(self, node: ast.For) -> None:
         from simgrad.frontend.loops import lower_for
@@ -551,6 +563,10 @@ class Compiler:
 
     def eval_BinOp(self, node: ast.BinOp):
         a, b = self.eval(node.left), self.eval(node.right)
+        if isinstance(node.op, ast.Mod) and isinstance(a, str):  # "x = %d" % x
+            from simgrad.frontend.printing import percent_format
+
+            return percent_format(a, b)
         return _BINOPS[type(node.op)](a, b)
 
     def eval_UnaryOp(self, node: ast.UnaryOp):

@@ -3,7 +3,7 @@ ti.loop_config."""
 
 from __future__ import annotations
 
-from simgrad.errors import SimgradSyntaxError
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError
 
 
 def static(x, *xs):
@@ -40,6 +40,12 @@ def _check_static(v) -> None:
 
 
 def static_assert(cond, msg: str = "static assertion failed"):
+    from simgrad.lang.expr import Expr
+    from simgrad.lang.matrix import Matrix
+
+    if isinstance(cond, (Expr, Matrix)):
+        raise SimgradTypeError("Static assert with non-static condition (a kernel value is known only at run "
+                               "time; use ti.static values)")
     if not cond:
         raise SimgradSyntaxError(msg)
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simgrad import dtypes as dt
+from simgrad.runtime import abi
 from simgrad.runtime.memory import Memory
 
 if TYPE_CHECKING:
@@ -73,7 +74,7 @@ class Program:
         self.profiler = Profiler()
         self.compile_seconds = 0.0  # time spent instantiating kernels (compiles and kernel-cache hits)
         self.instantiations = 0  # kernel instances made (compiled or taken from the kernel cache)
-        self.error = np.zeros(4, dtype=np.int64)
+        self.error = np.zeros(abi.ERR_WORDS, dtype=np.int64)
         self._pool = None
         self._rng: np.ndarray | None = None
         from simgrad.runtime.jit import get_jit

@@ -7,7 +7,7 @@ Generated code (codegen/) reads these slots and the launcher (runtime/launch.py)
 from __future__ import annotations
 
 CTX_ROOTS = 0  # the roots table: one base address per SNode tree
-CTX_ERR = 1  # the error buffer: [code, value] of the first error a kernel reports
+CTX_ERR = 1  # the error buffer: [code, value, args...] of the first error a kernel reports
 CTX_RNG = 2  # per-thread random states (16 bytes each)
 CTX_PFOR = 3  # the thread pool's parallel_for(task, closure, begin, end, grain)
 CTX_TAPE = 4  # the autodiff tape of the parallel tasks (one region per pool thread)
@@ -16,6 +16,11 @@ CTX_TAPE_SERIAL = 6  # the tape of the serial part of the kernel
 CTX_NTHREADS = 7  # number of pool threads
 CTX_CANCEL = 8  # the process's cancel flag (i32, set by Ctrl-C; runtime/threadpool.py)
 CTX_ARGS = 9  # first argument slot; return values follow the arguments
+
+# The error buffer: code, value, then up to ERR_MAX_ARGS values of a failed assert's message (64-bit words)
+ERR_ARGS = 2
+ERR_MAX_ARGS = 32
+ERR_WORDS = ERR_ARGS + ERR_MAX_ARGS
 
 # The error code a kernel reports when the cancel flag stopped it (the launcher raises KeyboardInterrupt).
 ERR_INTERRUPTED = -1

@@ -4,6 +4,8 @@ arguments into the context buffer and makes one native call. No generic per-argu
 from __future__ import annotations
 
 import ctypes
+import re
+import struct
 import threading
 
 import numpy as np
@@ -22,6 +24,7 @@ from simgrad.runtime.abi import (
     CTX_TAPE,
     CTX_TAPE_CAP,
     CTX_TAPE_SERIAL,
+    ERR_ARGS,
     ERR_INTERRUPTED,
     HEADER_SLOTS,
 )
@@ -133,6 +136,7 @@ class Launcher:
 
     def fail(self):
         code, value = int(self.program.error[0]), int(self.program.error[1])
+        saved = self.program.error.copy()
         self.program.error[:] = 0
         if code == ERR_INTERRUPTED:
             raise KeyboardInterrupt(f"kernel {self.kernel_name} was interrupted")
@@ -143,6 +147,8 @@ class Launcher:
             raise SimgradOutOfBoundError(f"Out of bound access: index {value} is out of bounds in dimension "
                                          f"{dim} {where}", loc)
         if kind == "assert":
+            if not isinstance(detail, str):
+                detail = assert_message(detail, saved[ERR_ARGS:].tolist())
             raise SimgradAssertionError(f"assertion failed: {detail}", loc)
         if kind == "adstack":
             raise SimgradRuntimeError(detail, loc)
@@ -218,3 +224,38 @@ def _array_info(a, kernel, param, ndim):
     if hasattr(a, "_ndarray"):
         return _array_info(a._ndarray, kernel, param, ndim)
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")
+
+
+def assert_message(template: list, values: list) -> str:
+    """The message of a failed assert from its template (frontend/printing.py FormattedString.template)
+    and the values the kernel reported (raw 64-bit words: floats as f64 bits, integers extended)."""
+    out = []
+    for p in template:
+        if isinstance(p, str):
+            out.append(p)
+            continue
+        k, conv, tname = p
+        t = dt._by_name(tname)
+        raw = int(values[k]) & (2**64 - 1)
+        if t.is_float:
+            x = struct.unpack("<d", struct.pack("<Q", raw))[0]
+            if conv is None:  # shortest text that reads back as the same value of its type (as Taichi)
+                out.append(repr(float(x)) if t.bits == 64 else str(t.np.type(x)))
+                continue
+            value: float | int = x
+        else:
+            value = raw if not t.is_signed else raw - (1 << 64) if raw >> 63 else raw
+            if t is dt.u1:
+                value = int(bool(value))
+            elif conv is not None and conv[-1] in "xXo" and value < 0:  # printf shows the bits
+                value &= (1 << t.bits) - 1
+        if conv is None:
+            out.append(str(value))
+            continue
+        c = re.sub(r"(hh|h|ll|l|j|z|t|L)(?=[a-zA-Z]$)", "", conv)
+        if c[-1] in "aA":
+            h = float(value).hex()
+            out.append(h.upper() if c[-1] == "A" else h)
+        else:
+            out.append((c[:-1] + "d" if c[-1] == "u" else c) % value)
+    return "".join(out)

@@ -66,20 +66,13 @@ def test_print_f64_keeps_precision(capfd):
 
 
 def test_print_format_specs_on_64_bit_and_int_values(capfd):
+    # specs are Taichi's printf specs (tests/lang/test_print_format.py has the rest)
     @ti.kernel
-    def k(a: ti.i64, b: ti.i32):
-        print(f"{a:d}|{b:.2f}|{a:x}")
+    def k(a: ti.i64, b: ti.i32, c: ti.u64):
+        print(f"{a:d}|{b:.2}|{c:x}")
 
-    k(2**40 + 5, 7)
-    assert _printed(capfd).strip() == f"{2**40 + 5:d}|{7:.2f}|{2**40 + 5:x}"
-
-    @ti.kernel
-    def specs(a: ti.i32, b: ti.f32, c: ti.u8):
-        print(f"[{a:<5d}|{a:+d}|{b:>8.2f}|{b:08.3f}|{b:e}|{c:3}|{b:8}]")
-
-    specs(42, -3.25, 200)
-    a, b, c = 42, -3.25, 200
-    assert _printed(capfd).strip() == f"[{a:<5d}|{a:+d}|{b:>8.2f}|{b:08.3f}|{b:e}|{c:3}|{b:8}]"
+    k(2**40 + 5, 7, 2**40 + 5)
+    assert _printed(capfd).strip() == "%d|%.2d|%x" % (2**40 + 5, 7, 2**40 + 5)  # noqa: UP031 (printf's reference)
 
 
 def test_print_unsupported_format_spec_is_a_located_error():
@@ -87,7 +80,7 @@ def test_print_unsupported_format_spec_is_a_located_error():
     def k(a: ti.f32):
         print(f"{a:,}")
 
-    with pytest.raises(SyntaxError, match="format spec ':,' is not supported") as info:
+    with pytest.raises(SyntaxError, match="',' is not a valid printf specifier") as info:
         k(1.0)
     assert 'print(f"{a:,}")' in str(info.value)
 
