@@ -197,6 +197,7 @@ def _struct_member(t, name: str, needs_grad: bool, needs_dual: bool) -> Field:
     if isinstance(t, StructType):
         return _struct_field(t, name, needs_grad, needs_dual)
     is_float = (t.dtype if isinstance(t, MatrixType) else t).is_float
+    # unlike Taichi, a struct's integer members are allowed beside needs_grad=True: they get no gradient
     grad, dual = needs_grad and is_float, needs_dual and is_float
     if isinstance(t, MatrixType):
         f = _with_grad(lambda suffix: MatrixField(t.n, t.m, t.dtype, name + suffix), grad, dual)

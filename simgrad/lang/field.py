@@ -10,7 +10,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradError, SimgradIndexError, SimgradOverflowError, caller_loc
+from simgrad.errors import (
+    SimgradError,
+    SimgradIndexError,
+    SimgradNotSupportedError,
+    SimgradOutOfBoundError,
+    SimgradOverflowError,
+    SimgradTypeError,
+    caller_loc,
+)
 from simgrad.ir.fieldref import FieldRef
 from simgrad.lang.matrix import Matrix
 
@@ -27,7 +35,8 @@ def _norm_index(key, ndim: int, name: str = "") -> tuple:
     elif not isinstance(key, tuple):
         key = (key,)
     if len(key) != ndim:
-        raise SimgradIndexError(f"field {name} has {ndim} indices, got {len(key)}")
+        raise SimgradOutOfBoundError(f"field {name} has {ndim} indices, got {len(key)} (Slicing is not supported "
+                                     "on ti.field)")
     return key
 
 
@@ -41,6 +50,14 @@ class Field:
     _needs_grad: bool  # ti.field(needs_grad=...): placing the field places its gradient (lang/factories.py)
     is_primal = True  # False for gradients and duals
     is_dual = False
+
+    @property
+    def _name(self) -> str:
+        return self.name
+
+    def __iter__(self):
+        raise SimgradNotSupportedError("Struct for is only available in Taichi scope: iterate over a field "
+                                       "inside a kernel, or over range(n) / np.ndindex(*x.shape) here", caller_loc())
 
     def _components(self) -> list[ScalarField]:
         raise NotImplementedError
@@ -256,6 +273,7 @@ class ScalarField(Field):
         return self.flat, self.gather
 
     def copy_from(self, other: ScalarField) -> None:
+        _check_copy_source(self, other)
         self.from_numpy(other.to_numpy())
 
     def to_torch(self, device=None):
@@ -268,6 +286,12 @@ class ScalarField(Field):
 
     def __repr__(self) -> str:
         return f"<ScalarField {self.name} {self.dtype} shape={self.shape if self._snode else '?'}>"
+
+
+def _check_copy_source(dst: Field, src) -> None:
+    if not isinstance(src, Field):
+        raise SimgradTypeError(f"copy_from: field {dst.name} copies from another field, got "
+                               f"{type(src).__name__} (use from_numpy for arrays)", caller_loc())
 
 
 def _unplaced_message(c: ScalarField) -> str:
@@ -375,6 +399,7 @@ class MatrixField(Field):
         return np.broadcast_to(np.asarray(raw, dtype=self.dtype.np), self.entry_shape).reshape(-1)
 
     def copy_from(self, other: MatrixField) -> None:
+        _check_copy_source(self, other)
         self.from_numpy(other.to_numpy())
 
     def __getitem__(self, key):

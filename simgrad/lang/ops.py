@@ -53,7 +53,8 @@ def to_expr(v, like: dt.DataType | None = None) -> Expr:
         if isinstance(value, int) and not isinstance(value, bool) and not t.is_float:
             _check_literal(value, t)
         return Expr(context.builder().const(value, t))
-    raise SimgradTypeError(f"cannot use a {type(v).__name__} value in a kernel expression", context.current_loc())
+    raise SimgradTypeError(f"unsupported operand type: cannot use a {type(v).__name__} value in a kernel "
+                           "expression", context.current_loc())
 
 
 def _check_literal(v: int, t: dt.DataType) -> None:

@@ -58,6 +58,13 @@ class SNode:
         self.offset_in_parent = 0
         self.align = 1
 
+    @property
+    def _name(self) -> str:
+        """A place node's field name (a vector field's, for its components), else the kind."""
+        if self.field is not None:
+            return self.field.name.split("[")[0]
+        return self.kind
+
     # -- building (Taichi API) -------------------------------------------------------------
     def _check_open(self):
         if self.tree is not None and self.tree.materialized:

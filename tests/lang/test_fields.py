@@ -352,3 +352,16 @@ def test_runtime_index_into_vector_and_matrix_elements():
     np.testing.assert_array_equal(m.to_numpy(), [[0, 1, 2], [10, 11, 99]])
     assert read(2, 1) == 21.5 + 11000
     assert read(3, 2) == 32.5 + 99000
+
+
+def test_python_scope_misuse_of_fields_is_loud():
+    x = ti.field(ti.i32, shape=(1, 2, 3))
+    with pytest.raises(AssertionError, match="Slicing is not supported on ti.field"):
+        x[0, 0] = 1
+    with pytest.raises(NotImplementedError, match="Struct for is only available in Taichi scope"):
+        for _ in x:
+            pass
+    with pytest.raises(TypeError, match="copies from another field"):
+        x.copy_from(np.zeros((1, 2, 3)))
+    v = ti.Vector.field(3, ti.f32, shape=2, name="vel")
+    assert v._name == "vel" and v.snode._name == "vel"
