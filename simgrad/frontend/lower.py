@@ -556,7 +556,13 @@ class Compiler:
         return [self.eval(e) for e in node.elts]
 
     def eval_Dict(self, node):
-        return {self.eval(k): self.eval(v) for k, v in zip(node.keys, node.values)}
+        out: dict = {}
+        for k, v in zip(node.keys, node.values):
+            if k is None:  # {**other}
+                out.update(self.eval(v))
+            else:
+                out[self.eval(k)] = self.eval(v)
+        return out
 
     def eval_Starred(self, node):
         return _Starred(self.eval(node.value))

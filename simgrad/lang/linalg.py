@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 
 from simgrad import dtypes as dt
+from simgrad.errors import SimgradTypeError
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
@@ -47,10 +48,13 @@ _PAIRS = {2: [(0, 1)], 3: [(0, 1), (0, 2), (1, 2)]}
 class _Work:
     """The working precision: the kernel dtype (None in Python scope) and its guard constant."""
 
-    def __init__(self, A, dt_):
+    def __init__(self, A, dt_, what: str = "this decomposition"):
+        if not isinstance(A, (Matrix, list, tuple)):
+            raise SimgradTypeError(f"{what} only supports 2D and 3D matrices: got a {type(A).__name__} (pass a "
+                                   "matrix value, e.g. m[i] of a matrix field)", _loc())
         self.A = A if isinstance(A, Matrix) else Matrix(A)
         if self.A.m != self.A.n or self.A.n not in (2, 3):
-            raise ValueError(f"expected a 2x2 or 3x3 matrix, got shape {self.A.shape}")
+            raise SimgradTypeError(f"{what} only supports 2D and 3D matrices: got shape {self.A.shape}", _loc())
         self.n = self.A.n
         exprs = [e for e in self.A.entries if isinstance(e, Expr)]
         if not exprs:
@@ -204,7 +208,7 @@ def _givens_qr(w: _Work, B):
 def svd(A, dt=None):
     """A = U @ S @ V.transpose() for 2x2/3x3 A: returns (U, S, V), U and V rotations, S diagonal with
     |S| decreasing; the last entry of S carries the sign of det(A) (Taichi's convention)."""
-    w = _Work(A, dt)
+    w = _Work(A, dt, "SVD")
     a, scale = w.scaled()
     B = w.rows(a)
     V = _one_sided(w, B)
@@ -219,7 +223,7 @@ def sym_eig(A, dt=None):
     """Eigen-decomposition of a symmetric 2x2/3x3 A: (eigenvalues vector, matrix with the unit
     eigenvectors as columns). Order follows Taichi: decreasing for 2x2, increasing for 3x3. Only the
     symmetric part of A is used."""
-    w = _Work(A, dt)
+    w = _Work(A, dt, "Symmetric eigen decomposition")
     a, scale = w.scaled()
     R = w.rows(a)
     S = [[R[i][i] if i == j else 0.5 * (R[i][j] + R[j][i]) for j in range(w.n)] for i in range(w.n)]
@@ -231,7 +235,7 @@ def sym_eig(A, dt=None):
 def polar_decompose(A, dt=None):
     """A = U @ P with U a rotation and P symmetric; returns (U, P). 2x2 in closed form (the rotation
     closest to A), 3x3 through the SVD: U = U_svd V^T, P = V S V^T."""
-    w = _Work(A, dt)
+    w = _Work(A, dt, "Polar decomposition")
     if w.n == 2:
         a, b, c, d = w.entries
         x, y = a + d, c - b
@@ -268,7 +272,7 @@ def eig(A, dt=None):
     (re, im, re, im)). As in Taichi, an eigenvector of one eigenvalue is a column of A minus the other
     eigenvalue (Cayley-Hamilton: the first, else the second when the first is zero), and A = c*I gives the
     unit axes. Unlike Taichi (NaN), a repeated eigenvalue gets a unit eigenvector. 2x2 only, as Taichi."""
-    w = _Work(A, dt)
+    w = _Work(A, dt, "ti.eig")
     if w.n != 2:
         raise ValueError("ti.eig supports 2x2 matrices only (as Taichi)")
     a, b, c, d = w.entries
@@ -300,7 +304,7 @@ def eig(A, dt=None):
 def solve(A, b, dt=None):
     """x with A x = b for 2x2/3x3 A: Gaussian elimination with partial pivoting (row swaps as selects), as
     Taichi's ti.solve. A singular A gives inf/nan, as there."""
-    w = _Work(A, dt)
+    w = _Work(A, dt, "ti.solve")
     bv = b if isinstance(b, Matrix) else Matrix(b)
     if bv.n != w.n:
         raise ValueError(f"ti.solve: a {w.n}x{w.n} matrix needs a vector of {w.n} entries, got {bv.n}")
@@ -328,3 +332,9 @@ def solve(A, b, dt=None):
             acc = acc - M[i][k] * x[k]
         x[i] = acc / M[i][i]
     return Matrix(x)
+
+
+def _loc():
+    from simgrad.ir import context
+
+    return context.current_loc()

@@ -138,10 +138,18 @@ def test_ints_lists_and_bad_shapes():
     np.testing.assert_allclose(_np(S), np.diag([2.0, 1.0]))
     w, _ = ti.sym_eig([[2.0, 1.0], [1.0, 2.0]])
     np.testing.assert_allclose(_np(w), [3.0, 1.0], atol=1e-14)
-    with pytest.raises(ValueError):
+    with pytest.raises(ti.TaichiCompilationError, match="SVD only supports 2D and 3D matrices"):
         ti.svd(ti.Matrix(np.eye(4)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ti.TaichiCompilationError, match="only supports 2D and 3D matrices"):
         ti.sym_eig(ti.Matrix([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]))
+    m = ti.Matrix.field(1, 1, ti.f32, shape=())
+
+    @ti.kernel
+    def field_not_value():
+        ti.polar_decompose(m, ti.f32)
+
+    with pytest.raises(ti.TaichiCompilationError, match="Polar decomposition only supports 2D and 3D matrices"):
+        field_not_value()
 
 
 # -- kernels ----------------------------------------------------------------------------------------------

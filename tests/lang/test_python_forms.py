@@ -74,3 +74,32 @@ def test_dict_comprehension_and_static_grouped_unrolling():
 
     k(7)
     np.testing.assert_array_equal(f.to_numpy(), [[0, 7, 20], [100, 107, 120]])
+
+
+def test_forms_taichi_refuses_run_with_python_semantics():
+    """Taichi 1.7.4 refuses these three; simgrad gives them their Python meaning (the yardstick lists the
+    Taichi tests that expect the refusal as excluded, naming this test)."""
+    a = ti.field(ti.i32, shape=10)
+
+    @ti.kernel
+    def stepped(x: ti.i32):
+        for i in range(3, 9, 2):  # range with a step
+            a[i] = x
+
+    @ti.kernel
+    def static_list() -> ti.i32:
+        b = ti.static([1, 2, 3])
+        b[0] = ti.static(5)  # a compile-time list, assigned at compile time
+        return b[0] + b[2]
+
+    @ti.kernel
+    def reassign() -> ti.i32:
+        c = 1
+        c = ti.static(2)
+        d = {5: 6, **{1: 2}}
+        return c * 10 + d[1]
+
+    stepped(7)
+    np.testing.assert_array_equal(a.to_numpy(), [0, 0, 0, 7, 0, 7, 0, 7, 0, 0])
+    assert static_list() == 8
+    assert reassign() == 22
