@@ -182,8 +182,9 @@ def _atomic(comp, node: ast.Call, kind: str):
         raise SimgradSyntaxError(f"ti.atomic_{kind}(dest, value) takes two arguments", comp.loc(node))
     ref = comp.ref(node.args[0])
     if ref is None:
-        raise SimgradSyntaxError(f"the first argument of ti.atomic_{kind} must be a field element, an ndarray "
-                                 "element or a local variable", comp.loc(node))
+        raise SimgradSyntaxError(f"cannot use a non-writable target as the first operand of ti.atomic_{kind}: "
+                                 "it must be a field element, an ndarray element or a local variable",
+                                 comp.loc(node))
     return ref.atomic("atomic_mul" if kind == "mul" else kind, comp.eval(node.args[1]))
 
 

@@ -11,7 +11,7 @@ from types import FrameType
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradRuntimeError, SimgradValueError, caller_loc
+from simgrad.errors import SimgradRuntimeError, SimgradSyntaxError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.program import get_program
@@ -60,6 +60,13 @@ def _axes(ndim: int):
 
 def _place_new(f: Field, shape, offset, needs_grad: bool):
     """`ti.field(shape=...)`: its own SNode tree, dense over the shape, gradient beside it."""
+    if offset is not None:
+        if shape is None:
+            raise SimgradSyntaxError("shape cannot be None when offset is set", caller_loc())
+        off = (offset,) if isinstance(offset, int) else tuple(offset)
+        if len(off) != len(shape):
+            raise SimgradSyntaxError(f"The dimensionality of shape and offset must be the same: shape {shape}, "
+                                     f"offset {off}", caller_loc())
     if shape is None:
         f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
         return f  # to be placed by the user with ti.root...place()

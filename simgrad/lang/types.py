@@ -71,26 +71,22 @@ class MatrixType:
         return Matrix(n=self.n, m=self.m, _entries=[value] * self.num_entries).cast(self.dtype)
 
     def __call__(self, *args):
+        """`vec3(0, 1, 2)`, `vec3([0, 1, 2])`, `mat3(row, row, row)`, `mat3(np_3x3)`, `mat4x3(v1, v2, v3, v4)`,
+        `mat4x3(1)` (every entry), `mat2x6(m4x3)` (the same 12 entries, in row order), as Taichi accepts them."""
         from simgrad.lang.matrix import Matrix
 
-        if len(args) == 1:
-            a = args[0]
-            if isinstance(a, Matrix) or isinstance(a, (list, tuple)):
-                flat = []
-                for x in (a.entries if isinstance(a, Matrix) else a):
-                    flat.extend(x.entries if isinstance(x, Matrix) else list(x) if isinstance(x, (list, tuple))
-                                else [x])
-                args = tuple(flat)
-            elif hasattr(a, "__len__"):
-                args = tuple(a)
-            else:
-                args = (a,) * self.num_entries
-        flat = []
-        for a in args:
+        def flatten(a) -> list:
             if isinstance(a, Matrix):
-                flat.extend(a.entries)
-            else:
-                flat.append(a)
+                return list(a.entries)
+            if isinstance(a, (list, tuple)):
+                return [x for e in a for x in flatten(e)]
+            if hasattr(a, "shape") and hasattr(a, "reshape") and getattr(a, "ndim", 0) > 0:  # numpy arrays
+                return [x.item() if hasattr(x, "item") else x for x in a.reshape(-1)]
+            return [a]
+
+        flat = [x for a in args for x in flatten(a)]
+        if len(flat) == 1 and self.num_entries != 1:
+            flat = flat * self.num_entries
         if len(flat) != self.num_entries:
             raise ValueError(f"{self} takes {self.num_entries} entries, got {len(flat)}")
         if self.m == 0:

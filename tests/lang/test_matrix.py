@@ -366,3 +366,23 @@ def test_fill_of_a_local_or_element_matrix_assigns_it():
 
     assert k() == 6.0
     np.testing.assert_array_equal(v.to_numpy(), 2.5)
+
+
+def test_matrix_type_constructors_take_taichis_argument_forms():
+    mat4x3 = ti.types.matrix(4, 3, float)
+    mat2x6 = ti.types.matrix(2, 6, float)
+    vec3 = ti.math.vec3
+    b = np.arange(9.0).reshape(3, 3)
+    want = np.arange(1.0, 13.0).reshape(4, 3)
+    forms = [mat4x3([1, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12]), mat4x3(want.tolist()),
+             mat4x3(vec3(1, 2, 3), vec3(4, 5, 6), vec3(7, 8, 9), vec3(10, 11, 12)), mat4x3(list(range(1, 13))),
+             mat4x3(*range(1, 13)), mat4x3(mat4x3(want))]
+    for m in forms:
+        np.testing.assert_array_equal(m.to_numpy(), want)
+    np.testing.assert_array_equal(ti.math.mat3(b).to_numpy(), b)
+    np.testing.assert_array_equal(mat4x3(1).to_numpy(), np.ones((4, 3)))
+    np.testing.assert_array_equal(mat2x6(forms[0]).to_numpy(), want.reshape(2, 6))
+    with pytest.raises(ValueError, match="takes 12 entries, got 5"):
+        mat4x3(1, 2, 3, 4, 5)
+    with pytest.raises(ti.TaichiCompilationError, match="dimensionality of shape and offset"):
+        ti.field(ti.f32, shape=3, offset=(3, 4))
