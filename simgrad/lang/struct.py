@@ -34,11 +34,13 @@ class StructType:
     def __init__(self, members: dict, methods: dict | None = None, name: str = "Struct"):
         self.members = {k: _member_type(v) for k, v in members.items()}
         self.methods = dict(methods or {})
+        self.py_methods: dict = {}
         self.name = name
 
     def __call__(self, *args, **kwargs) -> Struct:
         """A value of this type: members by position or name (a dict or a struct works too), the rest 0."""
-        if len(args) == 1 and not kwargs and isinstance(args[0], (dict, Struct)):
+        one = args[0] if len(args) == 1 and not kwargs else None
+        if isinstance(one, dict) or (isinstance(one, Struct) and one._type in (None, self)):
             kwargs = dict(args[0].items()) if isinstance(args[0], Struct) else dict(args[0])
             args = ()
         if len(args) > len(self.members):
@@ -84,14 +86,16 @@ class StructType:
 
 def _convert(t, v):
     if isinstance(t, StructType):
-        return v if isinstance(v, Struct) and v._type is t else t(v if isinstance(v, (dict, Struct)) else {})
+        # a value that is not a struct goes to the first member, as a positional argument would (Taichi's
+        # `mystruct(1)` sets line.linedir to 1 and leaves the rest 0); it was dropped
+        return v if isinstance(v, Struct) and v._type is t else t(v)
     if isinstance(t, MatrixType):
         return t.make(v)
     return ops.cast(v, t)
 
 
 def _zero_dict(value) -> dict:
-    return dict(value.items()) if isinstance(value, Struct) else dict(value)
+    return dict(value.items()) if isinstance(value, (Struct, StructElement)) else dict(value)
 
 
 class Struct:
@@ -117,6 +121,8 @@ class Struct:
         stype = object.__getattribute__(self, "_type")
         if stype is not None and name in stype.methods:
             return stype.methods[name].__get__(self)
+        if stype is not None and name in stype.py_methods:
+            return stype.py_methods[name].__get__(self)
         raise AttributeError(f"struct has no member '{name}'")
 
     def __setattr__(self, name, value):
@@ -279,7 +285,11 @@ def dataclass(cls):
         raise SimgradSyntaxError(f"Default value in @dataclass is not supported (member '{defaults[0]}' of "
                                  f"{cls.__name__})", caller_loc())
     methods = {k: v for k, v in vars(cls).items() if isinstance(v, Func)}
-    return StructType(ann, methods, name=cls.__name__)
+    stype = StructType(ann, methods, name=cls.__name__)
+    # plain Python methods work on Python-scope struct values (`b.add_python(b)`)
+    stype.py_methods = {k: v for k, v in vars(cls).items()
+                        if callable(v) and not isinstance(v, Func) and not k.startswith("__")}
+    return stype
 
 
 def is_struct_value(v) -> bool:

@@ -131,3 +131,38 @@ def test_struct_kernel_arguments_and_returns():
     assert list(r.p) == [2.0, 4.0] and r.m == 4.0 and r.inner.k == 2 and r.inner.w == 0.5
     assert total(r) == 12.0
     assert total({"p": [1.0, 1.0], "m": 0.5, "inner": {"k": 3, "w": 0.0}}) == 5.5
+
+
+def test_struct_values_convert_as_taichi_does():
+    """A value given for a struct member goes to its first member (it was dropped: `mystruct(1)` left every
+    member 0); a struct of another type given alone is the first member, not a dict of members; struct
+    field elements assign from other elements; plain Python methods of a dataclass work on values."""
+    vec3f = ti.types.vector(3, float)
+    line3f = ti.types.struct(linedir=vec3f, length=float)
+    mystruct = ti.types.struct(line=line3f, idx=int)
+    s = mystruct(3)
+    np.testing.assert_array_equal(s.line.linedir.to_numpy(), 3.0)
+    assert s.line.length == 0.0 and s.idx == 0
+
+    @ti.dataclass
+    class A:
+        i: int
+        j: float
+
+        def twice(self):
+            return A(self.i * 2, self.j * 2)
+
+    @ti.dataclass
+    class B:
+        a1: A
+        a2: A
+
+    b = B(A(1, 2.0))
+    assert (b.a1.i, b.a1.j, b.a2.i) == (1, 2.0, 0)
+    assert b.a1.twice().j == 4.0
+    x = mystruct.field(shape=4)
+    y = line3f.field(shape=4)
+    y[2] = line3f(linedir=vec3f(1, 2, 3), length=7.0)
+    x[1].line = y[2]
+    np.testing.assert_array_equal(x[1].line.linedir.to_numpy(), [1, 2, 3])
+    assert x[1].line.length == 7.0
