@@ -1,3 +1,4 @@
+# mypy: disable-error-code="valid-type"
 """Matrix-free Krylov solvers over simgrad fields: LinearOperator (a kernel computing A @ v), MatrixFreeCG and
 MatrixFreeBICGSTAB. Every vector operation is a simgrad kernel (the dot products are parallel reductions in
 the fields' dtype), so the iterations run natively; only the scalar recurrences are Python.

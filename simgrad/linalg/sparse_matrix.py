@@ -52,7 +52,7 @@ def _size(v, what: str) -> int:
 
 def _eigen_number(v: float) -> str:
     """A coefficient as Eigen prints it with precision 4 (C++ ostream defaults: %g)."""
-    return "%.4g" % v
+    return f"{v:.4g}"
 
 
 def _shortest(v, t: dt.DataType) -> str:
@@ -229,7 +229,7 @@ class SparseMatrix:
         coo = self.matrix.tocoo()
         key = np.lexsort((coo.row, coo.col)) if self._format == "csc" else np.lexsort((coo.col, coo.row))
         lines = ["%%MatrixMarket matrix coordinate real general", "%", f"{self.n} {self.m} {coo.nnz}"]
-        lines += [f"{coo.row[k] + 1} {coo.col[k] + 1} {'%g' % float(coo.data[k])}" for k in key]
+        lines += [f"{coo.row[k] + 1} {coo.col[k] + 1} {float(coo.data[k]):g}" for k in key]
         with open(filename, "w") as f:
             f.write("\n".join(lines) + "\n")
 
