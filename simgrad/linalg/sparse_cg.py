@@ -46,7 +46,10 @@ class SparseCG:
             rz = float(r @ z)
             for _ in range(self.max_iter):
                 ap = a @ p
-                alpha = rz / float(p @ ap)
+                pap = float(p @ ap)
+                if pap == 0 or not np.isfinite(pap):
+                    break  # a breakdown (A is not positive definite): not converged
+                alpha = rz / pap
                 x += alpha * p
                 r -= alpha * ap
                 if float(r @ r) <= tol2:
@@ -54,6 +57,8 @@ class SparseCG:
                     break
                 z = inv * r
                 rz_new = float(r @ z)
+                if rz == 0:
+                    break
                 p = z + (rz_new / rz) * p
                 rz = rz_new
         self._ok = bool(ok and np.all(np.isfinite(x)))

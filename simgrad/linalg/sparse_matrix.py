@@ -56,9 +56,15 @@ def _eigen_number(v: float) -> str:
 
 
 def _shortest(v, t: dt.DataType) -> str:
-    """A value as Taichi's print_triplets writes it: the shortest text that reads back, no trailing '.0'."""
-    s = repr(float(v)) if t is dt.f64 else str(np.float32(v))
-    return s[:-2] if s.endswith(".0") else s
+    """A value as Taichi's print_triplets writes it (fmt's `{}`): the shortest digits that read back at the
+    value's type, positional for decimal exponents -4 to 15, else scientific with a two-digit exponent."""
+    x = t.np.type(v)
+    if not np.isfinite(x):
+        return str(float(x))
+    sci = np.format_float_scientific(x, unique=True, trim="-", exp_digits=2)
+    if -4 <= int(sci.split("e")[1]) < 16:
+        return np.format_float_positional(x, unique=True, trim="-")
+    return sci
 
 
 class SparseMatrix:
