@@ -104,7 +104,7 @@ from simgrad.lang.ops import (
     zero,
 )
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
-from simgrad.lang.types import Layout, ref, template, types
+from simgrad.lang.types import Layout, ref, sparse_matrix_builder, template, types
 from simgrad.lang.atomics import (
     atomic_add,
     atomic_and,
@@ -145,8 +145,6 @@ _NOT_SUPPORTED = {
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
-    "linalg": "ti.linalg (sparse matrices and solvers) is not built yet",
-    "sparse_matrix_builder": "ti.linalg (sparse matrices and solvers) is not built yet",
     "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",
     "BitpackedFields": "quantized types are not built yet",
     "get_addr": "raw field addresses are not exposed",
@@ -164,6 +162,10 @@ def __getattr__(name):
         if name == "tools":
             return _gui
         return getattr(_gui, name)
+    if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
+        import simgrad.linalg as _linalg
+
+        return _linalg
     if name in ("ad", "Tape", "clear_all_gradients", "no_grad", "grad_replaced", "grad_for"):
         from simgrad.lang import ad as _ad
 

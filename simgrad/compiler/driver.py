@@ -15,8 +15,8 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradTypeError, SimgradValueError
-from simgrad.frontend.arrays import ArrayArg
+from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.frontend.arrays import ArrayArg, BuilderArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import Compiler
 from simgrad.frontend.source import get_source
@@ -27,7 +27,7 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.program import Program
 from simgrad.lang.struct import StructType
-from simgrad.lang.types import MatrixType, NdarrayType, is_template
+from simgrad.lang.types import MatrixType, NdarrayType, is_sparse_matrix_builder, is_template
 from simgrad.passes.manager import run_pipeline
 from simgrad.runtime.launch import Launcher
 
@@ -51,6 +51,8 @@ class Param:
             self.ann = ann if isinstance(ann, NdarrayType) else NdarrayType()
         elif isinstance(ann, MatrixType):
             self.kind = "matrix"
+        elif is_sparse_matrix_builder(ann):
+            self.kind = "builder"  # a ti.linalg.SparseMatrixBuilder: its triplet arrays, by reference
         elif isinstance(ann, StructType):
             self.kind = "struct"  # passed as its leaves, one slot (or matrix of slots) each
         elif ann is inspect.Parameter.empty:
@@ -71,6 +73,15 @@ class Param:
                                    f"{type(a).__name__}")
         arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
         return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a, kernel_name))
+
+    def builder_key(self, a, kernel_name: str) -> tuple:
+        """What of a sparse matrix builder argument an instantiation depends on: its value type."""
+        triplets = getattr(a, "_triplets", None)
+        if triplets is None:
+            raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' is annotated "
+                                   "ti.types.sparse_matrix_builder() and expects a ti.linalg.SparseMatrixBuilder, "
+                                   f"got {type(a).__name__}", caller_loc())
+        return ("builder", triplets.dtype.name)
 
     def with_grad(self, a, kernel_name: str) -> bool:
         """Whether kernels see the gradient of ndarray argument `a`: the annotation's needs_grad, else whether
@@ -201,6 +212,8 @@ def _param_fingerprint(kernel: KernelSource, kb: KeyBuilder, p: Param, a):
         return kb.value(a)
     if p.kind == "ndarray":
         return p.ndarray_key(a, kernel.name)  # dtype and ndim; the annotation is in the signature
+    if p.kind == "builder":
+        return p.builder_key(a, kernel.name)
     return None
 
 
@@ -276,6 +289,11 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
                         out.append(SlotParam(leaf, "scalar", slot, lt, of=p.name, path=path))
                         slot += 1
                 comp.bind(p.name, p.ann.from_leaves(leaves))
+            elif p.kind == "builder":
+                barg = BuilderArg(p.name, slot, a._triplets.dtype)
+                comp.bind(p.name, barg)
+                out.append(SlotParam(p.name, "builder", slot, barg.dtype))
+                slot += barg.num_slots
             else:
                 arg = _array_arg(kernel.name, p, a, slot)
                 comp.bind(p.name, arg)

@@ -150,6 +150,8 @@ class Kernel(KernelDef):
             return _template_key(a, keep)
         if p.kind == "ndarray":
             return p.ndarray_key(a, self.name)
+        if p.kind == "builder":
+            return p.builder_key(a, self.name)
         return None
 
 

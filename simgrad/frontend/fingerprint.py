@@ -195,7 +195,7 @@ class KeyBuilder:
         from simgrad.lang.loops import ndrange
         from simgrad.lang.matrix import Matrix
         from simgrad.lang.snode import Axis
-        from simgrad.lang.types import MatrixType, NdarrayType, Template, _Types
+        from simgrad.lang.types import MatrixType, NdarrayType, Template, _Types, is_sparse_matrix_builder
 
         if isinstance(v, dt.DataType):
             return ("dtype", v.name)
@@ -213,6 +213,8 @@ class KeyBuilder:
             return ("ndarraytype", self.value(v.dtype, depth + 1), v.ndim)
         if isinstance(v, Template):
             return ("template",)
+        if is_sparse_matrix_builder(v):
+            return ("sparse_matrix_builder",)
         if isinstance(v, Axis):
             return ("axis", v.index)
         if isinstance(v, ndrange):

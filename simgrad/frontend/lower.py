@@ -772,6 +772,8 @@ class Compiler:
             base = self.eval(node.value)
             if isinstance(base, (Field,)) or _is_array_arg(base):
                 return global_ref(self, base, self.eval_index(node.slice), node)
+            if _is_builder_arg(base):
+                return base.ref(self.eval_index(node.slice), self.loc(node))
             return None
         if isinstance(node, ast.Attribute):
             if not isinstance(node.value, (ast.Name, ast.Subscript, ast.Attribute)):
@@ -810,6 +812,12 @@ def _is_array_arg(v) -> bool:
     from simgrad.frontend.arrays import ArrayArg
 
     return isinstance(v, ArrayArg)
+
+
+def _is_builder_arg(v) -> bool:
+    from simgrad.frontend.arrays import BuilderArg
+
+    return isinstance(v, BuilderArg)
 
 
 def _is_static_call(node: ast.expr) -> bool:

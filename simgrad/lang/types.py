@@ -145,6 +145,18 @@ def ndarray(dtype=None, ndim=None, **kw) -> NdarrayType:
     return NdarrayType(dtype, ndim, **kw)
 
 
+class sparse_matrix_builder:  # lower case: Taichi spells it so
+    """`ti.types.sparse_matrix_builder()`: the parameter takes a ti.linalg.SparseMatrixBuilder; in the kernel
+    `A[i, j] += v` (or `-=`) appends the triplet (i, j, v). Passed by reference as its triplet arrays."""
+
+    def __repr__(self):
+        return "sparse_matrix_builder()"
+
+
+def is_sparse_matrix_builder(ann) -> bool:
+    return isinstance(ann, sparse_matrix_builder) or ann is sparse_matrix_builder
+
+
 class _PrimitiveTypes:
     """`ti.types.primitive_types`: the scalar types and Taichi's lists of them."""
 
@@ -187,6 +199,7 @@ class _Types:
 
     template = staticmethod(template)
     ndarray = staticmethod(ndarray)
+    sparse_matrix_builder = sparse_matrix_builder
     vector = staticmethod(vector)
     matrix = staticmethod(matrix)
 

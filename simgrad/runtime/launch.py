@@ -71,6 +71,7 @@ class Launcher:
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         lines = []
         names = []
+        after: list[str] = []  # checks after the call (a sparse matrix builder past its capacity)
         for p in params:
             if p.kind == "struct":  # its leaves follow as their own params
                 names.append(p.name)
@@ -109,8 +110,15 @@ class Launcher:
                     env["_grad_of"] = _grad_info
                     lines.append(f"    _buf[{CTX_ARGS + p.grad_slot}] = _grad_of({p.name}, _s, {self.kernel_name!r}, "
                                  f"{p.name!r}, {p.ndim_total})")
+            elif p.kind == "builder":
+                # the triplet count, rows, columns and values: base pointer and extent each
+                env["_builder"], env["_builder_done"] = _builder_info, _builder_done
+                lines.append(f"    _buf[{CTX_ARGS + p.slot}:{CTX_ARGS + p.slot + 8}] = _builder({p.name}, "
+                             f"{self.kernel_name!r}, {p.name!r}, {p.dtype.name!r})")
+                after.append(f"    _builder_done({p.name}, {self.kernel_name!r}, {p.name!r})")
         lines.append("    _call(_addr)")
         lines.append("    if _err[0]: _fail()")
+        lines += after
         if returns:
             rets = []
             for k, t in enumerate(returns):
@@ -259,3 +267,25 @@ def assert_message(template: list, values: list) -> str:
         else:
             out.append((c[:-1] + "d" if c[-1] == "u" else c) % value)
     return "".join(out)
+
+
+def _builder_info(a, kernel, param, type_name):
+    """The context slots of a sparse matrix builder argument: (pointer, extent) of its triplet count, rows,
+    columns and values (lang: simgrad/linalg/sparse_matrix.py TripletStore)."""
+    t = getattr(a, "_triplets", None)
+    if t is None or t.dtype.name != type_name:
+        got = type(a).__name__ if t is None else f"a builder of {t.dtype.name}"
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a ti.linalg.SparseMatrixBuilder of "
+                               f"{type_name}, got {got}", caller_loc())
+    cap = t.capacity
+    return (t.count.ctypes.data, 1, t.rows.ctypes.data, cap, t.cols.ctypes.data, cap, t.values.ctypes.data, cap)
+
+
+def _builder_done(a, kernel, param):
+    """After the launch: a builder whose count passed its capacity dropped the triplets past it; say so."""
+    t = a._triplets
+    n = int(t.count[0])
+    if n > t.capacity:
+        raise SimgradRuntimeError(f"kernel {kernel}: sparse matrix builder '{param}' was given {n} triplets, more "
+                                  f"than its max_num_triplets={t.capacity}; the {n - t.capacity} past it were not "
+                                  "stored (create the builder with a larger max_num_triplets)", caller_loc())

@@ -27,7 +27,14 @@ def _has(module: str) -> bool:
 
 _util.has_pytorch = lambda: _has("torch")  # type: ignore[attr-defined]
 _util.has_paddle = lambda: _has("paddle")  # type: ignore[attr-defined]
+_util.to_numpy_type = lambda t: _simgrad.dtypes.from_any(t).np.type  # type: ignore[attr-defined]
 sys.modules[_util.__name__] = _util
+if not hasattr(_lang, "util"):
+    _lang.util = _util  # type: ignore[attr-defined]  # `ti.lang.util.to_numpy_type` in test files
+import simgrad.linalg as _linalg  # noqa: E402
+
+sys.modules[__name__ + ".linalg"] = _linalg
+linalg = _linalg
 # Taichi's enums module: the names test files import (their values are never compared with simgrad's)
 _enums = _pytypes.ModuleType(__name__ + ".lang.enums")
 for _name in ("AutodiffMode", "SNodeGradType", "Layout"):
