@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
-recorder = None
+# `recorder(kernel, args)`; a bound method whose owner also has `insert(fn, args)` (grad_replaced units)
+recorder: Callable[[Any, tuple], None] | None = None
 
 # the ti.ad.FwdMode being entered (None outside): kernels launched meanwhile run their forward-mode instance
 forward_mode = None
