@@ -1,11 +1,11 @@
 """simgrad.testing.check_program_grads: a whole program's Tape gradients against finite differences, and
 on disagreement the first launch whose adjoint is wrong, found by replaying the launches one by one.
 
-How these tests were checked to be able to fail: with `_check_launch` made to always agree, the wrong custom
-gradient and the wrong kernel adjoint were reported as "each of the recorded launches agrees" (the tests
-below that expect the unit's name failed); with the adjoint side of `_check_launch` taken as `<K^T u, v>`
-instead of `<K^T u - u, v>` (or without the store's consumption), the Python-scope-write test blamed a
-kernel; with the program's central difference taken with the wrong sign, the correct program failed."""
+How these tests were checked to be able to fail (each by editing simgrad/testing.py, then reverting):
+`_check_launch` always agreeing failed the two tests that expect a unit to be named; the adjoint side taken as
+`<K^T u, v>` (without `- u`) or the difference side as `<u, K v>` (without `- v`) failed those and the
+Python-scope-write test (a kernel was blamed); the program's central difference with the wrong sign failed
+the tests of correct programs."""
 
 from __future__ import annotations
 
@@ -18,6 +18,35 @@ from simgrad.errors import GradientError
 from simgrad.testing import check_program_grads
 
 N, T = 4, 3
+
+
+def test_kernel_grad_maps_gradients_by_the_transpose():
+    """What the launch check relies on: with every gradient set to u, kernel.grad leaves K^T u over the whole
+    state (a store consumes the gradient of what it overwrote; an accumulation passes it on)."""
+    f64()
+    x = ti.field(ti.f64, 3, needs_grad=True)
+    y = ti.field(ti.f64, 3, needs_grad=True)
+
+    @ti.kernel
+    def store():
+        for i in x:
+            y[i] = x[i] ** 2
+
+    @ti.kernel
+    def accumulate():
+        for i in x:
+            y[i] += x[i]
+
+    xs, ux, uy = np.array([1.0, 2.0, 3.0]), np.array([1.0, -1.0, 0.5]), np.array([0.5, 0.25, 2.0])
+    for kernel, want_x, want_y in ((store, ux + 2 * xs * uy, 0 * uy), (accumulate, ux + uy, uy)):
+        x.from_numpy(xs)
+        y.from_numpy(np.array([10.0, 20.0, 30.0]))
+        kernel()
+        x.grad.from_numpy(ux)
+        y.grad.from_numpy(uy)
+        kernel.grad()
+        np.testing.assert_array_equal(x.grad.to_numpy(), want_x)
+        np.testing.assert_array_equal(y.grad.to_numpy(), want_y)
 
 
 def _def_line(name: str) -> int:
