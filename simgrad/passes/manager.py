@@ -31,7 +31,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
         ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
     if transform is not None:  # e.g. the reverse-mode adjoint, then a clean-up of what it produced
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
-    steps.append(("hoist", hoist.hoist))  # loop-invariant index arithmetic out of parallel loops
+    # loop-invariant index arithmetic out of parallel loops, then merged where it became common
+    steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)

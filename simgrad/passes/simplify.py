@@ -83,10 +83,15 @@ def _keeps_sign(op: Op, zero: float) -> bool:
 
 
 def _key(s: Stmt, repl):
-    """A hashable identity of a pure statement's value (None: not a CSE candidate)."""
+    """A hashable identity of a pure statement's value (None: not a CSE candidate). Constants count by
+    value (each is its own object), and an integer `x + (-c)` is `x - c`, so `t + t_offset` with
+    t_offset = -1 and `t - 1` are one value (one slice of a field for the parallel analyses)."""
     if s.op not in O.PURE or s.op is Op.ARG:
         return None
-    return (s.op, s.type, tuple(id(o) for o in s.operands), tuple(s.attrs.items()))
+    op, operands = s.op, [("c", o.type, o.attrs["value"]) if o.op is Op.CONST else id(o) for o in s.operands]
+    if op is Op.ADD and not s.vtype.is_float and isinstance(operands[1], tuple) and operands[1][2] < 0:
+        op, operands[1] = Op.SUB, ("c", operands[1][1], -operands[1][2])
+    return (op, s.type, tuple(operands), tuple(s.attrs.items()))
 
 
 def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
