@@ -244,6 +244,15 @@ class KernelCodegen:
         self.fm = FAST_MATH_FLAGS if fast_math else ""
         self.module = ModuleText()
         self.error_table: list[tuple] = []  # (kind, loc, detail) per error code - 1
+        # context slots after the returns that keep a privatised loop's per-thread copies between launches
+        # (allocated zeroed on first use, zeroed again by the final sum; the launcher frees them)
+        self.private_slots = 0
+
+    def private_slot(self) -> int:
+        """The context slot index of one more persistent private buffer."""
+        k = abi.CTX_ARGS + self.kernel.ret_slot + len(self.kernel.returns) + 1 + self.private_slots
+        self.private_slots += 1
+        return k
 
     def generate(self) -> str:
         f = FunctionText(self, self.symbol, f"void @{self.symbol}(ptr %ctx)", in_task=False)

@@ -53,29 +53,38 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)
     f.gen.module.declare("declare noalias ptr @calloc(i64, i64)")
-    f.gen.module.declare("declare void @free(ptr)")
+    # The copies persist in context slots between launches: allocated zeroed on first use, zeroed again as
+    # the final sum reads them, so a launch neither allocates nor clears (that was a serial memset of every
+    # thread's copy per launch). The launcher frees them (runtime/launch.py).
     bufs = []
     got = "true"
     for k, r in enumerate(regions):
+        ctx_slot = f.tmp("pctx")
+        f.emit(f"{ctx_slot} = getelementptr i64, ptr %ctx, i64 {f.gen.private_slot()}")
+        have, fresh, ready = f.tmp("phave"), f.label("pfresh"), f.label("pready")
+        f.emit(f"{have} = load ptr, ptr {ctx_slot}")
+        isnull = f.tmp("pnull")
+        f.emit(f"{isnull} = icmp eq ptr {have}, null")
+        f.emit(f"br i1 {isnull}, label %{fresh}, label %{ready}")
+        f.start_block(fresh)
+        new = f.tmp("pnew")
+        f.emit(f"{new} = call ptr @calloc(i64 {nthreads}, i64 {r.hi - r.lo})")
+        f.emit(f"store ptr {new}, ptr {ctx_slot}")
+        f.emit(f"br label %{ready}")
+        f.start_block(ready)
         buf, slot, nonnull, all_ok = f.tmp("priv"), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
-        f.emit(f"{buf} = call ptr @calloc(i64 {nthreads}, i64 {r.hi - r.lo})")
+        f.emit(f"{buf} = load ptr, ptr {ctx_slot}")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
         f.emit(f"store ptr {buf}, ptr {slot}")
         f.emit(f"{nonnull} = icmp ne ptr {buf}, null")
         f.emit(f"{all_ok} = and i1 {got}, {nonnull}")
         got = all_ok
         bufs.append(buf)
-    nomem = f.label("nomem")
-    f.emit(f"br i1 {got}, label %{run}, label %{nomem}")
-    f.start_block(nomem)  # out of memory: the atomic task needs none
-    for buf in bufs:
-        f.emit(f"call void @free(ptr {buf})")
-    f.emit(f"br label %{plain}")
+    f.emit(f"br i1 {got}, label %{run}, label %{plain}")  # out of memory: the atomic task needs none
     f.start_block(run)
     f.emit(f"call void {pfor}(ptr @{private_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
     for k, (r, buf) in enumerate(zip(regions, bufs)):
         _emit_sum_into(f, r, buf, nthreads, pfor, f"{private_task}_sum{k}")
-        f.emit(f"call void @free(ptr {buf})")
     f.emit(f"br label %{done}")
     f.start_block(plain)
     f.emit(f"call void {pfor}(ptr @{task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
@@ -105,15 +114,15 @@ SUM_GRAIN = 8192  # elements per chunk of the final sum
 
 
 def _sum_task(name: str, dtype, n: int) -> str:
-    """field[k] += copy_t[k] for k in [lo, hi) and every thread's copy t, in thread order. A zero partial
-    leaves the element untouched: bytes of other fields in the copied range stay as they are, and an
-    element no iteration updated keeps even the sign of a zero."""
+    """field[k] += copy_t[k] for k in [lo, hi) and every thread's copy t, in thread order, leaving the copy
+    zero for the next launch. A zero partial leaves the element untouched: bytes of other fields in the
+    copied range stay as they are, and an element no iteration updated keeps even the sign of a zero."""
     ty = dtype.llvm
     if dtype.is_float:
         combine = (f"  %added = fadd {ty} %old, %part\n  %zero = fcmp oeq {ty} %part, 0.0\n"
-                   f"  %new = select i1 %zero, {ty} %old, {ty} %added")
+                   f"  %new = select i1 %zero, {ty} %old, {ty} %added\n  store {ty} 0.0, ptr %src")
     else:
-        combine = f"  %new = add {ty} %old, %part"
+        combine = f"  %new = add {ty} %old, %part\n  store {ty} 0, ptr %src"
     return f"""define internal void @{name}(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {{
 entry:
   %buf = load ptr, ptr %clo

@@ -241,6 +241,7 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     uses_tape = ir.uses_tape
     meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
             "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
+            "private_slots": cg.private_slots,
             "tape_bound": ir.tape_bound if uses_tape else None}
     return ir, stable, meta
 
@@ -367,7 +368,7 @@ def _element_type_text(ann: NdarrayType, elem: tuple, want) -> str:
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
     """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
     launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog, meta["ret_matrix"])
+                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0))
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]

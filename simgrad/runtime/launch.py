@@ -36,18 +36,24 @@ LAUNCH_LOCK = threading.Lock()
 
 _VIEW_OF = {8: "i8", 16: "i16", 32: "i32", 64: "i64"}
 
+_LIBC_FREE = ctypes.CDLL(None).free
+_LIBC_FREE.argtypes = [ctypes.c_void_p]
+_LIBC_FREE.restype = None
+
 
 class Launcher:
     """Holds the context buffer of one kernel instantiation and the generated `launch` function."""
 
     def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
-                 error_table: list, program, ret_matrix: object = None):
+                 error_table: list, program, ret_matrix: object = None, private_slots: int = 0):
         self.kernel_name = kernel_name
         self.params = params  # SlotParam per kernel parameter (Tape validation maps ARG slots to values)
         self.ret_matrix = ret_matrix  # (n, m) for a matrix, a StructType for a struct: the values come back as a tuple
         self.error_table = error_table
         self.program = program
-        self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1, dtype=np.int64)
+        self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1 + private_slots, dtype=np.int64)
+        # the slots past the returns hold the privatised loops' per-thread copies, kept between launches
+        self._private = slice(CTX_ARGS + nslots + len(returns) + 1, len(self.buf))
         self.buf[list(HEADER_SLOTS)] = program.context_header()
         self.buf[CTX_NTHREADS] = program.pool.num_threads
         self.tape: np.ndarray | None = None
@@ -55,6 +61,15 @@ class Launcher:
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
         self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
         self.launch = self._generate(params, returns)
+
+    def __del__(self):
+        """Free the private copies the native code allocated (calloc) into this launcher's context."""
+        try:
+            for p in self.buf[self._private]:
+                if p:
+                    _LIBC_FREE(int(p))
+        except Exception:  # interpreter shutdown
+            pass
 
     def attach_tape(self, entries: int) -> None:
         """A private tape for this adjoint kernel: one region per thread plus one for the serial part."""

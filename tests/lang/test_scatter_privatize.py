@@ -282,3 +282,30 @@ def test_fixed_and_varying_updates_of_one_field_after_a_store_before_the_loop():
     count()
     assert "_private" in _text(count)
     np.testing.assert_array_equal(hist.to_numpy(), [n + n // 5] + [9 + n // 5] * 4)
+
+
+def test_private_copies_kept_between_launches_start_each_launch_at_zero():
+    """The per-thread copies persist in the launcher and are zeroed by the final sum: every launch must
+    add exactly its own updates (float scatter with fresh inputs each time)."""
+    n, cells = 50_000, 64
+    idx = ti.field(ti.i32, shape=n)
+    w = ti.field(ti.f64, shape=n)
+    grid = ti.field(ti.f64, shape=cells)
+
+    @ti.kernel
+    def scatter():
+        for p in idx:
+            grid[idx[p]] += w[p]
+            grid[(idx[p] + 1) % cells] += 0.5 * w[p]
+
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        i = rng.integers(0, cells, n).astype(np.int32)
+        v = rng.standard_normal(n)
+        idx.from_numpy(i)
+        w.from_numpy(v)
+        grid.fill(0)
+        scatter()
+        want = np.bincount(i, v, cells) + 0.5 * np.bincount((i + 1) % cells, v, cells)
+        np.testing.assert_allclose(grid.to_numpy(), want, rtol=1e-12, atol=1e-12)
+    assert "_private" in _text(scatter)

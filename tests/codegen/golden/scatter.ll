@@ -1,5 +1,4 @@
 declare noalias ptr @calloc(i64, i64)
-declare void @free(ptr)
 !0 = !{}
 define internal void @sg_kernel_task1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
@@ -190,6 +189,7 @@ kbody:
   %added = fadd float %old, %part
   %zero = fcmp oeq float %part, 0.0
   %new = select i1 %zero, float %old, float %added
+  store float 0.0, ptr %src
   store float %new, ptr %dst
   %knext = add i64 %k, 1
   br label %khead
@@ -227,6 +227,7 @@ kbody:
   %added = fadd float %old, %part
   %zero = fcmp oeq float %part, 0.0
   %new = select i1 %zero, float %old, float %added
+  store float 0.0, ptr %src
   store float %new, ptr %dst
   %knext = add i64 %k, 1
   br label %khead
@@ -246,16 +247,16 @@ entry:
   %cv.7 = load ptr, ptr %cp.6
   %cp.8 = getelementptr i64, ptr %ctx, i64 7
   %cv.9 = load i64, ptr %cp.8
-  %cp.35 = getelementptr i64, ptr %ctx, i64 0
-  %cv.36 = load ptr, ptr %cp.35
-  %rp.37 = getelementptr ptr, ptr %cv.36, i64 0
-  %root.38 = load ptr, ptr %rp.37, !invariant.load !0
-  %sclo.34 = alloca [3 x i64], align 8
-  %cp.45 = getelementptr i64, ptr %ctx, i64 0
-  %cv.46 = load ptr, ptr %cp.45
-  %rp.47 = getelementptr ptr, ptr %cv.46, i64 1
-  %root.48 = load ptr, ptr %rp.47, !invariant.load !0
-  %sclo.44 = alloca [3 x i64], align 8
+  %cp.46 = getelementptr i64, ptr %ctx, i64 0
+  %cv.47 = load ptr, ptr %cp.46
+  %rp.48 = getelementptr ptr, ptr %cv.47, i64 0
+  %root.49 = load ptr, ptr %rp.48, !invariant.load !0
+  %sclo.45 = alloca [3 x i64], align 8
+  %cp.56 = getelementptr i64, ptr %ctx, i64 0
+  %cv.57 = load ptr, ptr %cp.56
+  %rp.58 = getelementptr ptr, ptr %cv.57, i64 1
+  %root.59 = load ptr, ptr %rp.58, !invariant.load !0
+  %sclo.55 = alloca [3 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
@@ -270,55 +271,67 @@ entry:
   %pv.15 = and i1 %pv.18, %pv.17
   br i1 %pv.15, label %alloc.20, label %atomic.19
 alloc.20:
-  %priv.23 = call ptr @calloc(i64 %cv.9, i64 64)
-  %pslot.24 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.23, ptr %pslot.24
-  %pnn.25 = icmp ne ptr %priv.23, null
-  %pok.26 = and i1 true, %pnn.25
-  %priv.27 = call ptr @calloc(i64 %cv.9, i64 32)
-  %pslot.28 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.27, ptr %pslot.28
-  %pnn.29 = icmp ne ptr %priv.27, null
-  %pok.30 = and i1 %pok.26, %pnn.29
-  br i1 %pok.30, label %private.21, label %nomem.31
-nomem.31:
-  call void @free(ptr %priv.23)
-  call void @free(ptr %priv.27)
-  br label %atomic.19
+  %pctx.23 = getelementptr i64, ptr %ctx, i64 10
+  %phave.24 = load ptr, ptr %pctx.23
+  %pnull.27 = icmp eq ptr %phave.24, null
+  br i1 %pnull.27, label %pfresh.25, label %pready.26
+pfresh.25:
+  %pnew.28 = call ptr @calloc(i64 %cv.9, i64 64)
+  store ptr %pnew.28, ptr %pctx.23
+  br label %pready.26
+pready.26:
+  %priv.29 = load ptr, ptr %pctx.23
+  %pslot.30 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.29, ptr %pslot.30
+  %pnn.31 = icmp ne ptr %priv.29, null
+  %pok.32 = and i1 true, %pnn.31
+  %pctx.33 = getelementptr i64, ptr %ctx, i64 11
+  %phave.34 = load ptr, ptr %pctx.33
+  %pnull.37 = icmp eq ptr %phave.34, null
+  br i1 %pnull.37, label %pfresh.35, label %pready.36
+pfresh.35:
+  %pnew.38 = call ptr @calloc(i64 %cv.9, i64 32)
+  store ptr %pnew.38, ptr %pctx.33
+  br label %pready.36
+pready.36:
+  %priv.39 = load ptr, ptr %pctx.33
+  %pslot.40 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.39, ptr %pslot.40
+  %pnn.41 = icmp ne ptr %priv.39, null
+  %pok.42 = and i1 %pok.32, %pnn.41
+  br i1 %pok.42, label %private.21, label %atomic.19
 private.21:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.33 = getelementptr i8, ptr %root.38, i64 0
-  %real.32 = getelementptr i8, ptr %real.33, i64 0
-  %sslot.39 = getelementptr i64, ptr %sclo.34, i64 0
-  store ptr %priv.23, ptr %sslot.39
-  %sslot.40 = getelementptr i64, ptr %sclo.34, i64 1
-  store ptr %real.32, ptr %sslot.40
-  %sslot.41 = getelementptr i64, ptr %sclo.34, i64 2
-  store i64 %cv.9, ptr %sslot.41
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.34, i64 0, i64 16, i64 8192)
-  call void @free(ptr %priv.23)
-  %real.43 = getelementptr i8, ptr %root.48, i64 0
-  %real.42 = getelementptr i8, ptr %real.43, i64 0
-  %sslot.49 = getelementptr i64, ptr %sclo.44, i64 0
-  store ptr %priv.27, ptr %sslot.49
-  %sslot.50 = getelementptr i64, ptr %sclo.44, i64 1
-  store ptr %real.42, ptr %sslot.50
-  %sslot.51 = getelementptr i64, ptr %sclo.44, i64 2
-  store i64 %cv.9, ptr %sslot.51
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.44, i64 0, i64 8, i64 8192)
-  call void @free(ptr %priv.27)
+  %real.44 = getelementptr i8, ptr %root.49, i64 0
+  %real.43 = getelementptr i8, ptr %real.44, i64 0
+  %sslot.50 = getelementptr i64, ptr %sclo.45, i64 0
+  store ptr %priv.29, ptr %sslot.50
+  %sslot.51 = getelementptr i64, ptr %sclo.45, i64 1
+  store ptr %real.43, ptr %sslot.51
+  %sslot.52 = getelementptr i64, ptr %sclo.45, i64 2
+  store i64 %cv.9, ptr %sslot.52
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.45, i64 0, i64 16, i64 8192)
+  %real.54 = getelementptr i8, ptr %root.59, i64 0
+  %real.53 = getelementptr i8, ptr %real.54, i64 0
+  %sslot.60 = getelementptr i64, ptr %sclo.55, i64 0
+  store ptr %priv.39, ptr %sslot.60
+  %sslot.61 = getelementptr i64, ptr %sclo.55, i64 1
+  store ptr %real.53, ptr %sslot.61
+  %sslot.62 = getelementptr i64, ptr %sclo.55, i64 2
+  store i64 %cv.9, ptr %sslot.62
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.55, i64 0, i64 8, i64 8192)
   br label %scatterdone.22
 atomic.19:
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
   br label %scatterdone.22
 scatterdone.22:
-  %cancel.52 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.53 = icmp ne i32 %cancel.52, 0
-  br i1 %cancelled.53, label %stop.54, label %go.55
-stop.54:
+  %cancel.63 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.64 = icmp ne i32 %cancel.63, 0
+  br i1 %cancelled.64, label %stop.65, label %go.66
+stop.65:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.55:
+go.66:
   ret void
 }
 
