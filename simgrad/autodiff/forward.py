@@ -30,6 +30,20 @@ def make_forward(kernel: Kernel) -> bool:
     return True
 
 
+def adjoint_then_forward(kernel: Kernel) -> bool:
+    """The adjoint of `kernel` with tangents (forward over reverse): inside ti.ad.FwdMode, `kernel.grad()`
+    writes d(gradient) into the gradients' duals, i.e. Hessian-vector products H @ seed."""
+    from .validate import check_and_adjoint
+
+    check_and_adjoint(kernel)
+    if kernel.uses_tape:
+        raise GradientError(f"kernel {kernel.name.removesuffix('_grad')}: forward mode over an adjoint that keeps "
+                            "values on the tape (loops carrying local values) is not supported yet; "
+                            "Hessian-vector products need a kernel whose adjoint replays without the tape",
+                            None)
+    return make_forward(kernel)
+
+
 def _dual_of(ptr: Stmt):
     target = ptr.attrs["target"]
     if isinstance(target, FieldRef) and target.dual is not None and not ptr.attrs.get("stop_grad"):

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from simgrad.autodiff.forward import make_forward
+from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint
 from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, Param, compile_kernel
 from simgrad.errors import SimgradTypeError, caller_loc
@@ -49,6 +49,7 @@ class Kernel(KernelDef):
         self._simple_launch = None
         self._grad_instances: dict = {}
         self._fwd_instances: dict = {}  # forward-mode (tangent-carrying) instances, run inside ti.ad.FwdMode
+        self._gradfwd_instances: dict = {}  # adjoints with tangents (kernel.grad inside FwdMode)
         self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
@@ -90,6 +91,7 @@ class Kernel(KernelDef):
         self._instances.clear()
         self._grad_instances.clear()
         self._fwd_instances.clear()
+        self._gradfwd_instances.clear()
         self._keep.clear()
         self._simple_launch = None
         self._generation = prog.generation
@@ -109,7 +111,8 @@ class Kernel(KernelDef):
                                    f"got {len(args)}")
         keep: list = []
         key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
-        cache = {"": self._instances, "grad": self._grad_instances, "fwd": self._fwd_instances}[mode]
+        cache = {"": self._instances, "grad": self._grad_instances, "fwd": self._fwd_instances,
+                 "gradfwd": self._gradfwd_instances}[mode]
         inst = cache.get(key)
         if inst is None:
             with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
@@ -133,6 +136,8 @@ class Kernel(KernelDef):
             inst = compile_kernel(self, prog, args, transform=check_and_adjoint, name_suffix="_grad")
         elif mode == "fwd":
             inst = compile_kernel(self, prog, args, transform=make_forward, name_suffix="_fwd")
+        elif mode == "gradfwd":
+            inst = compile_kernel(self, prog, args, transform=adjoint_then_forward, name_suffix="_gradfwd")
         else:
             inst = compile_kernel(self, prog, args)
             if self._simple:
@@ -169,7 +174,8 @@ class GradKernel:
         prog = get_program()
         if k._generation != prog.generation:
             k._reset(prog)
-        launch = k._launch_for(args, "grad")
+        # inside ti.ad.FwdMode the adjoint runs with tangents: gradients' duals get Hessian-vector products
+        launch = k._launch_for(args, "gradfwd" if ad_hooks.forward_mode is not None else "grad")
         if prog.config.kernel_profiler:
             t0 = time.perf_counter()
             launch(*args)

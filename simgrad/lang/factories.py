@@ -74,7 +74,9 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
-    for wanted, g in ((needs_grad, f.grad), (getattr(f, "_needs_dual", False), getattr(f, "dual", None))):
+    dual = getattr(f, "_needs_dual", False)
+    for wanted, g in ((needs_grad, f.grad), (dual, getattr(f, "dual", None)),
+                      (needs_grad and dual, getattr(f.grad, "dual", None) if f.grad is not None else None)):
         if wanted and g is not None and g.snode is None:
             gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
             gnode.place(g, offset=offset)
@@ -100,6 +102,12 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
         c.dual = d
         d.is_primal, d.is_dual = False, True
     f.dual.is_primal, f.dual.is_dual = False, True
+    # the gradient's own dual: forward mode over an adjoint (Hessian-vector products) writes d(grad) there
+    f.grad.dual = make(".grad.dual")
+    for g, d in zip(f.grad._components(), f.grad.dual._components()):
+        g.dual = d
+        d.is_primal, d.is_dual = False, True
+    f.grad.dual.is_primal, f.grad.dual.is_dual = False, True
     f._needs_dual = needs_dual
     return f
 

@@ -114,6 +114,10 @@ class SNode:
             dual = getattr(f, "dual", None)
             if getattr(f, "_needs_dual", False) and dual is not None and dual.snode is None:
                 self.place(dual, offset=offset)
+            gdual = getattr(f.grad, "dual", None) if getattr(f, "grad", None) is not None else None
+            if getattr(f, "_needs_dual", False) and gdual is not None and gdual.snode is None and \
+                    f.grad.snode is not None:
+                self.place(gdual, offset=offset)
         return self
 
     def lazy_grad(self) -> None:
@@ -127,7 +131,7 @@ class SNode:
         """Place the dual of every float field under this node, beside its primal (forward mode)."""
         for node in list(self._walk()):
             d = getattr(node.field, "dual", None) if node.kind == "place" else None
-            if d is not None and d.snode is None and node.field.is_primal:
+            if d is not None and d.snode is None and not node.field.is_dual:  # primals and gradients
                 node.parent.place(d)
 
     def _walk(self):

@@ -126,3 +126,54 @@ def test_forward_mode_errors_are_loud():
             biggest()
     with pytest.raises(ti.SimgradError, match="has no dual"):
         ti.field(ti.f32, shape=2).dual[0]
+
+
+def test_hessian_vector_products_by_forward_mode_over_the_adjoint():
+    """Inside FwdMode, kernel.grad() carries tangents: x.grad.dual = H v, checked against central
+    differences of the gradient; an adjoint that needs the tape is refused, not differentiated wrongly."""
+    f64()
+    n = 5
+    x = ti.field(ti.f64, shape=n, needs_grad=True, needs_dual=True)
+    E = ti.field(ti.f64, shape=(), needs_grad=True, needs_dual=True)
+
+    @ti.kernel
+    def energy():
+        for i in range(n):
+            d = x[(i + 1) % n] - x[i]
+            E[None] += ti.sin(x[i]) * x[(i + 1) % n] ** 2 + 0.5 * x[i] ** 3 + ti.exp(-d * d)
+
+    def grad_at(p):
+        x.from_numpy(p)
+        E.fill(0)
+        energy()
+        x.grad.fill(0)
+        E.grad[None] = 1
+        energy.grad()
+        return x.grad.to_numpy()
+
+    rng = np.random.default_rng(5)
+    x0, v = rng.random(n), rng.standard_normal(n)
+    x.from_numpy(x0)
+    with ti.ad.FwdMode(loss=x.grad, param=x, seed=list(v)):
+        E.fill(0)
+        energy()
+        x.grad.fill(0)
+        E.grad[None] = 1
+        energy.grad()
+    hv = x.grad.dual.to_numpy()
+    eps = 1e-6
+    fd = (grad_at(x0 + eps * v) - grad_at(x0 - eps * v)) / (2 * eps)
+    np.testing.assert_allclose(hv, fd, rtol=1e-6, atol=1e-8)
+
+    @ti.kernel
+    def taped():
+        for i in range(n):
+            s = 0.0
+            for _k in range(3):
+                s = ti.sin(s + x[i])
+            E[None] += s
+
+    with pytest.raises(ti.GradientError, match="over an adjoint that keeps values on the tape"):
+        with ti.ad.FwdMode(loss=x.grad, param=x, seed=list(v)):
+            taped()
+            taped.grad()
