@@ -371,8 +371,28 @@ class MatrixField(Field):
         a = np.stack(arrays, axis=-1)
         return a.reshape(a.shape[:-1] + self.entry_shape)
 
+    def _packed_view(self) -> np.ndarray | None:
+        """One strided view of every entry when the components sit next to each other in each cell (AoS, as
+        `place(v)` lays a vector out): copying it reads memory once instead of once per component."""
+        for c in self.comps:
+            c._ensure()
+        views = [c.view for c in self.comps]
+        if any(v is None for v in views) or len({v.strides for v in views}) != 1:
+            return None
+        size = self.dtype.np.itemsize
+        base = views[0].__array_interface__["data"][0]
+        if any(v.__array_interface__["data"][0] != base + k * size for k, v in enumerate(views)):
+            return None
+        v0 = views[0]
+        packed = np.lib.stride_tricks.as_strided(v0, shape=v0.shape + (len(views),), strides=v0.strides + (size,),
+                                                 writeable=True)
+        return packed.reshape(v0.shape + self.entry_shape) if len(self.entry_shape) == 1 else \
+            np.lib.stride_tricks.as_strided(v0, shape=v0.shape + self.entry_shape,
+                                            strides=v0.strides + (self.entry_shape[1] * size, size), writeable=True)
+
     def to_numpy(self, dtype=None, keep_dims=False) -> np.ndarray:
-        out = self._stacked([c.to_numpy() for c in self.comps])
+        packed = self._packed_view()
+        out = np.array(packed) if packed is not None else self._stacked([c.to_numpy() for c in self.comps])
         return out.astype(dtype) if dtype is not None else out
 
     def from_numpy(self, arr) -> None:
@@ -380,6 +400,10 @@ class MatrixField(Field):
         want = self.shape + self.entry_shape
         if arr.shape != want:
             raise ValueError(f"from_numpy: field {self.name} has shape {want}, array has {arr.shape}")
+        packed = self._packed_view()
+        if packed is not None:
+            packed[...] = arr
+            return
         flat = arr.reshape(self.shape + (-1,))
         for c, comp in enumerate(self.comps):
             comp.from_numpy(flat[..., c])

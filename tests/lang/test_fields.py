@@ -365,3 +365,25 @@ def test_python_scope_misuse_of_fields_is_loud():
         x.copy_from(np.zeros((1, 2, 3)))
     v = ti.Vector.field(3, ti.f32, shape=2, name="vel")
     assert v._name == "vel" and v.snode._name == "vel"
+
+
+def test_vector_and_matrix_to_from_numpy_through_packed_views_and_soa():
+    """AoS components are read and written as one strided view; SoA components (placed apart) one by one:
+    both must give the same arrays, element access agreeing."""
+    rng = np.random.default_rng(3)
+    v = ti.Vector.field(3, ti.f32, shape=(3, 4), needs_grad=True)
+    m = ti.Matrix.field(2, 3, ti.f64, shape=5)
+    a, b = rng.random((3, 4, 3)).astype(np.float32), rng.random((5, 2, 3))
+    v.from_numpy(a)
+    m.from_numpy(b)
+    np.testing.assert_array_equal(v.to_numpy(), a)
+    np.testing.assert_array_equal(m.to_numpy(), b)
+    assert v[2, 1][2] == a[2, 1, 2] and m[4][1, 0] == b[4, 1, 0]
+    assert not v.grad.to_numpy().any()
+    u = ti.Vector.field(2, ti.f32)
+    ti.root.dense(ti.i, 4).place(u.get_scalar_field(0))
+    ti.root.dense(ti.i, 4).place(u.get_scalar_field(1))
+    c = np.arange(8, dtype=np.float32).reshape(4, 2)
+    u.from_numpy(c)
+    np.testing.assert_array_equal(u.to_numpy(), c)
+    assert u[2][1] == 5
