@@ -376,8 +376,8 @@ class MatrixField(Field):
         `place(v)` lays a vector out): copying it reads memory once instead of once per component."""
         for c in self.comps:
             c._ensure()
-        views = [c.view for c in self.comps]
-        if any(v is None for v in views) or len({v.strides for v in views}) != 1:
+        views: list[np.ndarray] = [c.view for c in self.comps if c.view is not None]
+        if len(views) != len(self.comps) or len({v.strides for v in views}) != 1:
             return None
         size = self.dtype.np.itemsize
         base = views[0].__array_interface__["data"][0]
