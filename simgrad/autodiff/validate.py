@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from simgrad.errors import GradientError, Loc
 from simgrad.ir.fieldref import ArrayRef, FieldRef
-from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 
 
@@ -52,6 +52,101 @@ def check_access_rules(kernel: Kernel) -> None:
                 f"(at line {where.line if where else '?'}); its adjoint would replay the read with the new "
                 "value and give a wrong gradient. Write the result to another field or time step "
                 "(e.g. x[t + 1] = f(x[t])).", s.loc)
+
+
+def check_owned_in_place(kernel: Kernel) -> None:
+    """The rule for adjoints run on the state *before* their kernel (ti.ad.checkpoint): a kernel may read
+    and overwrite the same element (`v[i] = v[i] * d + dt * f[i]`), because the adjoint never executes the
+    forward's stores and so replays the read with the old value, and a store's adjoint takes the element's
+    gradient before the read's adjoint adds to it. What it may not do is read an element of a field it
+    stores to other than the one it stores (`u[i] = u[i - 1] + u[i + 1]`): another iteration may already
+    have overwritten it, so the forward itself depends on the order of iterations."""
+    stored: dict[int, list] = {}
+    loads: list = []
+    written: set = set()  # (field, element) stored so far, in program order
+    for s in walk(kernel.body):
+        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+            ptr = s.operands[0]
+            stored.setdefault(id(ptr.attrs["target"]), []).append(ptr)
+            written.add((id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands)))
+        elif s.op is Op.GLOBAL_LOAD:
+            loads.append(s)
+            ptr = s.operands[0]
+            if (id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands)) in written and \
+                    _has_adjoint(ptr.attrs["target"]):
+                # the adjoint's replay drops stores, so it would read the old value here
+                raise GradientError(
+                    f"kernel {kernel.name.removesuffix('_grad')} reads an element of "
+                    f"{_kind(ptr.attrs['target'])} '{user_name(ptr.attrs['target'])}' after overwriting it; keep "
+                    "the new value in a local variable and use that (its adjoint replays reads, not writes)",
+                    s.loc)
+    for s in loads:
+        ptr = s.operands[0]
+        writes = stored.get(id(ptr.attrs["target"]))
+        if not writes or not _has_adjoint(ptr.attrs["target"]):
+            continue
+        same = tuple(id(o) for o in ptr.operands)
+        if any(tuple(id(o) for o in w.operands) != same for w in writes):
+            raise GradientError(
+                f"kernel {kernel.name.removesuffix('_grad')} reads an element of {_kind(ptr.attrs['target'])} "
+                f"'{user_name(ptr.attrs['target'])}' other than the one it overwrites; an in-place update is "
+                "differentiable only when each iteration reads exactly the element it writes (owned). Write "
+                "the new values to another field (or time step) instead.", s.loc)
+
+
+def forward_stores(kernel: Kernel) -> None:
+    """Within a block, a load of the element a store just wrote becomes the stored value (`v[i] = ...;
+    x[i] += dt * v[i]`): an adjoint that replays the kernel on the state before it must not read memory there.
+    Any other store or atomic to the field forgets what was known of it (indices may alias)."""
+    repl: dict[int, Stmt] = {}
+
+    def block(b: Block) -> None:
+        known: dict[tuple, Stmt] = {}
+        keep = []
+        for s in b.stmts:
+            if repl:
+                s.operands = tuple(repl.get(id(o), o) for o in s.operands)
+            if s.op is Op.GLOBAL_LOAD:
+                ptr = s.operands[0]
+                key = (id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands))
+                if key in known and known[key].type is s.type:
+                    repl[id(s)] = known[key]
+                    continue
+            elif s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+                ptr = s.operands[0]
+                target = id(ptr.attrs["target"])
+                for k in [k for k in known if k[0] == target]:
+                    del known[k]
+                if s.op is Op.GLOBAL_STORE:
+                    known[(target, tuple(id(o) for o in ptr.operands))] = s.operands[1]
+            for nested in s.blocks:
+                block(nested)
+                # what a nested block stored is not known after it (it may not have run)
+                for k in [k for k in known if any(_stores_to(nested, k[0]))]:
+                    del known[k]
+            keep.append(s)
+        b.stmts = keep
+
+    block(kernel.body)
+    if repl:  # loads forwarded inside nested blocks may be used later in enclosing ones
+        for s in walk(kernel.body):
+            s.operands = tuple(repl.get(id(o), o) for o in s.operands)
+
+
+def _stores_to(block: Block, target: int):
+    for s in walk(block):
+        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR and \
+                id(s.operands[0].attrs["target"]) == target:
+            yield s
+
+
+def check_in_place_and_adjoint(kernel: Kernel) -> bool:
+    """The pipeline step for the adjoints ti.ad.checkpoint runs (on the state before the kernel)."""
+    from simgrad.autodiff.reverse import make_adjoint
+
+    forward_stores(kernel)
+    check_owned_in_place(kernel)
+    return make_adjoint(kernel)
 
 
 def _kind(target) -> str:

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from simgrad.autodiff.forward import adjoint_then_forward, make_forward
-from simgrad.autodiff.validate import check_and_adjoint
+from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
 from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, Param, compile_kernel
 from simgrad.errors import SimgradTypeError, caller_loc
 from simgrad.lang import ad_hooks
@@ -50,6 +50,7 @@ class Kernel(KernelDef):
         self._grad_instances: dict = {}
         self._fwd_instances: dict = {}  # forward-mode (tangent-carrying) instances, run inside ti.ad.FwdMode
         self._gradfwd_instances: dict = {}  # adjoints with tangents (kernel.grad inside FwdMode)
+        self._inplace_instances: dict = {}  # adjoints run on the state before the kernel (ti.ad.checkpoint)
         self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
@@ -92,6 +93,7 @@ class Kernel(KernelDef):
         self._grad_instances.clear()
         self._fwd_instances.clear()
         self._gradfwd_instances.clear()
+        self._inplace_instances.clear()
         self._keep.clear()
         self._simple_launch = None
         self._generation = prog.generation
@@ -112,7 +114,7 @@ class Kernel(KernelDef):
         keep: list = []
         key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
         cache = {"": self._instances, "grad": self._grad_instances, "fwd": self._fwd_instances,
-                 "gradfwd": self._gradfwd_instances}[mode]
+                 "gradfwd": self._gradfwd_instances, "grad_in_place": self._inplace_instances}[mode]
         inst = cache.get(key)
         if inst is None:
             with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
@@ -136,6 +138,8 @@ class Kernel(KernelDef):
             inst = compile_kernel(self, prog, args, transform=check_and_adjoint, name_suffix="_grad")
         elif mode == "fwd":
             inst = compile_kernel(self, prog, args, transform=make_forward, name_suffix="_fwd")
+        elif mode == "grad_in_place":  # run by ti.ad.checkpoint on the state before the kernel
+            inst = compile_kernel(self, prog, args, transform=check_in_place_and_adjoint, name_suffix="_grad")
         elif mode == "gradfwd":
             inst = compile_kernel(self, prog, args, transform=adjoint_then_forward, name_suffix="_gradfwd")
         else:
@@ -166,6 +170,15 @@ class GradKernel:
     def __init__(self, kernel: Kernel):
         self.kernel = kernel
         self.name = kernel.name + ".grad"
+
+    def in_place(self, *args) -> None:
+        """The adjoint for ti.ad.checkpoint: launched on the state *before* the kernel ran, so reads of
+        elements the kernel overwrites in place (owned) replay their old values."""
+        k = self.kernel
+        prog = get_program()
+        if k._generation != prog.generation:
+            k._reset(prog)
+        k._launch_for(args, "grad_in_place")(*args)
 
     def __call__(self, *args, **kwargs):
         k = self.kernel
@@ -204,6 +217,9 @@ class _BoundGrad:
 
     def __call__(self, *args, **kwargs):
         return self.grad(self.obj, *args, **kwargs)
+
+    def in_place(self, *args) -> None:
+        self.grad.in_place(self.obj, *args)
 
 
 def kernel(func=None, **kw):

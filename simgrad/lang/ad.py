@@ -1,6 +1,8 @@
 """The `ti.ad` namespace."""
 
+from simgrad.lang.checkpoint import checkpoint
 from simgrad.lang.forward_mode import FwdMode
 from simgrad.lang.tape import SNodeGradType, Tape, clear_all_gradients, grad_for, grad_replaced, no_grad
 
-__all__ = ["FwdMode", "SNodeGradType", "Tape", "clear_all_gradients", "grad_for", "grad_replaced", "no_grad"]
+__all__ = ["checkpoint", "FwdMode", "SNodeGradType", "Tape", "clear_all_gradients", "grad_for", "grad_replaced",
+           "no_grad"]
