@@ -11,8 +11,11 @@ element in place (autodiff/validate.py check_owned_in_place says which in-place 
 After backward, `x.grad` for every state field is d loss / d (state before step 0); fields read by the steps
 but not in `state` (parameters) have accumulated their gradients; the state holds its final values again.
 Memory: K + 3 copies of the state (the budget, the initial and final state, the state before the step whose
-adjoint is running). Fields a step writes that are not in `state` must be overwritten by the step before they
-are read (temporaries such as forces): they are recomputed, never saved.
+adjoint is running). `step(t)` is run once per step in forward, and its kernel launches (with their
+arguments) are recorded: backward replays those launches, so a step must do its work in kernels (what it does
+in Python scope happens once, in forward). The snapshots of backward's first descent are taken during
+forward, which saves one sweep of recomputation. Fields a step writes that are not in `state` must be
+overwritten by the step before they are read (temporaries such as forces): they are recomputed, never saved.
 """
 
 from __future__ import annotations
@@ -83,13 +86,36 @@ class Checkpoint:
 
     def forward(self) -> None:
         self.start = _snapshot(self.state)
+        # the snapshots backward's first descent places (the schedule's right spine) are taken on the way
+        # forward instead of recomputed: one sweep fewer, and never more than the budget held at once
+        spine, t0, s = set(), 0, self.budget
+        while self.n - t0 > 1 and s > 0:
+            t0 += _split(self.n - t0, s)
+            spine.add(t0)
+            s -= 1
+        self.pre: dict[int, list] = {}
+        # each step's launches (kernels and their arguments) are kept: backward replays them without asking
+        # the step again
+        self.launches = []
         for t in range(self.n):
-            self._run(t)
+            self.launches.append(self._run(t))
+            if t + 1 in spine:
+                self.pre[t + 1] = _snapshot(self.state)
+                self._hold(1)
         self.end = _snapshot(self.state)
 
     def grad(self, *_args) -> None:
         self._reverse(0, self.n, self.start, self.budget)
         _restore(self.state, self.end)
+
+    def _replay(self, t: int) -> None:
+        """Step t again, from its recorded launches (not recorded by any Tape)."""
+        outer, ad_hooks.recorder = ad_hooks.recorder, None
+        try:
+            for fn, args in self.launches[t]:
+                fn(*args)
+        finally:
+            ad_hooks.recorder = outer
 
     def _hold(self, k: int) -> None:
         self._held += k
@@ -105,17 +131,19 @@ class Checkpoint:
             for t in range(t1 - 1, t0 - 1, -1):
                 _restore(self.state, snap)
                 for u in range(t0, t):
-                    self._run(u)
+                    self._replay(u)
                     self.recomputed += 1
                 self._step_adjoint(t, _snapshot(self.state))
             return
         m = _split(n, budget)
-        _restore(self.state, snap)
-        for u in range(t0, t0 + m):
-            self._run(u)
-            self.recomputed += 1
-        mid = _snapshot(self.state)
-        self._hold(1)
+        mid = self.pre.pop(t0 + m, None)
+        if mid is None:
+            _restore(self.state, snap)
+            for u in range(t0, t0 + m):
+                self._replay(u)
+                self.recomputed += 1
+            mid = _snapshot(self.state)
+            self._hold(1)
         self._reverse(t0 + m, t1, mid, budget - 1)
         del mid
         self._hold(-1)
@@ -123,8 +151,7 @@ class Checkpoint:
 
     def _step_adjoint(self, t: int, before: list) -> None:
         """The adjoint of step t, launch by launch in reverse, each on the state before that launch."""
-        _restore(self.state, before)
-        launches = self._run(t)
+        launches = self.launches[t]
         for j in range(len(launches) - 1, -1, -1):
             _restore(self.state, before)
             outer, ad_hooks.recorder = ad_hooks.recorder, None
