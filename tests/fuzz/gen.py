@@ -399,3 +399,31 @@ def run_gradient(seed: int, size: int, path, n: int = 3) -> None:
     if not np.allclose(tried[0], tried[1], rtol=1e-4, atol=1e-6 * max(1.0, float(np.max(np.abs(tried[1]))))):
         raise Inconclusive(text)  # FD itself is unstable across steps: this program cannot be checked by FD
     raise AssertionError(text)
+
+
+def run_forward_mode(seed: int, size: int, path, n: int = 3) -> None:
+    """FwdMode against reverse mode on a random differentiable program: loss.dual (= J v) must equal
+    <x.grad, v> (= (J^T 1) . v) for a random direction v; no finite differences, so no tolerance games."""
+    import simgrad as ti
+
+    src = gradient_case(seed, size)
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    x = ti.field(ti.f64, n, needs_grad=True, needs_dual=True)
+    y = ti.field(ti.f64, n, needs_grad=True, needs_dual=True)
+    loss = ti.field(ti.f64, (), needs_grad=True, needs_dual=True)
+    rng = np.random.default_rng(seed)
+    x.from_numpy(rng.uniform(-1.5, 1.5, n))
+    v = rng.standard_normal(n)
+    first, second = _load(path, f"fuzz_f{seed}_{size}", src).make(x, y, loss, n)
+    with ti.ad.Tape(loss=loss):
+        first()
+        second()
+    reverse = float(np.dot(x.grad.to_numpy(), v))
+    with ti.ad.FwdMode(loss=loss, param=x, seed=list(v)):
+        loss[None] = 0
+        first()
+        second()
+    forward = loss.dual[None]
+    if not np.isclose(forward, reverse, rtol=1e-9, atol=1e-12 * max(1.0, abs(reverse))):
+        raise AssertionError(f"seed={seed} size={size}\n{src}\nforward J v = {forward}, reverse (J^T 1).v = "
+                             f"{reverse}")

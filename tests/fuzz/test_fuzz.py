@@ -34,3 +34,9 @@ def test_random_gradients_match_finite_differences(tmp_path, seed, size):
         gen.run_gradient(seed, size, tmp_path)
     except gen.Inconclusive:
         reject()  # finite differences cannot judge this program (they disagree with each other)
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**31 - 1), size=st.integers(1, 5))
+def test_random_forward_mode_equals_reverse_mode(tmp_path, seed, size):
+    gen.run_forward_mode(seed, size, tmp_path)
