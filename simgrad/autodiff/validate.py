@@ -32,7 +32,7 @@ def check_access_rules(kernel: Kernel) -> None:
     """Raise a located GradientError where the IR proves a read-then-overwrite of the same element."""
     read: dict[tuple, Loc | None] = {}
     for s in walk(kernel.body):
-        if s.op not in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE):
+        if s.op not in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE, Op.ATOMIC) or s.operands[0].op is not Op.GLOBAL_PTR:
             continue
         ptr = s.operands[0]
         target = ptr.attrs["target"]
@@ -44,7 +44,7 @@ def check_access_rules(kernel: Kernel) -> None:
         key = (id(target), tuple(id(o) for o in ptr.operands))
         if s.op is Op.GLOBAL_LOAD:
             read.setdefault(key, s.loc)
-        elif key in read:
+        elif key in read:  # a store, or an update (`x[i] += x[i] ** 2`) whose replayed read would be the new value
             where = read[key]
             name = kernel.name.removesuffix("_grad")
             raise GradientError(
@@ -52,6 +52,38 @@ def check_access_rules(kernel: Kernel) -> None:
                 f"(at line {where.line if where else '?'}); its adjoint would replay the read with the new "
                 "value and give a wrong gradient. Write the result to another field or time step "
                 "(e.g. x[t + 1] = f(x[t])).", s.loc)
+
+
+def in_place_targets(kernel: Kernel) -> list:
+    """The differentiable fields a forward kernel updates in place: it reads an element and writes (stores or
+    atomically updates) that same element (`x[i] += x[i] ** 2`, `v[i] = v[i] * d + f[i]`). A Tape keeps their
+    values from before the launch so that the adjoint can run on them (lang/tape.py). Reading one slice and
+    writing another (`x[t + 1, i] = f(x[t, i])`) is not in place."""
+    loaded: set = set()  # elements read so far, in program order
+    out: dict = {}
+    for s in walk(kernel.body):
+        if s.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+            ptr = s.operands[0]
+            target = ptr.attrs["target"]
+            indices = ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands  # not the byte offset
+            key = (id(target), tuple(id(o) for o in indices))
+            if s.op is Op.GLOBAL_LOAD:
+                loaded.add(key)
+            elif key in loaded and differentiable(target):  # read, then overwritten: in place
+                out[id(target)] = target
+    return list(out.values())
+
+
+def written_targets(kernel: Kernel) -> list:
+    """The differentiable fields a kernel stores to or updates (what a Tape saves before an in-place launch,
+    so that every earlier adjoint, run after this one's, sees the values it read)."""
+    out: dict = {}
+    for s in walk(kernel.body):
+        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+            t = s.operands[0].attrs["target"]
+            if differentiable(t):
+                out[id(t)] = t
+    return list(out.values())
 
 
 def check_owned_in_place(kernel: Kernel) -> None:
@@ -86,7 +118,7 @@ def check_owned_in_place(kernel: Kernel) -> None:
         if not writes or not _has_adjoint(ptr.attrs["target"]):
             continue
         same = tuple(id(o) for o in ptr.operands)
-        if any(tuple(id(o) for o in w.operands) != same for w in writes):
+        if any(tuple(id(o) for o in w.operands) != same and not _other_slice(ptr, w) for w in writes):
             raise GradientError(
                 f"kernel {kernel.name.removesuffix('_grad')} reads an element of {_kind(ptr.attrs['target'])} "
                 f"'{user_name(ptr.attrs['target'])}' other than the one it overwrites; an in-place update is "
@@ -138,6 +170,32 @@ def _stores_to(block: Block, target: int):
         if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR and \
                 id(s.operands[0].attrs["target"]) == target:
             yield s
+
+
+def _offset_form(s: Stmt) -> tuple:
+    """(base, constant) with s == base + constant, looking through integer +/- constants."""
+    c = 0
+    while s.op in (Op.ADD, Op.SUB) and s.operands[1].op is Op.CONST:
+        c += s.operands[1].attrs["value"] * (1 if s.op is Op.ADD else -1)
+        s = s.operands[0]
+    return s, c
+
+
+def _invariant(s: Stmt) -> bool:
+    """A value every iteration of the kernel's loops shares (arguments, constants, arithmetic of them)."""
+    if s.op in (Op.ARG, Op.CONST):
+        return True
+    return s.op in (Op.ADD, Op.SUB, Op.MUL, Op.CAST) and all(_invariant(o) for o in s.operands)
+
+
+def _other_slice(a: Stmt, b: Stmt) -> bool:
+    """Two accesses of one field that no iterations share: in some axis both use the same launch-wide value
+    with different constant offsets (`x[t, i]` and `x[t + 1, j]`)."""
+    for x, y in zip(a.operands, b.operands):
+        (bx, cx), (by, cy) = _offset_form(x), _offset_form(y)
+        if bx is by and cx != cy and _invariant(bx):
+            return True
+    return False
 
 
 def check_in_place_and_adjoint(kernel: Kernel) -> bool:

@@ -14,6 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from simgrad import dtypes as dt
+from simgrad.autodiff.validate import in_place_targets
 from simgrad.debug import debug_level
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.frontend.arrays import ArrayArg, BuilderArg
@@ -143,13 +144,14 @@ class CompiledKernel:
     first use (tests and Tape validation read them)."""
 
     def __init__(self, launcher: Launcher, ir: IRKernel | None, llvm_text: str | None,
-                 ret_matrix: tuple[int, int] | StructType | None, rebuild=None):
+                 ret_matrix: tuple[int, int] | StructType | None, rebuild=None, in_place: bool = False):
         self.launcher = launcher
         self.launch = launcher.launch
         self._ir = ir
         self._llvm_text = llvm_text
         self._rebuild = rebuild
         self.ret_matrix = ret_matrix
+        self.in_place = in_place  # reads fields it overwrites (autodiff/validate.py in_place_targets)
 
     @property
     def ir(self) -> IRKernel:
@@ -178,7 +180,8 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
             launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
             light = tuple(np.empty((0,) * a.ndim, a.dtype) if isinstance(a, np.ndarray) else a for a in args)
             return CompiledKernel(launcher, None, None, meta["ret_matrix"],
-                                  rebuild=lambda: _build(kernel, prog, light, transform, name_suffix))
+                                  rebuild=lambda: _build(kernel, prog, light, transform, name_suffix),
+                                  in_place=meta.get("in_place", False))
     ir, text, meta = _build(kernel, prog, args, transform, name_suffix, guard)
     obj = prog.jit.object_for(text)
     if key is not None and guard is not None and guard.reason is None:
@@ -187,7 +190,7 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
         except (pickle.PicklingError, TypeError, AttributeError):
             pass  # metadata that does not pickle only costs us the cache
     launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
-    return CompiledKernel(launcher, ir, text, meta["ret_matrix"])
+    return CompiledKernel(launcher, ir, text, meta["ret_matrix"], in_place=meta["in_place"])
 
 
 def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix):
@@ -242,6 +245,8 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
             "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
             "private_slots": cg.private_slots,
+            # the forward reads fields it overwrites: a Tape keeps their values from before each launch
+            "in_place": transform is None and bool(in_place_targets(ir)),
             "tape_bound": ir.tape_bound if uses_tape else None}
     return ir, stable, meta
 

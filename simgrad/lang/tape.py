@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.autodiff.validate import differentiable, user_name
+from simgrad.autodiff.validate import differentiable, in_place_targets, user_name, written_targets
 from simgrad.errors import AccessRuleError, GradientError, SimgradError
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
@@ -52,6 +52,7 @@ class Tape:
         self._before: list | None = None
         self.entries: list = []
         self.snapshots: dict = {}
+        self.rollback: dict = {}  # entry -> [(field, values before the launch)] of in-place kernels
         self.gradient_evaluated = False
         self._outer = None
 
@@ -69,7 +70,12 @@ class Tape:
     def _record(self, kernel, args) -> None:
         if not getattr(kernel, "_no_grad", False):
             self.entries.append((kernel, args))
-            if self._validating():
+            fields = _in_place_fields(kernel, args)
+            if fields:  # the kernel reads what it overwrites: its adjoint must see the values from before it
+                self.rollback[len(self.entries) - 1] = [(f, f.to_numpy()) for f in fields]
+            if fields or self._validating():
+                # an in-place launch's other inputs are always watched: a later launch overwriting one (a
+                # temporary recomputed every step) would make its adjoint wrong, so that is an error
                 self.snapshots[len(self.entries) - 1] = Snapshot(kernel, args)
 
     def _validating(self) -> bool:
@@ -143,13 +149,50 @@ class Tape:
         """Run the recorded adjoints in reverse order."""
         if self.gradient_evaluated:
             raise SimgradError("this Tape's gradients were already computed")
+        # In-place kernels (reading what they overwrite) are rolled back before their adjoint, which then runs
+        # on the values from before them; backward proceeds in reverse, so every earlier adjoint sees the state
+        # it had too. The final values come back at the end.
+        final = {id(f): (f, f.to_numpy()) for saved in self.rollback.values() for f, _ in saved}
         for k in range(len(self.entries) - 1, -1, -1):
             fn, args = self.entries[k]
+            saved = self.rollback.get(k)
+            if saved is not None:
+                for f, values in saved:
+                    f.from_numpy(values)
             snap = self.snapshots.get(k)
             if snap is not None:
-                snap.check()
-            fn.grad(*args)
+                try:
+                    snap.check()
+                except AccessRuleError as e:
+                    if saved is None:
+                        raise
+                    raise AccessRuleError(f"{e.args[0]}\n(an in-place kernel on a Tape: its other inputs must "
+                                          "stay as it read them; put the steps in ti.ad.checkpoint(step, n, "
+                                          "state=[...]), which recomputes what later launches overwrite)") \
+                        from None
+            in_place = getattr(fn.grad, "in_place", None) if saved is not None else None
+            (in_place or fn.grad)(*args)
+        for f, values in final.values():
+            f.from_numpy(values)
         self.gradient_evaluated = True
+
+
+def _in_place_fields(kernel, args) -> list:
+    """For a kernel instance that updates fields in place, every lang-level field it writes (computed once
+    per instance); [] for the others."""
+    instance = getattr(kernel, "instance", None)
+    if instance is None:  # a @ti.ad.grad_replaced unit: its own gradient function
+        return []
+    inst = instance(args)
+    if not inst.in_place:
+        return []
+    fields = getattr(inst, "_in_place_fields", None)
+    if fields is None:
+        # everything it writes, not only what it updates in place: an earlier launch may have read those
+        fields = [t.owner for t in written_targets(inst.ir) if t.owner is not None] \
+            if in_place_targets(inst.ir) else []
+        inst._in_place_fields = fields
+    return fields
 
 
 def _check_array_loss(loss) -> None:
