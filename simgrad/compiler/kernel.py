@@ -47,6 +47,7 @@ class Kernel(KernelDef):
         self._keep: list = []
         self._generation = -1
         self._simple_launch = None
+        self._simple_instance: CompiledKernel | None = None
         self._grad_instances: dict = {}
         self._fwd_instances: dict = {}  # forward-mode (tangent-carrying) instances, run inside ti.ad.FwdMode
         self._gradfwd_instances: dict = {}  # adjoints with tangents (kernel.grad inside FwdMode)
@@ -96,6 +97,7 @@ class Kernel(KernelDef):
         self._inplace_instances.clear()
         self._keep.clear()
         self._simple_launch = None
+        self._simple_instance = None
         self._generation = prog.generation
 
     def _launch_for(self, args, mode: str = ""):
@@ -146,6 +148,7 @@ class Kernel(KernelDef):
             inst = compile_kernel(self, prog, args)
             if self._simple:
                 self._simple_launch = inst.launch
+                self._simple_instance = inst
         cache[key] = inst
         self._keep.extend(keep)
         return inst

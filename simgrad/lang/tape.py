@@ -183,7 +183,8 @@ def _in_place_fields(kernel, args) -> list:
     instance = getattr(kernel, "instance", None)
     if instance is None:  # a @ti.ad.grad_replaced unit: its own gradient function
         return []
-    inst = instance(args)
+    simple = getattr(kernel, "_simple_instance", None)  # kernels of scalar arguments have one instance
+    inst = simple if simple is not None else instance(args)
     if not inst.in_place:
         return []
     fields = getattr(inst, "_in_place_fields", None)
