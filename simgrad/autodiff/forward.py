@@ -36,12 +36,11 @@ def adjoint_then_forward(kernel: Kernel) -> bool:
     from .validate import check_and_adjoint
 
     check_and_adjoint(kernel)
-    if kernel.uses_tape:
-        raise GradientError(f"kernel {kernel.name.removesuffix('_grad')}: forward mode over an adjoint that keeps "
-                            "values on the tape (loops carrying local values) is not supported yet; "
-                            "Hessian-vector products need a kernel whose adjoint replays without the tape",
-                            None)
-    return make_forward(kernel)
+    f = _Forward(kernel)
+    f.block(kernel.body)
+    if f.taped and kernel.tape_bound is not None:
+        kernel.tape_bound *= 2  # a value and its tangent per entry at most
+    return True
 
 
 def _dual_of(ptr: Stmt):
@@ -55,12 +54,24 @@ class _Forward:
     def __init__(self, kernel: Kernel):
         self.kernel = kernel
         self.tan: dict[int, Stmt] = {}  # statement id -> its tangent (absent: zero)
+        self.taped = False  # tangents pushed on the adjoint's tape
 
     def block(self, block: Block) -> None:
         out: list[Stmt] = []
         for s in block.stmts:
             for nested in s.blocks:
                 self.block(nested)
+            if s.op is Op.TAPE_PUSH and s.operands and s.operands[0].type is not None \
+                    and s.operands[0].type.is_float:
+                # (an adjoint's tape, forward over reverse) every float value goes on with its tangent (zero when
+                # it has none), the tangent first, so that popping the value, then its tangent, takes them off
+                # in the right order
+                value = s.operands[0]
+                tangent = self.t(value) or Builder.constant(0.0, value.vtype, s.loc)
+                push = Builder.detached(Op.TAPE_PUSH, None, (tangent,), dict(s.attrs), s.loc)
+                push.block = block
+                out.append(push)
+                self.taped = True
             out.append(s)
             scratch = Block()
             b = Builder(scratch)
@@ -76,6 +87,10 @@ class _Forward:
 
     def statement(self, b: Builder, s: Stmt) -> None:
         op = s.op
+        if op is Op.TAPE_POP:
+            if s.type is not None and s.type.is_float:  # every float entry was pushed with its tangent
+                self.tan[id(s)] = b.emit(Op.TAPE_POP, s.type, (), dict(s.attrs))
+            return
         if op is Op.ALLOCA:
             if s.type is not None and s.type.is_float:
                 var = b.emit(Op.ALLOCA, s.type)
