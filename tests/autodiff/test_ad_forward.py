@@ -39,6 +39,11 @@ def _kernels(n):
             u, s, vt = ti.svd(m)
             y[i] += v.norm() * v.normalized()[1] + ti.max(x[i], 0.5) * ti.min(x[i], 0.4) + s[0, 0]
             y[(i + 3) % n] += ti.atan2(x[i], 1.5) * ti.sqrt(x[i] + 2.0) + u[0, 1] * vt[1, 0]
+            sym = m + m.transpose()
+            w, q = ti.sym_eig(sym)
+            ev, _vecs = ti.eig(sym)
+            rot, _stretch = ti.polar_decompose(m)
+            y[(i + 1) % n] += w[0] * q[0, 1] + 0.5 * ev[1, 0] + rot[1, 0]
 
     return x, y, {"control_flow": control_flow, "vectors_and_atomics": vectors_and_atomics}
 
