@@ -7,10 +7,10 @@ atomic add into such a field stores or adds the tangent into its dual as well. L
 beside them. Control flow is kept as it is: a forward kernel runs the primal computation once, with the
 tangents alongside, so loops, branches and break/continue need no tape.
 
-The derivative of an elementwise operation comes from its reverse rule (autodiff/rules.py): for a scalar
-operation the VJP contribution to operand k, `g * df/dx_k`, is linear in `g`, so with `g` set to the
-tangent of x_k it is the term `df/dx_k * dx_k` of the JVP. One table therefore serves both modes, and an
-operation without a rule is refused in both, naming it.
+The derivative of an elementwise operation is its JVP rule, rules.FORWARD, which sits beside every reverse
+rule and is made from it: for a scalar operation the VJP contribution to operand k, `g * df/dx_k`, is linear
+in `g`, so with `g` set to the tangent of x_k it is the term `df/dx_k * dx_k` of the JVP. Both modes thus
+differentiate exactly the same operations, and one without a rule is refused in both, naming it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import Op
 
-from .rules import REVERSE, ZERO_GRADIENT
+from .rules import FORWARD, ZERO_GRADIENT
 
 
 def make_forward(kernel: Kernel) -> bool:
@@ -123,18 +123,9 @@ class _Forward:
             return
         elif all(self.t(o) is None for o in s.operands):
             return
-        elif op in REVERSE:
-            terms = []
-            for k, o in enumerate(s.operands):
-                d = self.t(o)
-                if d is not None:
-                    c = REVERSE[op](b, d, *s.operands)[k]
-                    if c is not None:
-                        terms.append(c)
-            if terms:
-                total = terms[0]
-                for c in terms[1:]:
-                    total = b.add(total, c)
+        elif op in FORWARD:
+            total = FORWARD[op](b, [self.t(o) for o in s.operands], *s.operands)
+            if total is not None:
                 self.tan[id(s)] = b.cast(total, s.vtype) if total.type is not s.type else total
         elif op in ZERO_GRADIENT or op is Op.RANDOM:
             return

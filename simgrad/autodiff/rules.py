@@ -12,6 +12,7 @@ GradientError naming it.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from simgrad.ir.ops import Op
 
@@ -83,3 +84,30 @@ REVERSE: dict[Op, Callable[..., tuple]] = {
 }
 NEEDS_VALUES = {op for op in REVERSE if op not in (Op.ADD, Op.SUB, Op.NEG)}
 ZERO_GRADIENT = {Op.FLOOR, Op.CEIL, Op.ROUND, Op.LT, Op.LE, Op.GT, Op.GE, Op.EQ, Op.NE, Op.LOGICAL_NOT}
+
+
+def _jvp(vjp: Callable[..., tuple]) -> Callable:
+    """The forward (JVP) rule of an elementwise op from its reverse rule: for a scalar op the VJP contribution
+    to operand k, `g * df/dx_k`, is linear in g, so with g = dx_k it is the JVP's term df/dx_k * dx_k. The
+    result is the sum of the terms of the operands that have tangents (None: no tangent at all)."""
+
+    def rule(b, tangents, *operands):
+        terms = []
+        for k, d in enumerate(tangents):
+            if d is not None:
+                c = vjp(b, d, *operands)[k]
+                if c is not None:
+                    terms.append(c)
+        if not terms:
+            return None
+        total = terms[0]
+        for c in terms[1:]:
+            total = b.add(total, c)
+        return total
+
+    return rule
+
+
+# (builder, tangent or None per operand, *operands) -> the result's tangent (or None): one beside every
+# reverse rule, so both modes differentiate exactly the same operations
+FORWARD: dict[Op, Callable[..., Any]] = {op: _jvp(rule) for op, rule in REVERSE.items()}
