@@ -67,7 +67,7 @@ class ArrayArg:
             return refs[0]
         n = self.element_shape[0]
         m = self.element_shape[1] if len(self.element_shape) > 1 else 0
-        return MatrixRef(refs, n, m)
+        return MatrixRef(refs, n, m, clamp=self.boundary == "clamp")
 
 
 class BuilderArg:

@@ -93,10 +93,12 @@ class GlobalRef:
 class MatrixRef:
     """A matrix (or vector) of scalar refs: a local matrix variable or one element of a matrix field."""
 
-    __slots__ = ("refs", "n", "m")
+    __slots__ = ("refs", "n", "m", "clamp")
 
-    def __init__(self, refs: list, n: int, m: int):
+    def __init__(self, refs: list, n: int, m: int, clamp: bool = False):
         self.refs, self.n, self.m = refs, n, m
+        # an element of a ti.types.ndarray(boundary="clamp") argument: run-time indices into it clamp too
+        self.clamp = clamp
 
     @property
     def dtype(self):
@@ -228,6 +230,11 @@ class DynamicElementRef:
     __slots__ = ("base", "key")
 
     def __init__(self, base: MatrixRef, key: tuple):
+        if base.clamp and base.m == 0:
+            key = tuple(ops.max(0, ops.min(k, base.n - 1)) for k in key)
+        elif base.clamp and len(key) == 2:  # as Taichi: the row-major flat index is clamped
+            flat = ops.max(0, ops.min(ops.add(ops.mul(key[0], base.m), key[1]), base.n * base.m - 1))
+            key = (ops.floordiv(flat, base.m), ops.mod(flat, base.m))
         self.base, self.key = base, key
 
     @property

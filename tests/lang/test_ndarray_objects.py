@@ -93,3 +93,26 @@ def test_boundary_clamp_clamps_every_index():
         assert read(a, i, j) == a[min(max(i, 0), 2), min(max(j, 0), 3)]
     with pytest.raises(ti.SimgradTypeError, match="boundary"):
         ti.types.ndarray(boundary="wrap")
+
+
+def test_boundary_clamp_also_clamps_an_elements_own_run_time_index():
+    """As Taichi: a vector element's index is clamped into [0, n); a matrix element's row-major flat index
+    into [0, n*m) (so (2, 0) of a 2x2 element is its last entry)."""
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def vec_at(x: ti.types.ndarray(boundary="clamp"), k: ti.i32) -> ti.f32:
+        return x[1, 2][k]
+
+    @ti.kernel
+    def mat_at(x: ti.types.ndarray(boundary="clamp"), i: ti.i32, j: ti.i32) -> ti.f32:
+        return x[1, 2][i, j]
+
+    v = ti.ndarray(ti.math.vec2, shape=(3, 3))
+    m = ti.ndarray(ti.math.mat2, shape=(3, 3))
+    v[1, 2] = [10.0, 20.0]
+    m[1, 2] = [[1.0, 2.0], [3.0, 4.0]]
+    assert [vec_at(v, k) for k in (-3, 0, 1, 7)] == [10.0, 10.0, 20.0, 20.0]
+    flat = np.array([[1.0, 2.0], [3.0, 4.0]]).reshape(-1)
+    for i, j in [(-1, 0), (1, -1), (2, 0), (1, 2), (0, 1)]:
+        assert mat_at(m, i, j) == flat[min(max(i * 2 + j, 0), 3)]
