@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from simgrad.errors import GradientError, Loc
 from simgrad.ir.fieldref import ArrayRef, FieldRef
-from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import Op
 
 
@@ -28,6 +28,17 @@ def user_name(target) -> str:
     return target.name.split("[")[0]
 
 
+def _element(ptr: Stmt) -> tuple:
+    """Which element a GLOBAL_PTR names: its target and index values (not the byte offset lowering adds)."""
+    indices = ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands
+    return id(ptr.attrs["target"]), tuple(id(o) for o in indices)
+
+
+def _writes_global(s: Stmt) -> bool:
+    """A store or atomic update of a field or ndarray element."""
+    return s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR
+
+
 def check_access_rules(kernel: Kernel) -> None:
     """Raise a located GradientError where the IR proves a read-then-overwrite of the same element."""
     read: dict[tuple, Loc | None] = {}
@@ -41,7 +52,7 @@ def check_access_rules(kernel: Kernel) -> None:
                                 f"{kernel.name.removesuffix('_grad')} accesses '{target.name}'", s.loc)
         if not _has_adjoint(target):
             continue
-        key = (id(target), tuple(id(o) for o in ptr.operands))
+        key = _element(ptr)
         if s.op is Op.GLOBAL_LOAD:
             read.setdefault(key, s.loc)
         elif key in read:  # a store, or an update (`x[i] += x[i] ** 2`) whose replayed read would be the new value
@@ -62,14 +73,11 @@ def in_place_targets(kernel: Kernel) -> list:
     loaded: set = set()  # elements read so far, in program order
     out: dict = {}
     for s in walk(kernel.body):
-        if s.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
-            ptr = s.operands[0]
-            target = ptr.attrs["target"]
-            indices = ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands  # not the byte offset
-            key = (id(target), tuple(id(o) for o in indices))
-            if s.op is Op.GLOBAL_LOAD:
-                loaded.add(key)
-            elif key in loaded and differentiable(target):  # read, then overwritten: in place
+        if s.op is Op.GLOBAL_LOAD:
+            loaded.add(_element(s.operands[0]))
+        elif _writes_global(s) and _element(s.operands[0]) in loaded:  # read, then overwritten: in place
+            target = s.operands[0].attrs["target"]
+            if differentiable(target):
                 out[id(target)] = target
     return list(out.values())
 
@@ -79,10 +87,8 @@ def written_targets(kernel: Kernel) -> list:
     so that every earlier adjoint, run after this one's, sees the values it read)."""
     out: dict = {}
     for s in walk(kernel.body):
-        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
-            t = s.operands[0].attrs["target"]
-            if differentiable(t):
-                out[id(t)] = t
+        if _writes_global(s) and differentiable(s.operands[0].attrs["target"]):
+            out[id(s.operands[0].attrs["target"])] = s.operands[0].attrs["target"]
     return list(out.values())
 
 
@@ -97,15 +103,14 @@ def check_owned_in_place(kernel: Kernel) -> None:
     loads: list = []
     written: set = set()  # (field, element) stored so far, in program order
     for s in walk(kernel.body):
-        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+        if _writes_global(s):
             ptr = s.operands[0]
             stored.setdefault(id(ptr.attrs["target"]), []).append(ptr)
-            written.add((id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands)))
+            written.add(_element(ptr))
         elif s.op is Op.GLOBAL_LOAD:
             loads.append(s)
             ptr = s.operands[0]
-            if (id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands)) in written and \
-                    _has_adjoint(ptr.attrs["target"]):
+            if _element(ptr) in written and _has_adjoint(ptr.attrs["target"]):
                 # the adjoint's replay drops stores, so it would read the old value here
                 raise GradientError(
                     f"kernel {kernel.name.removesuffix('_grad')} reads an element of "
@@ -117,8 +122,7 @@ def check_owned_in_place(kernel: Kernel) -> None:
         writes = stored.get(id(ptr.attrs["target"]))
         if not writes or not _has_adjoint(ptr.attrs["target"]):
             continue
-        same = tuple(id(o) for o in ptr.operands)
-        if any(tuple(id(o) for o in w.operands) != same and not _other_slice(ptr, w) for w in writes):
+        if any(_element(w) != _element(ptr) and not _other_slice(ptr, w) for w in writes):
             raise GradientError(
                 f"kernel {kernel.name.removesuffix('_grad')} reads an element of {_kind(ptr.attrs['target'])} "
                 f"'{user_name(ptr.attrs['target'])}' other than the one it overwrites; an in-place update is "
@@ -139,18 +143,16 @@ def forward_stores(kernel: Kernel) -> None:
             if repl:
                 s.operands = tuple(repl.get(id(o), o) for o in s.operands)
             if s.op is Op.GLOBAL_LOAD:
-                ptr = s.operands[0]
-                key = (id(ptr.attrs["target"]), tuple(id(o) for o in ptr.operands))
+                key = _element(s.operands[0])
                 if key in known and known[key].type is s.type:
                     repl[id(s)] = known[key]
                     continue
-            elif s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
-                ptr = s.operands[0]
-                target = id(ptr.attrs["target"])
-                for k in [k for k in known if k[0] == target]:
+            elif _writes_global(s):
+                key = _element(s.operands[0])
+                for k in [k for k in known if k[0] == key[0]]:
                     del known[k]
                 if s.op is Op.GLOBAL_STORE:
-                    known[(target, tuple(id(o) for o in ptr.operands))] = s.operands[1]
+                    known[key] = s.operands[1]
             for nested in s.blocks:
                 block(nested)
                 # what a nested block stored is not known after it (it may not have run)
@@ -167,18 +169,8 @@ def forward_stores(kernel: Kernel) -> None:
 
 def _stores_to(block: Block, target: int):
     for s in walk(block):
-        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR and \
-                id(s.operands[0].attrs["target"]) == target:
+        if _writes_global(s) and id(s.operands[0].attrs["target"]) == target:
             yield s
-
-
-def _offset_form(s: Stmt) -> tuple:
-    """(base, constant) with s == base + constant, looking through integer +/- constants."""
-    c = 0
-    while s.op in (Op.ADD, Op.SUB) and s.operands[1].op is Op.CONST:
-        c += s.operands[1].attrs["value"] * (1 if s.op is Op.ADD else -1)
-        s = s.operands[0]
-    return s, c
 
 
 def _invariant(s: Stmt) -> bool:
@@ -192,8 +184,8 @@ def _other_slice(a: Stmt, b: Stmt) -> bool:
     """Two accesses of one field that no iterations share: in some axis both use the same launch-wide value
     with different constant offsets (`x[t, i]` and `x[t + 1, j]`)."""
     for x, y in zip(a.operands, b.operands):
-        (bx, cx), (by, cy) = _offset_form(x), _offset_form(y)
-        if bx is by and cx != cy and _invariant(bx):
+        (bx, cx), (by, cy) = offset_form(x), offset_form(y)
+        if bx is by and cx != cy and (bx is None or _invariant(bx)):
             return True
     return False
 

@@ -62,6 +62,23 @@ def walk(block: Block) -> Iterator[Stmt]:
             yield from walk(b)
 
 
+def offset_form(s: Stmt) -> tuple[Stmt | None, int]:
+    """(base, constant) with s == base + constant, looking through integer +/- constants; (None, value) for a
+    constant. Two indices with the same base and different constants never name the same element."""
+    c = 0
+    while True:
+        if s.op is Op.CONST:
+            return None, c + s.attrs["value"]
+        if s.op in (Op.ADD, Op.SUB) and s.operands[1].op is Op.CONST:
+            c += s.operands[1].attrs["value"] * (1 if s.op is Op.ADD else -1)
+            s = s.operands[0]
+        elif s.op is Op.ADD and s.operands[0].op is Op.CONST:
+            c += s.operands[0].attrs["value"]
+            s = s.operands[1]
+        else:
+            return s, c
+
+
 class Kernel:
     """The IR of one kernel instantiation: a body block plus what the launcher needs to know."""
 

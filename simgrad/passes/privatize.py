@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 from simgrad.dtypes import DataType
 from simgrad.ir.fieldref import FieldRef
-from simgrad.ir.nodes import Stmt
+from simgrad.ir.nodes import Stmt, offset_form
 from simgrad.ir.ops import Op
 
 
@@ -94,27 +94,11 @@ def _updates(block, uses: dict, times: int, adds: dict, others: dict) -> None:
             _updates(b, uses, inner, adds, others)
 
 
-def _offset_form(s: Stmt) -> tuple:
-    """(base statement or None, constant) with s == base + constant, looking through +/- constants."""
-    c = 0
-    while True:
-        if s.op is Op.CONST:
-            return None, c + s.attrs["value"]
-        if s.op in (Op.ADD, Op.SUB) and s.operands[1].op is Op.CONST:
-            c += s.operands[1].attrs["value"] * (1 if s.op is Op.ADD else -1)
-            s = s.operands[0]
-        elif s.op is Op.ADD and s.operands[0].op is Op.CONST:
-            c += s.operands[0].attrs["value"]
-            s = s.operands[1]
-        else:
-            return s, c
-
-
 def _other_slice(a: Stmt, b: Stmt, nprefix: int) -> bool:
     """True when two accesses of one field provably differ in one of its first `nprefix` indices
     (`p[t + 1, ...]` against `p[t, ...]`), so they never touch the same element."""
     for x, y in zip(a.operands[:nprefix], b.operands[:nprefix]):
-        (bx, cx), (by, cy) = _offset_form(x), _offset_form(y)
+        (bx, cx), (by, cy) = offset_form(x), offset_form(y)
         if bx is by and cx != cy:
             return True
     return False
