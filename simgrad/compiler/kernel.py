@@ -28,6 +28,14 @@ def _template_key(v, keep: list):
     return ("id", id(v))
 
 
+# mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
+# "fwd" it with forward-mode tangents (inside ti.ad.FwdMode); "gradfwd" its adjoint with tangents
+# (kernel.grad inside FwdMode: Hessian-vector products); "grad_in_place" its adjoint run on the state before
+# the kernel (in-place kernels: ti.ad.checkpoint, the Tape's rollback)
+_MODES = {"": (None, ""), "grad": (check_and_adjoint, "_grad"), "fwd": (make_forward, "_fwd"),
+          "gradfwd": (adjoint_then_forward, "_gradfwd"), "grad_in_place": (check_in_place_and_adjoint, "_grad")}
+
+
 class Kernel(KernelDef):
     """A @ti.kernel: binds arguments, keeps one CompiledKernel per instantiation (template values, ndarray
     dtypes and shapes) and launches it; `.grad` launches the adjoint."""
@@ -43,15 +51,11 @@ class Kernel(KernelDef):
         self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
         self._has_defaults = any(p.default is not inspect.Parameter.empty
                                  for p in self.signature.parameters.values())
-        self._instances: dict = {}
         self._keep: list = []
         self._generation = -1
         self._simple_launch = None
         self._simple_instance: CompiledKernel | None = None
-        self._grad_instances: dict = {}
-        self._fwd_instances: dict = {}  # forward-mode (tangent-carrying) instances, run inside ti.ad.FwdMode
-        self._gradfwd_instances: dict = {}  # adjoints with tangents (kernel.grad inside FwdMode)
-        self._inplace_instances: dict = {}  # adjoints run on the state before the kernel (ti.ad.checkpoint)
+        self._caches: dict[str, dict] = {mode: {} for mode in _MODES}  # mode -> instantiation key -> instance
         self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
@@ -90,18 +94,15 @@ class Kernel(KernelDef):
         return tuple(b.arguments.values())
 
     def _reset(self, prog: Program) -> None:
-        self._instances.clear()
-        self._grad_instances.clear()
-        self._fwd_instances.clear()
-        self._gradfwd_instances.clear()
-        self._inplace_instances.clear()
+        for cache in self._caches.values():
+            cache.clear()
         self._keep.clear()
         self._simple_launch = None
         self._simple_instance = None
         self._generation = prog.generation
 
     def _launch_for(self, args, mode: str = ""):
-        """mode "": the kernel; "grad": its adjoint; "fwd": it with forward-mode tangents."""
+        """The launcher of the instance for `args` in `mode` (see _MODES)."""
         return self._instance_for(args, mode).launch
 
     def instance(self, args) -> CompiledKernel:
@@ -115,8 +116,7 @@ class Kernel(KernelDef):
                                    f"got {len(args)}")
         keep: list = []
         key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
-        cache = {"": self._instances, "grad": self._grad_instances, "fwd": self._fwd_instances,
-                 "gradfwd": self._gradfwd_instances, "grad_in_place": self._inplace_instances}[mode]
+        cache = self._caches[mode]
         inst = cache.get(key)
         if inst is None:
             with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
@@ -135,20 +135,11 @@ class Kernel(KernelDef):
             prog.instantiations += 1
 
     def _compile_uncounted(self, args, mode: str, key, keep: list, cache: dict) -> CompiledKernel:
-        prog = get_program()
-        if mode == "grad":
-            inst = compile_kernel(self, prog, args, transform=check_and_adjoint, name_suffix="_grad")
-        elif mode == "fwd":
-            inst = compile_kernel(self, prog, args, transform=make_forward, name_suffix="_fwd")
-        elif mode == "grad_in_place":  # run by ti.ad.checkpoint on the state before the kernel
-            inst = compile_kernel(self, prog, args, transform=check_in_place_and_adjoint, name_suffix="_grad")
-        elif mode == "gradfwd":
-            inst = compile_kernel(self, prog, args, transform=adjoint_then_forward, name_suffix="_gradfwd")
-        else:
-            inst = compile_kernel(self, prog, args)
-            if self._simple:
-                self._simple_launch = inst.launch
-                self._simple_instance = inst
+        transform, suffix = _MODES[mode]
+        inst = compile_kernel(self, get_program(), args, transform=transform, name_suffix=suffix)
+        if mode == "" and self._simple:
+            self._simple_launch = inst.launch
+            self._simple_instance = inst
         cache[key] = inst
         self._keep.extend(keep)
         return inst

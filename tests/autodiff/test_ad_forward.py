@@ -195,7 +195,7 @@ def test_hessian_vector_products_by_forward_mode_over_the_adjoint():
         x.grad.fill(0)
         E.grad[None] = 1
         taped.grad()
-    assert any(inst.ir.uses_tape for inst in taped._gradfwd_instances.values())  # the tape path is covered
+    assert any(inst.ir.uses_tape for inst in taped._caches["gradfwd"].values())  # the tape path is covered
     hv = x.grad.dual.to_numpy()
     fd = (taped_grad_at(x0 + eps * v) - taped_grad_at(x0 - eps * v)) / (2 * eps)
     np.testing.assert_allclose(hv, fd, rtol=1e-6, atol=1e-8)

@@ -46,7 +46,7 @@ def _adjoint_text():
     sin_sq.grad()
     # the dump is of the kernel that actually ran: check its result
     np.testing.assert_allclose(x.grad.to_numpy(), 2 * xs * np.cos(xs * xs), rtol=1e-5, atol=1e-6)
-    insts = list(sin_sq._grad_instances.values())
+    insts = list(sin_sq._caches["grad"].values())
     assert len(insts) == 1
     return normalise(print_kernel(insts[0].ir))
 

@@ -37,7 +37,7 @@ def test_kernel_grad_with_template_and_scalar_args():
         assert rel_err(src.grad.to_numpy(), expect, floor=1e-9) < 1e-13
         other = b if src is a else a
         assert not np.any(other.grad.to_numpy())
-    assert len(f._grad_instances) == 2  # one adjoint per template instantiation
+    assert len(f._caches["grad"]) == 2  # one adjoint per template instantiation
 
     def loss():
         f(a, out, 1.5, 3)

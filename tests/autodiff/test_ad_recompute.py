@@ -20,7 +20,7 @@ from simgrad.testing import check_grads
 
 
 def _grad_ir(kernel):
-    (inst,) = kernel._grad_instances.values()
+    (inst,) = kernel._caches["grad"].values()
     return inst.ir
 
 

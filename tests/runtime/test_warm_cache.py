@@ -38,7 +38,7 @@ SCRIPT = textwrap.dedent("""
         f(2.0)
         y.grad.fill(1.0)
         f.grad(2.0)
-        (inst,) = f._grad_instances.values()
+        (inst,) = f._caches["grad"].values()
         out["ir_stmts"] = len(inst.ir.body.stmts)  # rebuilt on demand when the kernel came from the cache
     except ti.SimgradError as e:
         out["error"] = type(e).__name__
