@@ -20,6 +20,7 @@ overwritten by the step before they are read (temporaries such as forces): they 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from math import comb
 
 import numpy as np
@@ -35,6 +36,16 @@ def _snapshot(state: list) -> list[np.ndarray]:
 def _restore(state: list, snap: list[np.ndarray]) -> None:
     for f, a in zip(state, snap):
         f.from_numpy(a)
+
+
+@contextmanager
+def _unrecorded():
+    """Launches made inside are recorded by no Tape (backward's replays and adjoints)."""
+    outer, ad_hooks.recorder = ad_hooks.recorder, None
+    try:
+        yield
+    finally:
+        ad_hooks.recorder = outer
 
 
 def _reach(s: int, t: int) -> int:
@@ -109,13 +120,10 @@ class Checkpoint:
         _restore(self.state, self.end)
 
     def _replay(self, t: int) -> None:
-        """Step t again, from its recorded launches (not recorded by any Tape)."""
-        outer, ad_hooks.recorder = ad_hooks.recorder, None
-        try:
+        """Step t again, from its recorded launches."""
+        with _unrecorded():
             for fn, args in self.launches[t]:
                 fn(*args)
-        finally:
-            ad_hooks.recorder = outer
 
     def _hold(self, k: int) -> None:
         self._held += k
@@ -154,18 +162,16 @@ class Checkpoint:
         launches = self.launches[t]
         for j in range(len(launches) - 1, -1, -1):
             _restore(self.state, before)
-            outer, ad_hooks.recorder = ad_hooks.recorder, None
-            try:
+            with _unrecorded():
                 for fn, args in launches[:j]:
                     fn(*args)
                 fn, args = launches[j]
                 grad = getattr(fn, "grad", None)
                 if grad is None:
-                    raise SimgradError(f"step {t} launched {getattr(fn, '__name__', fn)!r}, which has no gradient")
+                    raise SimgradError(f"step {t} launched {getattr(fn, '__name__', fn)!r}, which has no "
+                                       "gradient")
                 in_place = getattr(grad, "in_place", None)
                 (in_place or grad)(*args)
-            finally:
-                ad_hooks.recorder = outer
 
 
 def checkpoint(step, n_steps: int, state, budget: int = 10) -> Checkpoint:

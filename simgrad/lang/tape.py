@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.autodiff.validate import differentiable, in_place_targets, user_name, written_targets
+from simgrad.autodiff.validate import differentiable, user_name, written_targets
 from simgrad.errors import AccessRuleError, GradientError, SimgradError
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
@@ -31,8 +31,6 @@ class Tape:
         if loss is not None and not isinstance(loss, Field):
             _check_array_loss(loss)
         elif loss is not None:
-            if not isinstance(loss, Field):
-                raise SimgradError(f"Tape(loss=...) expects a scalar field, got {type(loss).__name__}")
             if not isinstance(loss, ScalarField) or loss.shape != ():
                 raise SimgradError(f"the loss must be a 0-d scalar field (ti.field(dtype, shape=())), got "
                                    f"shape {loss.shape}")
@@ -190,9 +188,7 @@ def _in_place_fields(kernel, args) -> list:
     fields = getattr(inst, "_in_place_fields", None)
     if fields is None:
         # everything it writes, not only what it updates in place: an earlier launch may have read those
-        fields = [t.owner for t in written_targets(inst.ir) if t.owner is not None] \
-            if in_place_targets(inst.ir) else []
-        inst._in_place_fields = fields
+        fields = inst._in_place_fields = [t.owner for t in written_targets(inst.ir) if t.owner is not None]
     return fields
 
 
