@@ -20,6 +20,7 @@ from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.frontend.arrays import ArrayArg, BuilderArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import Compiler
+from simgrad.frontend.refs import tensor_text
 from simgrad.frontend.source import get_source
 from simgrad.ir import context
 from simgrad.ir.nodes import Kernel as IRKernel
@@ -341,16 +342,16 @@ def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
         want = dt.from_any(ann.dtype) if ann.dtype is not None else None
     if want is not None and not isinstance(ann.dtype, MatrixType) and own:
         raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
-                               f"{_tensor(own, t)}")
+                               f"{tensor_text(own, t)}")
     if (own is not None and own != elem) or len(elem) > len(arr.shape) \
             or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
         # never reinterpret the memory: a (2, 3) matrix element is not a 2-vector followed by more
-        given = _tensor(own, t) if own is not None else f"an array of shape {tuple(arr.shape)}"
+        given = tensor_text(own, t) if own is not None else f"an array of shape {tuple(arr.shape)}"
         raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required element "
                                 f"type: {_element_type_text(ann, elem, want or t)}, but {given} is provided")
     if want is not None and want is not t:
         raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
-                               f"{_tensor(own if own is not None else elem, t)}")
+                               f"{tensor_text(own if own is not None else elem, t)}")
     ndim = len(arr.shape) - len(elem)
     if ann.ndim is not None and ann.ndim != ndim:
         raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required "
@@ -358,16 +359,12 @@ def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
     return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary, grad=t.is_float and p.with_grad(a, kernel_name))
 
 
-def _tensor(shape: tuple, t) -> str:
-    return f"[Tensor ({', '.join(map(str, shape))}) {t}]" if shape else str(t)
-
-
 def _element_type_text(ann: NdarrayType, elem: tuple, want) -> str:
     """The annotation's element type as Taichi names it: VectorType[2, i32], MatrixType[2,2, f32], f32."""
     mt = ann.dtype
     if isinstance(mt, MatrixType) and mt.n is not None:
         return f"VectorType[{mt.n}, {want}]" if mt.m == 0 else f"MatrixType[{mt.n},{mt.m}, {want}]"
-    return _tensor(elem, want)
+    return tensor_text(elem, want)
 
 
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:

@@ -114,8 +114,8 @@ class MatrixRef:
             if value.shape != ((self.n,) if self.m == 0 else (self.n, self.m)):
                 # never store a prefix: a 2-vector into a 3-vector must not leave the third entry behind
                 raise SimgradTypeError(
-                    f"cannot assign '{_tensor_text(value.shape, _entry_type(value.entries[0]))}' to "
-                    f"'{_tensor_text((self.n,) if self.m == 0 else (self.n, self.m), self.dtype)}': a "
+                    f"cannot assign '{tensor_text(value.shape, _entry_type(value.entries[0]))}' to "
+                    f"'{tensor_text((self.n,) if self.m == 0 else (self.n, self.m), self.dtype)}': a "
                     f"{value.shape} matrix to a {self.shape_text()} one", context.current_loc())
             return value.entries
         return [value] * len(self.refs)
@@ -182,9 +182,9 @@ class MatrixRef:
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)
 
 
-def _tensor_text(shape: tuple, dtype) -> str:
-    """A matrix type as Taichi's messages print it: [Tensor (3) i32], [Tensor (2, 2) f32]."""
-    return f"[Tensor ({', '.join(str(d) for d in shape)}) {dtype}]"
+def tensor_text(shape: tuple, dtype) -> str:
+    """An element type as Taichi's messages print it: [Tensor (3) i32], [Tensor (2, 2) f32]; a scalar: f32."""
+    return f"[Tensor ({', '.join(str(d) for d in shape)}) {dtype}]" if shape else str(dtype)
 
 
 def _entry_type(v):

@@ -91,25 +91,25 @@ def _with_grad(make, needs_grad: bool, needs_dual: bool = False):
             raise SimgradRuntimeError(f"{f.dtype} is not supported for field with `needs_grad=True` or "
                                       "`needs_dual=True`. (Gradients need a floating-point type.)")
         return f
-    f.grad = make(".grad")
-    for c, g in zip(f._components(), f.grad._components()):
-        c.grad = g
-        g.is_primal = False
-    f.grad.is_primal = False
+    grad = _companion(make, f, ".grad", "grad")
     # and an (unplaced) dual for forward mode, placed by needs_dual or ti.root.lazy_dual()
-    f.dual = make(".dual")
-    for c, d in zip(f._components(), f.dual._components()):
-        c.dual = d
-        d.is_primal, d.is_dual = False, True
-    f.dual.is_primal, f.dual.is_dual = False, True
+    _companion(make, f, ".dual", "dual")
     # the gradient's own dual: forward mode over an adjoint (Hessian-vector products) writes d(grad) there
-    f.grad.dual = make(".grad.dual")
-    for g, d in zip(f.grad._components(), f.grad.dual._components()):
-        g.dual = d
-        d.is_primal, d.is_dual = False, True
-    f.grad.dual.is_primal, f.grad.dual.is_dual = False, True
+    _companion(make, grad, ".grad.dual", "dual")
     f._needs_dual = needs_dual
     return f
+
+
+def _companion(make, of: Field, suffix: str, attr: str) -> Field:
+    """A gradient or dual field of `of` (`attr` "grad" or "dual"), linked to it component by component."""
+    made = make(suffix)
+    dual = attr == "dual"
+    for c, d in zip(of._components(), made._components()):
+        setattr(c, attr, d)
+        d.is_primal, d.is_dual = False, dual
+    made.is_primal, made.is_dual = False, dual
+    setattr(of, attr, made)
+    return made
 
 
 def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = False, needs_dual: bool = False,
