@@ -148,29 +148,6 @@ def test_hessian_vector_products_by_forward_mode_over_the_adjoint():
             d = x[(i + 1) % n] - x[i]
             E[None] += ti.sin(x[i]) * x[(i + 1) % n] ** 2 + 0.5 * x[i] ** 3 + ti.exp(-d * d)
 
-    def grad_at(p):
-        x.from_numpy(p)
-        E.fill(0)
-        energy()
-        x.grad.fill(0)
-        E.grad[None] = 1
-        energy.grad()
-        return x.grad.to_numpy()
-
-    rng = np.random.default_rng(5)
-    x0, v = rng.random(n), rng.standard_normal(n)
-    x.from_numpy(x0)
-    with ti.ad.FwdMode(loss=x.grad, param=x, seed=list(v)):
-        E.fill(0)
-        energy()
-        x.grad.fill(0)
-        E.grad[None] = 1
-        energy.grad()
-    hv = x.grad.dual.to_numpy()
-    eps = 1e-6
-    fd = (grad_at(x0 + eps * v) - grad_at(x0 - eps * v)) / (2 * eps)
-    np.testing.assert_allclose(hv, fd, rtol=1e-6, atol=1e-8)
-
     @ti.kernel
     def taped():  # a loop carrying a local value: its adjoint keeps values on the tape
         for i in range(n):
@@ -179,23 +156,26 @@ def test_hessian_vector_products_by_forward_mode_over_the_adjoint():
                 s = ti.sin(s + x[i] * x[(i + 1) % n])
             E[None] += s * s
 
-    def taped_grad_at(p):
-        x.from_numpy(p)
+    def gradient(kernel):
         E.fill(0)
-        taped()
+        kernel()
         x.grad.fill(0)
         E.grad[None] = 1
-        taped.grad()
+        kernel.grad()
         return x.grad.to_numpy()
 
-    x.from_numpy(x0)
-    with ti.ad.FwdMode(loss=x.grad, param=x, seed=list(v)):
-        E.fill(0)
-        taped()
-        x.grad.fill(0)
-        E.grad[None] = 1
-        taped.grad()
+    def grad_at(kernel, p):
+        x.from_numpy(p)
+        return gradient(kernel)
+
+    rng = np.random.default_rng(5)
+    x0, v = rng.random(n), rng.standard_normal(n)
+    eps = 1e-6
+    for kernel in (energy, taped):
+        x.from_numpy(x0)
+        with ti.ad.FwdMode(loss=x.grad, param=x, seed=list(v)):
+            gradient(kernel)
+        hv = x.grad.dual.to_numpy()
+        fd = (grad_at(kernel, x0 + eps * v) - grad_at(kernel, x0 - eps * v)) / (2 * eps)
+        np.testing.assert_allclose(hv, fd, rtol=1e-6, atol=1e-8)
     assert any(inst.ir.uses_tape for inst in taped._caches["gradfwd"].values())  # the tape path is covered
-    hv = x.grad.dual.to_numpy()
-    fd = (taped_grad_at(x0 + eps * v) - taped_grad_at(x0 - eps * v)) / (2 * eps)
-    np.testing.assert_allclose(hv, fd, rtol=1e-6, atol=1e-8)
