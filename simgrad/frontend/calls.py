@@ -239,8 +239,7 @@ def inline(comp, fn, args, kwargs, node):
     if frame.real and ann is None and rv is not None:
         raise SimgradSyntaxError(f"the return value must be annotated: real function {fn.name} returns a value "
                                  "(add -> ti.f32 or another type)", comp.loc(node))
-    if ann is not None and ann is not None.__class__ and rv is None and not frame.has_returned \
-            and frame.ret_var is None:
+    if ann is not None and rv is None and not frame.has_returned and frame.ret_var is None:
         raise SimgradSyntaxError(f"Function has a return type but does not have a return statement "
                                  f"(ti.func {fn.name})", comp.loc(node))
     if ann is not None and rv is not None:
