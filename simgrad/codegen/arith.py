@@ -67,6 +67,14 @@ def _negate_if(f, q: str, cond: str, ty: str) -> str:
     return r
 
 
+def _nonnegative_digit(x) -> bool:
+    """x is the index of a loop starting at a constant >= 0, or a quotient of one by positive constants."""
+    while x.op is Op.RAW_DIV and x.operands[1].op is Op.CONST and x.operands[1].attrs["value"] > 0:
+        x = x.operands[0]
+    start = x.operands[0] if x.op is Op.RANGE_FOR else None
+    return start is not None and start.op is Op.CONST and start.attrs["value"] >= 0
+
+
 def lower_binary(f, s) -> str:
     a, b = s.operands
     t = a.type
@@ -108,6 +116,10 @@ def lower_binary(f, s) -> str:
     if op in (Op.MIN, Op.MAX):
         name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")
         return _intrinsic(f, name, t, [x, y])
+    if op in (Op.RAW_DIV, Op.RAW_MOD) and _nonnegative_digit(a) and b.op is Op.CONST and b.attrs["value"] > 0:
+        # a digit of a flat loop index (never negative): unsigned division is the same and a shift/mask
+        f.emit(f"{r} = {'udiv' if op is Op.RAW_DIV else 'urem'} {ty} {x}, {y}")
+        return r
     if not t.is_signed:
         d = _safe_divisor(f, y, ty)
         f.emit(f"{r} = {'udiv' if op in (Op.FLOORDIV, Op.RAW_DIV) else 'urem'} {ty} {x}, {d}")

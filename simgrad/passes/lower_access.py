@@ -22,7 +22,7 @@ from __future__ import annotations
 from simgrad import dtypes as dt
 from simgrad.ir.builder import Builder
 from simgrad.ir.fieldref import ArrayRef, FieldRef
-from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.digits import digit_chain
 
@@ -55,7 +55,7 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
                 changed |= _lower_block(b, loop, inside, before, debug)
         if s.op is Op.GLOBAL_PTR and not s.attrs.get("lowered"):
             invariant = before is not None and not debug and all(id(o) not in inside for o in s.operands)
-            offset_stmts = _lower_one(s, loop, debug)
+            offset_stmts = _lower_one(s, loop, inside, debug)
             for x in offset_stmts:
                 x.block = None if invariant else block
             (before if invariant and before is not None else out).extend(offset_stmts)
@@ -65,14 +65,14 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
     return changed
 
 
-def _lower_one(s: Stmt, loop: Stmt | None, debug: bool) -> list[Stmt]:
+def _lower_one(s: Stmt, loop: Stmt | None, inside: set, debug: bool) -> list[Stmt]:
     """The statements computing GLOBAL_PTR `s`'s byte offset, which becomes its last operand."""
     scratch = Block()
     b = Builder(scratch)
     b.loc = s.loc
     target = s.attrs["target"]
     if isinstance(target, FieldRef):
-        offset = _field_offset(b, s, target, loop, debug)
+        offset = _field_offset(b, s, target, loop, inside, debug)
     elif isinstance(target, ArrayRef):
         offset = _array_offset(b, s, target, debug)
     else:
@@ -124,14 +124,21 @@ def _checked(b: Builder, s: Stmt, name: str, axis: int, idx: Stmt, extent: Stmt,
                   {"field": name, "axis": axis, "shape": shape_text, "offset": offset})
 
 
-def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, debug: bool) -> Stmt:
+def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, inside: set, debug: bool) -> Stmt:
     """The byte offset of a field element from its tree's root, level by level (dense levels only today)."""
     if any(kind != "dense" for kind in target.kinds):
         raise NotImplementedError(f"internal: access lowering for SNode kinds {target.kinds}")
     _tree, const, terms, shape = target.layout
-    stride = None if debug else _linear_stride(s, terms, loop)
-    if stride is not None and loop is not None:  # affine in the loop index: LLVM can vectorise
-        return _add(b, b.const(const, dt.u64), _mul(b, _u64(b, loop), stride))
+    form = None if debug or loop is None else _affine_form(s, terms, loop, inside)
+    if form is not None and loop is not None:  # affine in the loop index: LLVM can vectorise
+        unit, shift, invariant = form
+        off = _mul(b, _u64(b, loop), unit)
+        for o, stride in invariant:
+            off = _add(b, off, _mul(b, _u64(b, o), stride))
+        shift += const
+        if shift < 0:  # `g[i - 1, j]`: subtract, so that no in-bounds partial sum wraps
+            return b.emit(Op.SUB, dt.u64, (off, b.const(-shift, dt.u64)), dict(_NOWRAP))
+        return _add(b, b.const(shift, dt.u64), off)
     idx = [_u64(b, o) for o in s.operands]
     if debug:
         offsets = target.offset or (0,) * len(shape)
@@ -166,19 +173,32 @@ def _array_offset(b: Builder, s: Stmt, arg: ArrayRef, debug: bool) -> Stmt:
     return _mul(b, lin, arg.dtype.bits // 8)
 
 
-def _linear_stride(s: Stmt, terms, loop: Stmt | None) -> int | None:
-    """The byte stride `st` when the element's offset is `const + L * st` for the parallel loop's index L:
-    the indices are the digits `(L // d) % m` of a flattened struct-for (the loop starting at 0) and the
-    field's strides follow the same digits (a dense field iterated in its own order). Else None."""
-    if loop is None or loop.operands[0].op is not Op.CONST or loop.operands[0].attrs["value"] != 0:
+def _affine_form(s: Stmt, terms, loop: Stmt, inside: set) -> tuple[int, int, list] | None:
+    """(unit, shift, invariant) when the element's byte offset from the field's first byte is
+    `L * unit + shift + sum(index * stride for index, stride in invariant)` for the parallel loop's index
+    L: every axis is plainly strided, and its index is either loop-invariant or a digit `(L // d) % m`
+    of the flattened loop plus a constant (`p[t, i + 1, j]` in `for i, j in g`), the digits together
+    being all of L with strides that follow them (a dense field iterated in its own order). Else None."""
+    if loop.operands[0].op is not Op.CONST or loop.operands[0].attrs["value"] != 0:
         return None
     if len(terms) != len(s.operands) or any(t.divisor != 1 or t.modulus for t in terms):
         return None
-    values = [s.operands[t.axis] for t in terms]
-    chain = digit_chain(values, loop)
-    if chain is None or len(chain) != len(terms):  # every index one digit of the chain
+    strides = {t.axis: t.stride for t in terms}
+    shift, invariant, digits, places = 0, [], [], []
+    for axis, o in enumerate(s.operands):
+        base, c = offset_form(o)
+        if base is None:
+            shift += c * strides[axis]
+        elif id(base) not in inside:
+            invariant.append((o, strides[axis]))
+        else:
+            digits.append(base)
+            places.append(axis)
+            shift += c * strides[axis]
+    chain = digit_chain(digits, loop) if digits else None
+    if chain is None or len(chain) != len(digits):  # every varying index one digit of the chain
         return None
-    unit = terms[chain[0][0]].stride
-    if any(terms[k].stride != divisor * unit for k, divisor, _mod in chain):
+    unit = strides[places[chain[0][0]]]
+    if any(strides[places[k]] != divisor * unit for k, divisor, _mod in chain):
         return None
-    return unit
+    return unit, shift, invariant

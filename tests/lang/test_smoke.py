@@ -170,3 +170,38 @@ def test_struct_for_accesses_in_loop_order_transposed_and_of_other_shapes():
     np.testing.assert_array_equal(tr.to_numpy(), np.transpose(a + 1, (2, 1, 0)))
     np.testing.assert_array_equal(wide.to_numpy()[:, :, :6], 3 * a)
     np.testing.assert_array_equal(wide.to_numpy()[:, :, 6], 0)
+
+
+def test_neighbour_and_time_sliced_accesses_in_a_struct_for_agree_with_numpy():
+    """p[t - 1, i + di, j + dj] in `for i, j in g` is addressed as L * stride plus a constant and a
+    loop-invariant slice (no division); guarded neighbours at the edges, a slice chosen at run time and
+    a field whose rows are wider than the loop's (not affine) must all agree with numpy."""
+    rng = np.random.default_rng(3)
+    n, m, steps = 6, 9, 4
+    a = rng.random((steps, n, m)).astype(np.float32)
+    p = ti.field(ti.f32, shape=(steps, n, m))
+    g = ti.field(ti.f32, shape=(n, m))
+    wide = ti.field(ti.f32, shape=(n, m + 3))
+    p.from_numpy(a)
+
+    @ti.kernel
+    def stencil(t: ti.i32):
+        for i, j in g:
+            s = -4.0 * p[t - 1, i, j]
+            if i > 0:
+                s += p[t - 1, i - 1, j]
+            if i < n - 1:
+                s += p[t - 1, i + 1, j]
+            if j > 0:
+                s += p[t - 1, i, j - 1]
+            if j < m - 1:
+                s += p[t - 1, i, j + 1]
+            g[i, j] = s + p[0, i, j]
+            wide[i, j + 3] = p[t, i, j]
+
+    for t in (1, 3):
+        stencil(t)
+        q = np.pad(a[t - 1], 1)
+        expect = -4 * a[t - 1] + q[:-2, 1:-1] + q[2:, 1:-1] + q[1:-1, :-2] + q[1:-1, 2:] + a[0]
+        np.testing.assert_allclose(g.to_numpy(), expect, rtol=1e-6)
+        np.testing.assert_array_equal(wide.to_numpy()[:, 3:], a[t])

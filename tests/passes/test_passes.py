@@ -241,6 +241,39 @@ def test_lower_access_expands_fields_into_offsets(golden):
     golden.check("lower_access.txt", text)
 
 
+def test_lower_access_neighbours_and_slices_are_affine_in_the_loop_index():
+    """`p[t, i - 1, j + 2]` in a loop over (i, j) digits: L * stride, a slice term `t * stride` and a
+    constant (subtracted when negative), no division; `p[t, j, i]` (transposed) keeps its digits."""
+    from simgrad.passes.lower_access import lower_access
+
+    ti.init(arch=ti.cpu)
+    p = ti.field(ti.f32, shape=(3, 4, 8), name="p")
+    k, b = new_kernel("neighbours")
+    t = b.emit(Op.ARG, dt.i32, (), {"slot": 0})
+    loop = parallel_for(b, 32)
+    with b.inside(loop.blocks[0]):
+        i = b.binary(Op.RAW_DIV, loop, b.const(8, dt.i32))
+        j = b.binary(Op.RAW_MOD, loop, b.const(8, dt.i32))
+        up = b.binary(Op.SUB, i, b.const(1, dt.i32))
+        right = b.binary(Op.ADD, j, b.const(2, dt.i32))
+        v = load(b, ptr(b, p, t, up, right))
+        store(b, ptr(b, p, t, j, b.binary(Op.RAW_MOD, i, b.const(8, dt.i32))), v)
+    parallel_strategy(k)
+    lower_access(k)
+    verify(k)
+    shifted, transposed = (s.operands[-1] for s in walk(k.body) if s.op is Op.GLOBAL_PTR)
+    assert shifted.op is Op.SUB and shifted.operands[1].attrs["value"] == 4 * 8 - 2 * 4  # -1 row, +2 cols
+
+    def reaches(x, want):
+        return x is want or x.op is not Op.RANGE_FOR and any(reaches(o, want) for o in x.operands)
+
+    def divides(x):
+        return x.op in (Op.RAW_DIV, Op.RAW_MOD) or x.op is not Op.RANGE_FOR and any(divides(o) for o in x.operands)
+
+    assert reaches(shifted, loop) and reaches(shifted, t) and not divides(shifted)
+    assert divides(transposed)
+
+
 def test_lower_access_debug_mode_checks_every_index_at_the_access():
     from simgrad.passes.lower_access import lower_access
 
