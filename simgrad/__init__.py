@@ -50,6 +50,7 @@ from simgrad.lang.factories import FieldsBuilder, field, root
 from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.compiler import fill as _fill  # installs the compiled zeroing of large gradients
+from simgrad.compiler import sparse_scope as _sparse_scope  # Python-scope access to sparse fields
 from simgrad.lang.kernel import data_oriented, func, pyfunc, real_func
 
 
@@ -116,6 +117,7 @@ from simgrad.lang.atomics import (
     atomic_xor,
 )
 from simgrad.lang.linalg import eig, polar_decompose, solve, svd, sym_eig
+from simgrad.lang.sparse import activate, append, deactivate, deactivate_all_snodes, is_active, length
 from simgrad.lang import profiler
 from simgrad.lang.program import init, reset
 
@@ -137,10 +139,10 @@ def get_runtime():
     return get_program()
 
 
-_SPARSE = "sparse SNodes (pointer/bitmasked/dynamic) are not built yet"
 _NOT_SUPPORTED = {
-    **{n: _SPARSE for n in ("activate", "deactivate", "deactivate_all_snodes", "is_active", "length", "append",
-                            "no_activate")},
+    "no_activate": "ti.no_activate is a GPU-backend hint simgrad does not have",
+    "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
+              "bitmasked / dynamic)",
     **{n: "Taichi's AOT/graph deployment is not part of simgrad" for n in ("aot", "graph", "ArgPack", "argpack")},
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
@@ -150,7 +152,6 @@ _NOT_SUPPORTED = {
     "get_addr": "raw field addresses are not exposed",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
-    "sparse": "sparse SNodes are not built yet",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",
 }
 

@@ -32,7 +32,9 @@ def lower_global_ptr(gen, f, s) -> str:
     off = f.v(s.operands[-1])
     target = s.attrs["target"]
     p = f.tmp("ptr")
-    if isinstance(target, FieldRef):
+    if s.attrs.get("absolute"):  # a sparse field's element: the walk computed its address
+        f.emit(f"{p} = inttoptr i64 {off} to ptr")
+    elif isinstance(target, FieldRef):
         private = f.private_root_of(s)
         if private is not None:  # its root points before the copy: no inbounds
             f.emit(f"{p} = getelementptr i8, ptr {private}, i64 {off}")

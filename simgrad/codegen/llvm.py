@@ -17,6 +17,7 @@ from simgrad import dtypes as dt
 from simgrad.codegen import arith
 from simgrad.codegen.access import lower_check_index as check_index
 from simgrad.codegen.access import lower_global_ptr as global_address
+from simgrad.codegen.sparse import lower_sparse_action, lower_sparse_cell, lower_tree_root
 from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import PAIR, PLAIN, PRIVATE, REDUCE
@@ -314,6 +315,11 @@ class KernelCodegen:
         f.emit(f"br label %{head}")
         f.start_block(done)
 
+    def need_branch_weights(self) -> None:
+        """The `!1` metadata (a cold branch) that failure paths and activations are marked with."""
+        if "!1 = " not in "".join(self.module.globals):
+            self.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
+
     def _check(self, f, ok_i32: str, code: int, value: str) -> None:
         """Report error `code` (with `value`) unless ok_i32 is nonzero; the failure branch is cold."""
         c = f.tmp("ok")
@@ -324,8 +330,7 @@ class KernelCodegen:
         f.emit(f"call void @sg_report(ptr %ctx, i64 {code}, i64 {value})")
         f.emit(f"br label %{good}")
         f.start_block(good)
-        if "!1 = " not in "".join(self.module.globals):
-            self.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
+        self.need_branch_weights()
 
 
 Lowering = Callable[[KernelCodegen, FunctionText, Stmt], None]
@@ -612,8 +617,7 @@ def lower_assert(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         f.emit(f"store i64 {word}, ptr {p}")
     f.emit(f"br label %{good}")
     f.start_block(good)
-    if "!1 = " not in "".join(g.module.globals):
-        g.module.globals.append('!1 = !{!"branch_weights", i32 1000, i32 1}')
+    g.need_branch_weights()
 
 
 def lower_tape_reset(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -656,6 +660,10 @@ def lower_random(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     f.names[s] = arith.random_value(f, s.vtype)
 
 
+def _not_lowered(s: Stmt) -> None:
+    raise AssertionError(f"internal: {s!r} reached codegen without passes/lower_access.py")
+
+
 def _combine_text(dst, op, ty, a, b, fm: str) -> str:
     if op == "xchg":
         return f"{dst} = select i1 true, {ty} {b}, {ty} {b}"
@@ -685,4 +693,6 @@ LOWERING: dict[Op, Lowering] = {
     Op.CONTINUE: lower_continue,
     Op.PRINT: lower_print, Op.ASSERT: lower_assert, Op.RANDOM: lower_random, Op.TAPE_RESET: lower_tape_reset,
     Op.TAPE_PUSH: lower_tape_push, Op.TAPE_POP: lower_tape_pop,
+    Op.SNODE_OP: lambda g, f, s: _not_lowered(s), Op.TREE_ROOT: lower_tree_root,
+    Op.SPARSE_CELL: lower_sparse_cell, Op.SPARSE_ACTION: lower_sparse_action,
 }

@@ -15,6 +15,7 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field
 from simgrad.lang.loops import grouped, ndrange, static
 from simgrad.lang.matrix import Matrix
+from simgrad.lang.snode import SNode
 
 
 def _is_static_call(comp, node) -> bool:
@@ -40,8 +41,16 @@ def lower_for(comp, node: ast.For) -> None:
         _nd_for(comp, node, it.bounds, grouped_=False)
     elif isinstance(it, grouped):
         t = it.target
+        cells = _sparse_node(t)
+        if cells is not None:
+            _sparse_for(comp, node, cells, _offset_of(t), grouped_=True)
+            return
         bounds = t.bounds if isinstance(t, ndrange) else _bounds_of(comp, t, node)
         _nd_for(comp, node, bounds, grouped_=True)
+    elif _sparse_node(it) is not None:
+        _sparse_for(comp, node, _sparse_node(it), _offset_of(it), grouped_=False)  # type: ignore[arg-type]
+    elif isinstance(it, SNode):
+        _nd_for(comp, node, [(0, n) for n in it.shape], grouped_=False)
     elif isinstance(it, Field) or _is_array(it):
         _nd_for(comp, node, _bounds_of(comp, it, node), grouped_=False)
     elif isinstance(it, Expr):
@@ -64,6 +73,109 @@ def _bounds_of(comp, target, node):
     shape = _shape_of(comp, target, node)
     offset = target._components()[0].offset if isinstance(target, Field) else None
     return [(o, o + n) for o, n in zip(offset, shape)] if offset else [(0, n) for n in shape]
+
+
+def _sparse_node(target) -> SNode | None:
+    """The node whose active cells a struct-for over `target` visits, when sparse SNodes are on its path:
+    a field's cells (the node its value is placed under) or an SNode's own."""
+    if isinstance(target, Field):
+        target._ensure()
+        node = target.snode.parent()
+    elif isinstance(target, SNode):
+        node = target
+        if node.tree is not None:
+            node.tree.materialize()
+    else:
+        return None
+    return node if node is not None and node.has_sparse_path() else None
+
+
+def _offset_of(target):
+    return target._components()[0].offset if isinstance(target, Field) else None
+
+
+def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> None:
+    """A struct-for over the active cells of `cells`: nested loops down the SNode path, one per run of
+    levels that ends at a sparse node, each entered only where that node's cell is active (a dynamic
+    node's loop runs to its list's length). The outermost loop (the levels down to the first sparse node,
+    flattened) is the parallel one; the indices are built digit by digit in `cells`' index space."""
+    from simgrad.lang import sparse
+
+    names = _target_names(comp, node.target)
+    axes = sorted({a for n in cells.path() for a in n.axes})
+    if grouped_ and len(names) != 1:
+        raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
+    if not grouped_ and len(names) != len(axes):
+        raise SimgradSyntaxError(f"this loop has {len(axes)} indices but {len(names)} loop variable(s)",
+                                 comp.loc(node.target))
+    groups: list[list[SNode]] = [[]]
+    for n in cells.path()[1:]:
+        if n.kind == "dynamic" and groups[-1]:
+            groups.append([])
+        groups[-1].append(n)
+        if n.is_sparse:
+            groups.append([])
+    if not groups[-1]:
+        groups.pop()
+
+    def bind(coords):
+        idx = [coords[a] for a in axes]
+        if offset:
+            idx = [ops.add(i, o) for i, o in zip(idx, offset)]
+        if grouped_:
+            comp.bind(names[0], Matrix(idx))
+        else:
+            for name, v in zip(names, idx):
+                comp.bind(name, v)
+        comp.visit_block(node.body)
+
+    def level(k: int, coords: dict) -> None:
+        if k == len(groups):
+            bind(coords)
+            return
+        group = groups[k]
+        if group[0].kind == "dynamic":
+            dyn = group[0]
+            ax = dyn.axes[0]
+            base = {a: ops.mul(v, dyn.sizes[0]) if a == ax else v for a, v in coords.items()}
+            base.setdefault(ax, 0)
+            count = sparse._emit("length", dyn, [ops.cast_expr(ops.to_expr(base[a], dt.i32), dt.i32) for a in axes
+                                                 if a in base])
+
+            def inner(i):
+                level(k + 1, {**base, ax: ops.add(base[ax], i)})
+
+            _emit_loop(comp, 0, count, inner)
+            return
+        digits = [(n, a, size) for n in group for a, size in zip(n.axes, n.sizes)]
+        total = 1
+        for _n, _a, size in digits:
+            total *= size
+
+        def body(flat):
+            new = dict(coords)
+            rest = flat
+            values = []
+            for _n, _a, size in reversed(digits):
+                values.append(_raw(Op.RAW_MOD, rest, size) if len(values) < len(digits) - 1 else rest)
+                rest = _raw(Op.RAW_DIV, rest, size)
+            values.reverse()
+            for (_n, a, size), v in zip(digits, values):
+                new[a] = ops.add(ops.mul(new[a], size), v) if a in new else v
+            last = group[-1]
+            if not last.is_sparse:
+                level(k + 1, new)
+                return
+            here = [a for a in axes if a in new]
+            active = sparse._emit("is_active", last, [ops.cast_expr(ops.to_expr(new[a], dt.i32), dt.i32)
+                                                     for a in here])
+            guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
+            with comp.dynamic(guard.blocks[0]):
+                level(k + 1, new)
+
+        _emit_loop(comp, 0, total, body)
+
+    level(0, {})
 
 
 def _shape_of(comp, target, node):

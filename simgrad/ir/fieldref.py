@@ -2,14 +2,53 @@
 
 A GLOBAL_PTR of a field refers to a FieldRef (attrs["target"]), built by the frontend from the lang-level
 field (lang/field.py ScalarField.ref()). Passes, autodiff and codegen read only this record, never the
-Field: that is what keeps them free of `simgrad.lang`, and where sparse SNode kinds will plug in (their
-per-level kinds go in `kinds`; passes/lower_access.py expands by kind)."""
+Field: that is what keeps them free of `simgrad.lang`. A field under sparse SNodes (pointer, bitmasked,
+dynamic) also carries its path as `levels`, which passes/lower_access.py walks level by level."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 from simgrad.dtypes import DataType
+
+
+@dataclass(frozen=True)
+class Level:
+    """One SNode on the path of a field that has sparse SNodes on it, outermost first.
+
+    The node's *container* sits `offset` bytes into a cell of its parent (the tree's root buffer for the
+    first level). Its `terms` (AccessTerm: axis, divisor, modulus, stride) give the number of the cell an
+    index names, in cells (strides count cells, not bytes). Per kind, the container holds:
+    dense: the cells, `cell_size` bytes each; bitmasked: the cells, then one activity bit per cell in u32
+    words at `mask_offset`; pointer: one 8-byte slot per cell pointing to the cell's block (allocated
+    from pool `pool` when the cell is activated, null while inactive); dynamic: a 16-byte header (i32
+    length, then the pointer to a block of `ncells` cells, allocated from `pool`)."""
+
+    kind: str
+    offset: int
+    terms: tuple
+    cell_size: int
+    ncells: int
+    pool: int = -1
+    mask_offset: int = 0
+
+    @property
+    def sparse(self) -> bool:
+        return self.kind != "dense"
+
+
+@dataclass(frozen=True)
+class SNodeRef:
+    """An SNode as the IR sees it (the target of ti.activate / is_active / deactivate / append / length):
+    the levels from the root down to it and the number of indices that address its cells."""
+
+    name: str
+    tree_id: int
+    levels: tuple
+    ndim: int
+
+    def ir_name(self) -> str:
+        return self.name
 
 
 @dataclass(eq=False)
@@ -22,12 +61,18 @@ class FieldRef:
     offset: tuple | None = None
     #: the record of the placed gradient field, None when there is none
     grad: FieldRef | None = None
-    #: SNode kind of each level on the path, outermost first
-    kinds: tuple = ("dense",)
     #: the lang-level field this describes; opaque below lang (Tape validation reads values through it)
     owner: object = field(default=None, repr=False)
     #: the record of the placed dual (forward-mode tangent) field, None when there is none
     dual: FieldRef | None = None
+    #: the SNodes of the path when one of them is sparse (Level, outermost first), else () (dense:
+    #: `layout` says everything); then the value sits `value_offset` bytes into a cell of the last level
+    levels: tuple = ()
+    value_offset: int = 0
+
+    @property
+    def sparse(self) -> bool:
+        return bool(self.levels)
 
     @property
     def shape(self) -> tuple:

@@ -21,6 +21,14 @@ class Op(Enum):
     GLOBAL_STORE = auto()
     ATOMIC = auto()  # atomic read-modify-write, returns the old value (attrs: kind)
     ARRAY_SHAPE = auto()  # runtime extent of an ndarray argument (attrs: arg, dim)
+    # sparse SNodes: SNODE_OP is what kernels say (attrs: op = is_active | activate | deactivate | length |
+    # append_slot, snode: SNodeRef; operands: the node's indices; i32 result); passes/lower_access.py turns
+    # it and every GLOBAL_PTR into a sparse field into the walk below, level by level
+    SNODE_OP = auto()
+    TREE_ROOT = auto()  # u64 address of an SNode tree's buffer (attrs: tree)
+    SPARSE_CELL = auto()  # u64 address of a cell of a sparse level (operands: container address, cell
+    #                       number; attrs: level, mode = read | write | nowrite)
+    SPARSE_ACTION = auto()  # SNODE_OP's effect on the last level (operands: container, cell; attrs: level, op)
     RET_STORE = auto()  # kernel return value (attrs: slot)
     # arithmetic
     ADD = auto()
@@ -103,8 +111,9 @@ CONTROL = {Op.IF, Op.RANGE_FOR, Op.WHILE}
 SIDE_EFFECTS = {
     Op.LOCAL_STORE, Op.GLOBAL_STORE, Op.ATOMIC, Op.RET_STORE, Op.IF, Op.RANGE_FOR, Op.WHILE, Op.BREAK,
     Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP, Op.CHECK_INDEX,
+    Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION,
 }
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = BINARY_ARITH | COMPARE | UNARY_MATH | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG,
-                                              Op.ARRAY_SHAPE, Op.GLOBAL_PTR}
+                                              Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.TREE_ROOT}
 ATOMIC_KINDS = ("add", "sub", "mul", "min", "max", "and", "or", "xor", "xchg")

@@ -20,6 +20,7 @@ from simgrad.errors import (
     caller_loc,
 )
 from simgrad.ir.fieldref import FieldRef
+from simgrad.lang import scope_hooks
 from simgrad.lang.matrix import Matrix
 
 if TYPE_CHECKING:
@@ -123,10 +124,8 @@ class Field:
                 c.snode.tree.materialize()
 
     def parent(self, n: int = 1):
-        node = self._components()[0].snode
-        for _ in range(n):
-            node = node.parent
-        return node
+        """The n-th SNode above this field's place node (Taichi's x.parent(n) == x.snode.parent(n))."""
+        return self._components()[0].snode.parent(n)
 
     @property
     def snode(self):
@@ -148,6 +147,7 @@ class ScalarField(Field):
         self._shape: tuple[int, ...] | None = None
         self.is_primal = True
         self.is_dual = False
+        self.sparse = False  # under a pointer/bitmasked/dynamic SNode: Python scope goes through kernels
 
     def _components(self):
         return [self]
@@ -162,8 +162,10 @@ class ScalarField(Field):
         key = (self.name, self.layout, self.offset, id(grad), id(dual))
         cached = getattr(self, "_ref", None)
         if cached is None or cached[0] != key:
-            kinds = tuple(n.kind for n in self._snode.path() if n.kind not in ("root", "place"))
-            ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, kinds, owner=self, dual=dual)
+            node = self._snode
+            levels = node.levels() if node.has_sparse_path() else ()
+            ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, owner=self, dual=dual,
+                           levels=levels, value_offset=node.offset_in_parent if levels else 0)
             self._ref = cached = (key, ref)
         return cached[1]
 
@@ -188,8 +190,12 @@ class ScalarField(Field):
         node = self._snode
         const, terms, shape = node.access_terms()
         tree = node.tree
-        self.layout = (tree.id, const, terms, shape)
         self._shape = shape
+        if node.has_sparse_path():  # no view: Python scope goes through kernels (lang/scope_hooks.py)
+            self.layout = (tree.id, 0, (), shape)
+            self.sparse = True
+            return
+        self.layout = (tree.id, const, terms, shape)
         buf = tree.buffer
         isz = self.dtype.nbytes
         if all(t.divisor == 1 and t.modulus == 0 for t in terms) and len(terms) == len(shape):
@@ -214,11 +220,19 @@ class ScalarField(Field):
             return tuple(k - o for k, o in zip(key, self.offset))
         return key
 
+    def _unshift(self, key):
+        """Back to the user's indices (kernels take those; the field's offset is theirs to subtract)."""
+        if self.offset:
+            return tuple(k + o for k, o in zip(key, self.offset))
+        return key
+
     def __getitem__(self, key):
         if self.view is None:
             self._ensure()
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
+        if self.sparse:
+            return scope_hooks.sparse.get(self, self._unshift(key))
         if self.view is not None:
             return self.view[key].item()
         flat, gather = self._indirect()
@@ -230,6 +244,8 @@ class ScalarField(Field):
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         _check_value(value, self.dtype, self.name)
+        if self.sparse:
+            return scope_hooks.sparse.set(self, self._unshift(key), value)
         if self.view is not None:
             self.view[key] = value
         else:
@@ -238,6 +254,9 @@ class ScalarField(Field):
 
     def to_numpy(self, dtype=None) -> np.ndarray:
         self._ensure()
+        if self.sparse:
+            out = scope_hooks.sparse.to_numpy(self)
+            return out.astype(dtype) if dtype is not None else out
         if self.view is not None:
             out = np.array(self.view)
         else:
@@ -250,6 +269,8 @@ class ScalarField(Field):
         arr = np.asarray(arr)
         if arr.shape != self.shape:
             raise ValueError(f"from_numpy: field {self.name} has shape {self.shape}, array has {arr.shape}")
+        if self.sparse:
+            return scope_hooks.sparse.from_numpy(self, arr)
         if self.view is not None:
             self.view[...] = arr
         else:
@@ -261,6 +282,8 @@ class ScalarField(Field):
             return _kernel_fill(self, value)
         self._ensure()
         _check_value(value, self.dtype, self.name)
+        if self.sparse:
+            return scope_hooks.sparse.fill(self, value)
         if self.view is not None:
             self.view[...] = value
         else:

@@ -12,6 +12,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.runtime import abi
 from simgrad.runtime.memory import Memory
+from simgrad.runtime.sparse import SparseMemory
 
 if TYPE_CHECKING:
     from simgrad.runtime.jit import CodeSpace
@@ -69,6 +70,7 @@ class Program:
         self.config = Config(**kw)
         self.set_default_types(self.config.default_fp, self.config.default_ip)
         self.memory = Memory()
+        self.sparse = SparseMemory()
         self.trees: list = []
         self._open_tree = None
         self.profiler = Profiler()
@@ -139,6 +141,7 @@ class Program:
         if self._code is not None:
             self._code.close()
             self._code = None
+        self.sparse.release()
 
     @property
     def pool(self):
@@ -160,7 +163,7 @@ class Program:
     def context_header(self) -> list[int]:
         """The header slots of every kernel context (abi.HEADER_SLOTS; the tape slots belong to each launcher)."""
         return [self.memory.roots_address, self.error.ctypes.data, self.rng_states.ctypes.data,
-                self.pool.parallel_for_address, self.pool.cancel_address]
+                self.pool.parallel_for_address, self.pool.cancel_address, self.sparse.address]
 
     @property
     def tape_capacity(self) -> int:

@@ -1,10 +1,12 @@
 """Structural nodes (SNodes): the layout tree fields are placed in, as in Taichi.
 
 `ti.root.dense(ti.ij, (4, 8)).place(a, b)` puts a and b side by side in each cell (AoS);
-separate `place` calls on separate dense nodes give SoA. Only dense nodes exist today; a
-node kind is a small class so pointer/bitmasked/dynamic nodes can join the tree later.
-A tree is materialised (its buffer allocated) the first time a kernel or Python code
-touches one of its fields; after that it is frozen and `ti.root` starts a fresh tree.
+separate `place` calls on separate dense nodes give SoA. Sparse nodes (pointer, bitmasked, dynamic)
+keep only a *container* in their parent's cell (slots, activity bits or a list header; see
+ir/fieldref.py Level) and their cells' contents in the container (bitmasked) or in blocks from a
+per-node pool (pointer, dynamic; runtime/sparse.py). A tree is materialised (its buffer allocated)
+the first time a kernel or Python code touches one of its fields; after that it is frozen and
+`ti.root` starts a fresh tree.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simgrad.errors import SimgradError, SimgradValueError, caller_loc
+from simgrad.ir.fieldref import Level
 
 if TYPE_CHECKING:
     from simgrad.lang.field import ScalarField
@@ -45,9 +48,12 @@ class AccessTerm:
     stride: int
 
 
+SPARSE_KINDS = ("pointer", "bitmasked", "dynamic")
+
+
 class SNode:
     def __init__(self, parent: SNode | None, kind: str, axes_: tuple[int, ...] = (), sizes: tuple = ()):
-        self.parent = parent
+        self._parent = parent
         self.kind = kind
         self.axes = axes_
         self.sizes = sizes
@@ -57,6 +63,22 @@ class SNode:
         self.cell_size = 0
         self.offset_in_parent = 0
         self.align = 1
+        self.block_size = 0  # pointer/dynamic: bytes of one block from the pool
+        self.mask_offset = 0  # bitmasked: where the activity bits start in the container
+        self.pool = -1  # pointer/dynamic: the program's pool for this node's blocks
+        self.chunk_size = None  # dynamic: Taichi's chunk size (blocks here hold the whole list)
+        self._ref: object = None  # its IR record once materialised (lang/sparse.py snode_ref)
+
+    def parent(self, n: int = 1) -> SNode | None:
+        """The n-th ancestor (Taichi's snode.parent(n)); None above the root."""
+        node: SNode | None = self
+        for _ in range(n):
+            node = node._parent if node is not None else None
+        return node
+
+    @property
+    def is_sparse(self) -> bool:
+        return self.kind in SPARSE_KINDS
 
     @property
     def _name(self) -> str:
@@ -74,19 +96,46 @@ class SNode:
             )
 
     def dense(self, indices, dimensions) -> SNode:
+        return self._child("dense", indices, dimensions)
+
+    def pointer(self, indices, dimensions) -> SNode:
+        """Cells allocated from a pool when first written (or ti.activate), freed by ti.deactivate."""
+        return self._child("pointer", indices, dimensions)
+
+    def bitmasked(self, indices, dimensions) -> SNode:
+        """Cells stored densely with one activity bit each: a struct-for visits only the active ones."""
+        return self._child("bitmasked", indices, dimensions)
+
+    def dynamic(self, index, dimension, chunk_size=None) -> SNode:
+        """A list along one axis of at most `dimension` cells: ti.append adds, ti.length counts."""
+        if isinstance(index, (tuple, list)):
+            if len(index) != 1:
+                raise SimgradError("dynamic(): a dynamic SNode has exactly one axis", caller_loc())
+            index = index[0]
+        node = self._child("dynamic", index, dimension)
+        node.chunk_size = chunk_size
+        return node
+
+    def hash(self, *args, **kwargs):
+        from simgrad.errors import SimgradNotSupportedError
+
+        raise SimgradNotSupportedError("hash SNodes were removed from Taichi and are not built in simgrad",
+                                       caller_loc())
+
+    def _child(self, kind: str, indices, dimensions) -> SNode:
         self._check_open()
         if isinstance(indices, Axis):
             indices = (indices,)
         ax = tuple(a.index for a in indices)
-        if isinstance(dimensions, int):
+        if isinstance(dimensions, (int, np.integer)):
             dimensions = (dimensions,) * len(ax)
         if any(isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0 for d in dimensions):
-            raise SimgradValueError(f"dense(): sizes must be non-negative integers, got {dimensions!r}",
+            raise SimgradValueError(f"{kind}(): sizes must be non-negative integers, got {dimensions!r}",
                                     caller_loc())
         dims = tuple(int(d) for d in dimensions)
         if len(dims) != len(ax):
-            raise SimgradError(f"dense(): {len(ax)} axes but {len(dims)} sizes")
-        child = SNode(self, "dense", ax, dims)
+            raise SimgradError(f"{kind}(): {len(ax)} axes but {len(dims)} sizes")
+        child = SNode(self, kind, ax, dims)
         self.children.append(child)
         return child
 
@@ -120,19 +169,34 @@ class SNode:
                 self.place(gdual, offset=offset)
         return self
 
+    def deactivate_all(self) -> None:
+        """Deactivate every cell of every sparse node at or under this one (deepest first, so no block
+        is freed while it still points to others); a pool whose node was emptied everywhere gives its
+        pages back."""
+        from simgrad.lang import scope_hooks
+
+        if self.tree is None:
+            return
+        self.tree.materialize()
+        nodes = [n for n in self._walk() if n.is_sparse]
+        for n in sorted(nodes, key=lambda n: -len(n.path())):
+            scope_hooks.sparse.deactivate_all(n)
+            if not any(a.is_sparse for a in n.path()[:-1]) and self in n.path():
+                n.tree.program.sparse.reset_pool(n.pool)
+
     def lazy_grad(self) -> None:
         """Place the gradient of every field under this node that needs one, beside its primal."""
         for node in list(self._walk()):
             g = node.field.grad if node.kind == "place" else None
             if g is not None and g.snode is None and node.field.is_primal:
-                node.parent.place(g)
+                node._parent.place(g)
 
     def lazy_dual(self) -> None:
         """Place the dual of every float field under this node, beside its primal (forward mode)."""
         for node in list(self._walk()):
             d = getattr(node.field, "dual", None) if node.kind == "place" else None
             if d is not None and d.snode is None and not node.field.is_dual:  # primals and gradients
-                node.parent.place(d)
+                node._parent.place(d)
 
     def _walk(self):
         yield self
@@ -148,7 +212,7 @@ class SNode:
         return n
 
     def _layout(self) -> int:
-        """Assign offsets bottom-up; returns this node's total size in bytes."""
+        """Assign offsets bottom-up; returns the bytes this node takes in a cell of its parent."""
         if self.kind == "place":
             assert self.field is not None
             size = self.field.dtype.nbytes
@@ -162,8 +226,20 @@ class SNode:
             c.offset_in_parent = off
             off += size
             align = max(align, c.align)
-        self.align = align
         self.cell_size = (off + align - 1) // align * align if off else 0
+        if self.kind == "pointer":  # one 8-byte slot per cell; the cell itself is a block
+            self.block_size = max(8, (self.cell_size + 7) // 8 * 8)
+            self.align = 8
+            return 8 * self.num_cells
+        if self.kind == "dynamic":  # header: i32 length, then the pointer to a block of the whole list
+            self.block_size = max(8, (self.cell_size * self.num_cells + 7) // 8 * 8)
+            self.align = 8
+            return 16
+        self.align = align
+        if self.kind == "bitmasked":
+            self.mask_offset = (self.cell_size * self.num_cells + 3) // 4 * 4
+            self.align = max(align, 4)
+            return self.mask_offset + 4 * ((self.num_cells + 31) // 32)
         return self.cell_size * self.num_cells
 
     def path(self) -> list[SNode]:
@@ -171,8 +247,49 @@ class SNode:
         n: SNode | None = self
         while n is not None:
             nodes.append(n)
-            n = n.parent
+            n = n._parent
         return nodes[::-1]
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The index space of this node's cells (Taichi's snode.shape): per distinct axis on the path,
+        the product of its sizes from the root down to here, in axis order."""
+        sizes: dict[int, int] = {}
+        for n in self.path():
+            for a, s in zip(n.axes, n.sizes):
+                sizes[a] = sizes.get(a, 1) * s
+        return tuple(sizes[a] for a in sorted(sizes))
+
+    def has_sparse_path(self) -> bool:
+        return any(n.is_sparse for n in self.path())
+
+    def levels(self) -> tuple[Level, ...]:
+        """The path from the root down to this node as ir/fieldref.py Levels; an index of this node's
+        shape names a cell at every level. Dense levels take their digits like access_terms."""
+        path = self.path()[1:]
+        if self.kind == "place":
+            path = path[:-1]
+        axes_ = sorted({a for n in path for a in n.axes})
+        position = {a: p for p, a in enumerate(axes_)}
+        below = dict.fromkeys(axes_, 1)  # product of the sizes along each axis under the current level
+        out: list[tuple[SNode, list[AccessTerm]]] = []
+        for n in reversed(path):
+            terms = []
+            weight = 1
+            for ax, size in reversed(list(zip(n.axes, n.sizes))):
+                terms.append(AccessTerm(position[ax], below[ax], size, weight))
+                weight *= size
+                below[ax] *= size
+            out.append((n, terms))
+        levels = []
+        first_use: set[int] = set()
+        for n, terms in reversed(out):  # outermost first: the outermost digit of an axis has no modulus
+            terms = [AccessTerm(t.axis, t.divisor, 0 if t.axis not in first_use else t.modulus, t.stride)
+                     for t in terms]
+            first_use.update(t.axis for t in terms)
+            levels.append(Level(n.kind, n.offset_in_parent, tuple(terms[::-1]), n.cell_size, n.num_cells,
+                                n.pool, n.mask_offset))
+        return tuple(levels)
 
     def access_terms(self) -> tuple[int, tuple[AccessTerm, ...], tuple[int, ...]]:
         """(constant byte offset, terms, shape) of a placed field, merged where strides compose."""
@@ -231,12 +348,26 @@ class SNodeTree:
         if self.materialized:
             return
         self.size = max(self.root._layout(), 1)
+        self._add_pools(self.root, 1)
         self.buffer = self.program.memory.allocate(self.size)
         self.program.memory.set_root(self.id, self.buffer)
         self.materialized = True
         for node in self.root._walk():
             if node.kind == "place":
                 node.field._bind()
+
+
+    def _add_pools(self, node: SNode, instances: int) -> None:
+        """A pool for every sparse node: blocks for each cell a pointer could activate (or each list of a
+        dynamic node), and the zero and discard blocks every sparse node reads and writes through."""
+        for c in node.children:
+            if c.kind == "place":
+                continue
+            if c.is_sparse:
+                blocks = instances * c.num_cells if c.kind == "pointer" else instances if c.kind == "dynamic" else 0
+                size = c.block_size if c.kind != "bitmasked" else c.cell_size
+                c.pool = self.program.sparse.add_pool(c.kind, size, blocks)
+            self._add_pools(c, instances * c.num_cells)
 
 
 def check_placed(field) -> None:

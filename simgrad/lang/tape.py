@@ -262,7 +262,7 @@ def clear_all_gradients(gradient_type=SNodeGradType.ADJOINT) -> None:
                 continue
             f = node.field
             if zero is not None and int(np.prod(f.shape)) >= _NATIVE_ZEROING:
-                native.setdefault(id(node.parent), []).append(f)
+                native.setdefault(id(node._parent), []).append(f)
             elif f.view is not None:
                 f.view[...] = 0
             else:

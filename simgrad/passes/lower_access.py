@@ -35,25 +35,41 @@ def indices_of(ptr: Stmt) -> tuple[Stmt, ...]:
 
 
 def lower_access(kernel: Kernel, debug: bool = False) -> bool:
-    return _lower_block(kernel.body, None, set(), None, debug)
+    written = {id(s.operands[0]) for s in walk(kernel.body)
+               if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR}
+    return _lower_block(kernel.body, None, set(), None, debug, written)
 
 
-def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt] | None, debug: bool) -> bool:
+def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt] | None, debug: bool,
+                 written: set) -> bool:
     """Lower the accesses of `block`; `loop` is the parallel loop the block is in (None outside one),
-    `inside` the ids of its statements, `before` what goes ahead of it."""
+    `inside` the ids of its statements, `before` what goes ahead of it; `written`: ids of the GLOBAL_PTRs
+    stored or atomically updated through (a sparse element is activated there)."""
     changed = False
     out: list[Stmt] = []
     for s in block.stmts:
         if loop is None and s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
             ahead: list[Stmt] = []
-            changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug)
+            changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug,
+                                    written)
             for x in ahead:
                 x.block = block
             out += ahead
         else:
             for b in s.blocks:
-                changed |= _lower_block(b, loop, inside, before, debug)
+                changed |= _lower_block(b, loop, inside, before, debug, written)
+        if s.op is Op.SNODE_OP:  # becomes the SPARSE_ACTION at the end of its walk
+            out += _lower_snode_op(s)
+            changed = True
+            continue
         if s.op is Op.GLOBAL_PTR and not s.attrs.get("lowered"):
+            target = s.attrs["target"]
+            if isinstance(target, FieldRef) and target.sparse:
+                mode = ("nowrite" if s.attrs.get("no_activate") else "write") if id(s) in written else "read"
+                out += _lower_sparse(s, target, mode, debug)
+                changed = True
+                out.append(s)
+                continue
             invariant = before is not None and not debug and all(id(o) not in inside for o in s.operands)
             offset_stmts = _lower_one(s, loop, inside, debug)
             for x in offset_stmts:
@@ -63,6 +79,85 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
         out.append(s)
     block.stmts = out
     return changed
+
+
+def _walk_levels(b: Builder, s: Stmt, tree_id: int, levels: tuple, idx: list, modes: list) -> Stmt:
+    """The u64 address of a cell of the last of `levels`, from the tree's root down: a dense level adds
+    its cell's offset, a sparse one looks the cell up (SPARSE_CELL, in that level's mode)."""
+    addr = b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": tree_id})
+    for level, mode in zip(levels, modes):
+        container = _add(b, addr, b.const(level.offset, dt.u64))
+        cell = _cell_number(b, level, idx)
+        if level.kind == "dense":
+            addr = _add(b, container, _mul(b, cell, level.cell_size))
+        else:
+            addr = b.emit(Op.SPARSE_CELL, dt.u64, (container, cell), {"level": level, "mode": mode})
+    return addr
+
+
+def _cell_number(b: Builder, level, idx: list) -> Stmt:
+    n = b.const(0, dt.u64)
+    for t in level.terms:
+        d = idx[t.axis]
+        if t.divisor != 1:
+            d = _digit(b, Op.RAW_DIV, d, t.divisor)
+        if t.modulus:
+            d = _digit(b, Op.RAW_MOD, d, t.modulus)
+        n = _add(b, n, _mul(b, d, t.stride))
+    return n
+
+
+def _indices(b: Builder, s: Stmt, name: str, shape: tuple, debug: bool) -> list:
+    idx = [_u64(b, o) for o in s.operands]
+    if debug:
+        text = str(tuple(shape))
+        idx = [_checked(b, s, name, k, i, b.const(shape[k], dt.u64), text) for k, i in enumerate(idx)]
+    return idx
+
+
+def _sparse_modes(levels: tuple, mode: str) -> list:
+    """Reads look every level up without activating (an inactive one gives its zero block); writes
+    activate every level; a write that must not activate (an adjoint into a gradient) reads its way down
+    and only the last sparse level sends an inactive cell to the discard block."""
+    if mode != "nowrite":
+        return [mode] * len(levels)
+    last = max(k for k, lv in enumerate(levels) if lv.sparse)
+    return ["nowrite" if k == last else "read" for k in range(len(levels))]
+
+
+def _lower_sparse(s: Stmt, target: FieldRef, mode: str, debug: bool) -> list[Stmt]:
+    """A GLOBAL_PTR into a field under sparse SNodes: its absolute address (attrs `absolute`)."""
+    scratch = Block()
+    b = Builder(scratch)
+    b.loc = s.loc
+    idx = _indices(b, s, target.name, target.shape, debug)
+    levels = target.levels
+    addr = _walk_levels(b, s, target.layout[0], levels, idx, _sparse_modes(levels, mode))
+    addr = _add(b, addr, b.const(target.value_offset, dt.u64))
+    s.operands = (*s.operands, addr)
+    s.attrs["lowered"] = True
+    s.attrs["absolute"] = True
+    return scratch.stmts
+
+
+def _lower_snode_op(s: Stmt) -> list[Stmt]:
+    """ti.activate / deactivate / is_active / length / append on a sparse node: walk to the container of
+    the node's cell (activating the levels above only when the op activates), then act on it."""
+    scratch = Block()
+    b = Builder(scratch)
+    b.loc = s.loc
+    node = s.attrs["snode"]
+    op = s.attrs["op"]
+    idx = _indices(b, s, node.name, (), False)
+    *above, last = node.levels
+    mode = "write" if op in ("activate", "append_slot") else "read"
+    addr = _walk_levels(b, s, node.tree_id, tuple(above), idx, [mode] * len(above)) if above else \
+        b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": node.tree_id})
+    container = _add(b, addr, b.const(last.offset, dt.u64))
+    cell = _cell_number(b, last, idx)
+    s.op, s.operands, s.attrs = Op.SPARSE_ACTION, (container, cell), {"level": last, "op": op}
+    scratch.stmts.append(s)
+    return scratch.stmts
 
 
 def _lower_one(s: Stmt, loop: Stmt | None, inside: set, debug: bool) -> list[Stmt]:
@@ -126,8 +221,6 @@ def _checked(b: Builder, s: Stmt, name: str, axis: int, idx: Stmt, extent: Stmt,
 
 def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, inside: set, debug: bool) -> Stmt:
     """The byte offset of a field element from its tree's root, level by level (dense levels only today)."""
-    if any(kind != "dense" for kind in target.kinds):
-        raise NotImplementedError(f"internal: access lowering for SNode kinds {target.kinds}")
     _tree, const, terms, shape = target.layout
     form = None if debug or loop is None else _affine_form(s, terms, loop, inside)
     if form is not None and loop is not None:  # affine in the loop index: LLVM can vectorise

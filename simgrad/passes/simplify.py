@@ -88,6 +88,8 @@ def _key(s: Stmt, repl):
     t_offset = -1 and `t - 1` are one value (one slice of a field for the parallel analyses)."""
     if s.op not in O.PURE or s.op is Op.ARG:
         return None
+    if s.op is Op.GLOBAL_PTR and getattr(s.attrs["target"], "sparse", False):
+        return None  # a sparse element's write activates at its own place: a read must not share it
     op, operands = s.op, [("c", o.type, o.attrs["value"]) if o.op is Op.CONST else id(o) for o in s.operands]
     if op is Op.ADD and not s.vtype.is_float and isinstance(operands[1], tuple) and operands[1][2] < 0:
         op, operands[1] = Op.SUB, ("c", operands[1][1], -operands[1][2])

@@ -15,7 +15,8 @@ CTX_TAPE_CAP = 5  # tape capacity per thread, in entries
 CTX_TAPE_SERIAL = 6  # the tape of the serial part of the kernel
 CTX_NTHREADS = 7  # number of pool threads
 CTX_CANCEL = 8  # the process's cancel flag (i32, set by Ctrl-C; runtime/threadpool.py)
-CTX_ARGS = 9  # first argument slot; return values follow the arguments
+CTX_SPARSE = 9  # the sparse SNode pool table (runtime/sparse.py)
+CTX_ARGS = 10  # first argument slot; return values follow the arguments
 
 # The error buffer: code, value, then up to ERR_MAX_ARGS values of a failed assert's message (64-bit words)
 ERR_ARGS = 2
@@ -26,7 +27,7 @@ ERR_WORDS = ERR_ARGS + ERR_MAX_ARGS
 ERR_INTERRUPTED = -1
 
 # Slots the program fills identically for every kernel (Program.context_header), in slot order.
-HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_CANCEL)
+HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_CANCEL, CTX_SPARSE)
 
 # Closure of an outlined task: slot 0 holds the context pointer, captured values follow.
 CLOSURE_CTX = 0

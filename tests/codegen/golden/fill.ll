@@ -36,7 +36,7 @@ entry:
   %cp.1 = getelementptr i64, ptr %ctx, i64 8
   %cv.2 = load ptr, ptr %cp.1
   store atomic i32 0, ptr %cv.2 monotonic, align 4
-  %cp.3 = getelementptr i64, ptr %ctx, i64 9
+  %cp.3 = getelementptr i64, ptr %ctx, i64 10
   %cv.4 = load float, ptr %cp.3
   %clo.5 = alloca [2 x i64], align 8
   %cp.9 = getelementptr i64, ptr %ctx, i64 3

@@ -271,7 +271,7 @@ entry:
   %pv.15 = and i1 %pv.18, %pv.17
   br i1 %pv.15, label %alloc.20, label %atomic.19
 alloc.20:
-  %pctx.23 = getelementptr i64, ptr %ctx, i64 10
+  %pctx.23 = getelementptr i64, ptr %ctx, i64 11
   %phave.24 = load ptr, ptr %pctx.23
   %pnull.27 = icmp eq ptr %phave.24, null
   br i1 %pnull.27, label %pfresh.25, label %pready.26
@@ -285,7 +285,7 @@ pready.26:
   store ptr %priv.29, ptr %pslot.30
   %pnn.31 = icmp ne ptr %priv.29, null
   %pok.32 = and i1 true, %pnn.31
-  %pctx.33 = getelementptr i64, ptr %ctx, i64 11
+  %pctx.33 = getelementptr i64, ptr %ctx, i64 12
   %phave.34 = load ptr, ptr %pctx.33
   %pnull.37 = icmp eq ptr %phave.34, null
   br i1 %pnull.37, label %pfresh.35, label %pready.36

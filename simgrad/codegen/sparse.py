@@ -1,0 +1,343 @@
+"""LLVM IR for sparse SNodes: looking a cell up (SPARSE_CELL), acting on one (SPARSE_ACTION), and the two
+helpers every kernel module that activates or frees gets: `@sg_sparse_alloc` (a block for a slot, under the
+pool's spin lock) and `@sg_sparse_free` (zero a block and put it on the pool's free list). The pool table
+and what its words mean are runtime/sparse.py's; passes/lower_access.py decides which level is looked up
+how (read: an inactive cell is the zero block; write: activate; nowrite: an inactive cell is the discard
+block)."""
+
+from __future__ import annotations
+
+from simgrad.runtime import abi
+from simgrad.runtime import sparse as rt
+
+_HELPERS = r"""
+define internal ptr @sg_pool(ptr %ctx, i64 %pool) alwaysinline {
+  %tp = getelementptr i64, ptr %ctx, i64 @CTX_SPARSE@
+  %table = load ptr, ptr %tp
+  %off = mul i64 %pool, @POOL_WORDS@
+  %row = getelementptr i64, ptr %table, i64 %off
+  ret ptr %row
+}
+
+define internal void @sg_pool_lock(ptr %row) {
+entry:
+  br label %try
+try:
+  %old = atomicrmw xchg ptr %row, i64 1 acquire
+  %free = icmp eq i64 %old, 0
+  br i1 %free, label %done, label %spin
+spin:
+  br label %try
+done:
+  ret void
+}
+
+define internal void @sg_pool_unlock(ptr %row) {
+  store atomic i64 0, ptr %row release, align 8
+  ret void
+}
+
+; the block behind *slot, allocating it (zeroed) when the slot is still null; a pool that has run out
+; reports error `code` and hands out the discard block
+define internal ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code) noinline {
+entry:
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  call void @sg_pool_lock(ptr %row)
+  %cur = load atomic ptr, ptr %slot acquire, align 8
+  %have = icmp ne ptr %cur, null
+  br i1 %have, label %unlock_cur, label %take
+unlock_cur:
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %cur
+take:
+  %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
+  %free = load ptr, ptr %fp
+  %has_free = icmp ne ptr %free, null
+  br i1 %has_free, label %reuse, label %bump
+reuse:
+  %next = load ptr, ptr %free
+  store ptr %next, ptr %fp
+  store i64 0, ptr %free
+  br label %got
+bump:
+  %np = getelementptr i64, ptr %row, i64 @POOL_NEXT@
+  %n = load i64, ptr %np
+  %cp = getelementptr i64, ptr %row, i64 @POOL_CAPACITY@
+  %cap = load i64, ptr %cp
+  %full = icmp uge i64 %n, %cap
+  br i1 %full, label %exhausted, label %fresh
+fresh:
+  %n1 = add i64 %n, 1
+  store i64 %n1, ptr %np
+  %bp = getelementptr i64, ptr %row, i64 @POOL_BASE@
+  %base = load ptr, ptr %bp
+  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
+  %sz = load i64, ptr %szp
+  %boff = mul i64 %n, %sz
+  %blk = getelementptr i8, ptr %base, i64 %boff
+  br label %got
+got:
+  %b = phi ptr [%free, %reuse], [%blk, %fresh]
+  %lp = getelementptr i64, ptr %row, i64 @POOL_LIVE@
+  %live = load i64, ptr %lp
+  %live1 = add i64 %live, 1
+  store i64 %live1, ptr %lp
+  store atomic ptr %b, ptr %slot release, align 8
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %b
+exhausted:
+  call void @sg_pool_unlock(ptr %row)
+  call void @sg_report(ptr %ctx, i64 %code, i64 %cap)
+  %dp = getelementptr i64, ptr %row, i64 @POOL_DISCARD@
+  %discard = load ptr, ptr %dp
+  ret ptr %discard
+}
+
+; zero a block and give it back to its pool
+define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
+  %sz = load i64, ptr %szp
+  call void @llvm.memset.p0.i64(ptr %blk, i8 0, i64 %sz, i1 false)
+  call void @sg_pool_lock(ptr %row)
+  %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
+  %free = load ptr, ptr %fp
+  store ptr %free, ptr %blk
+  store ptr %blk, ptr %fp
+  %lp = getelementptr i64, ptr %row, i64 @POOL_LIVE@
+  %live = load i64, ptr %lp
+  %live1 = sub i64 %live, 1
+  store i64 %live1, ptr %lp
+  call void @sg_pool_unlock(ptr %row)
+  ret void
+}
+"""
+for _name, _value in (("CTX_SPARSE", abi.CTX_SPARSE), ("POOL_WORDS", rt.POOL_WORDS), ("POOL_FREE", rt.POOL_FREE),
+                      ("POOL_NEXT", rt.POOL_NEXT), ("POOL_CAPACITY", rt.POOL_CAPACITY),
+                      ("POOL_BASE", rt.POOL_BASE), ("POOL_BLOCK", rt.POOL_BLOCK), ("POOL_LIVE", rt.POOL_LIVE),
+                      ("POOL_DISCARD", rt.POOL_DISCARD)):
+    _HELPERS = _HELPERS.replace(f"@{_name}@", str(_value))
+
+
+def _helpers(g) -> None:
+    g.module.declare("declare void @llvm.memset.p0.i64(ptr, i8, i64, i1)")
+    if _HELPERS not in g.module.functions:
+        g.module.functions.append(_HELPERS)
+
+
+def _pool_word(f, pool: int, word: int) -> str:
+    """A word of a pool's table entry, loaded where it is used (the table moves only between launches)."""
+    tp, table, p, v = f.tmp("spt"), f.tmp("sptab"), f.tmp("spw"), f.tmp("spv")
+    f.emit(f"{tp} = getelementptr i64, ptr %ctx, i64 {abi.CTX_SPARSE}")
+    f.emit(f"{table} = load ptr, ptr {tp}, !invariant.load !0")
+    f.emit(f"{p} = getelementptr i64, ptr {table}, i64 {pool * rt.POOL_WORDS + word}")
+    f.emit(f"{v} = load ptr, ptr {p}, !invariant.load !0")
+    return v
+
+
+def lower_tree_root(g, f, s) -> None:
+    r = f.tmp("rootaddr")
+    f.emit(f"{r} = ptrtoint ptr {f.root(s.attrs['tree'])} to i64")
+    f.names[s] = r
+
+
+def _as_ptr(f, v: str) -> str:
+    p = f.tmp("cp")
+    f.emit(f"{p} = inttoptr i64 {v} to ptr")
+    return p
+
+
+def _as_int(f, p: str) -> str:
+    r = f.tmp("ci")
+    f.emit(f"{r} = ptrtoint ptr {p} to i64")
+    return r
+
+
+def _branch(f, cond: str, then_emit, else_emit=None) -> None:
+    """if cond (i1) { then_emit() } else { else_emit() }; both emit straight-line code."""
+    t, e, d = f.label("sthen"), f.label("selse"), f.label("sdone")
+    f.emit(f"br i1 {cond}, label %{t}, label %{e}")
+    f.start_block(t)
+    then_emit()
+    f.emit(f"br label %{d}")
+    f.start_block(e)
+    if else_emit is not None:
+        else_emit()
+    f.emit(f"br label %{d}")
+    f.start_block(d)
+
+
+def _slot_block(g, f, s, slot: str, level, mode: str) -> str:
+    """The block a slot points to (pointer cell, dynamic list): by mode, the zero block, a new block or
+    the discard block when it is null."""
+    cur = f.tmp("blk")
+    f.emit(f"{cur} = load atomic ptr, ptr {slot} monotonic, align 8")
+    null = f.tmp("isnull")
+    f.emit(f"{null} = icmp eq ptr {cur}, null")
+    if mode == "write":
+        _helpers(g)
+        code = g.error_code("sparse_pool", s.loc, level.kind)
+        t, d, pre = f.label("act"), f.label("actdone"), f.label("actpre")
+        f.emit(f"br label %{pre}")
+        f.start_block(pre)
+        f.emit(f"br i1 {null}, label %{t}, label %{d}, !prof !1")
+        f.start_block(t)
+        new = f.tmp("newblk")
+        f.emit(f"{new} = call ptr @sg_sparse_alloc(ptr %ctx, i64 {level.pool}, ptr {slot}, i64 {code})")
+        f.emit(f"br label %{d}")
+        f.start_block(d)
+        r = f.tmp("blkr")
+        f.emit(f"{r} = phi ptr [{cur}, %{pre}], [{new}, %{t}]")
+        g.need_branch_weights()
+        return r
+    other = _pool_word(f, level.pool, rt.POOL_ZERO if mode == "read" else rt.POOL_DISCARD)
+    r = f.tmp("blkr")
+    f.emit(f"{r} = select i1 {null}, ptr {other}, ptr {cur}")
+    return r
+
+
+def _mask_word(f, container: str, cell: str, level) -> tuple[str, str]:
+    """(pointer to the u32 activity word of a bitmasked cell, its bit)."""
+    w, wb, p, b, b32, bit = (f.tmp("mw") for _ in range(6))
+    f.emit(f"{w} = lshr i64 {cell}, 5")
+    f.emit(f"{wb} = mul i64 {w}, 4")
+    f.emit(f"{p} = add i64 {container}, {level.mask_offset}")
+    addr = f.tmp("mwa")
+    f.emit(f"{addr} = add i64 {p}, {wb}")
+    f.emit(f"{b} = and i64 {cell}, 31")
+    f.emit(f"{b32} = trunc i64 {b} to i32")
+    f.emit(f"{bit} = shl i32 1, {b32}")
+    return _as_ptr(f, addr), bit
+
+
+def _bit_set(f, word_ptr: str, bit: str) -> str:
+    v, a, r = f.tmp("mv"), f.tmp("ma"), f.tmp("mset")
+    f.emit(f"{v} = load atomic i32, ptr {word_ptr} monotonic, align 4")
+    f.emit(f"{a} = and i32 {v}, {bit}")
+    f.emit(f"{r} = icmp ne i32 {a}, 0")
+    return r
+
+
+def lower_sparse_cell(g, f, s) -> None:
+    container, cell = (f.v(o) for o in s.operands)
+    level, mode = s.attrs["level"], s.attrs["mode"]
+    kind = level.kind
+    if kind == "pointer":
+        so, sa = f.tmp("so"), f.tmp("sa")
+        f.emit(f"{so} = mul i64 {cell}, 8")
+        f.emit(f"{sa} = add i64 {container}, {so}")
+        f.names[s] = _as_int(f, _slot_block(g, f, s, _as_ptr(f, sa), level, mode))
+        return
+    if kind == "dynamic":
+        hp = f.tmp("hp")
+        f.emit(f"{hp} = add i64 {container}, 8")
+        blk = _as_int(f, _slot_block(g, f, s, _as_ptr(f, hp), level, mode))
+        if mode == "write":  # the list now reaches at least this element
+            n1, n32 = f.tmp("dn"), f.tmp("dn32")
+            f.emit(f"{n1} = add i64 {cell}, 1")
+            f.emit(f"{n32} = trunc i64 {n1} to i32")
+            f.emit(f"atomicrmw max ptr {_as_ptr(f, container)}, i32 {n32} monotonic")
+        off, r = f.tmp("eo"), f.tmp("ea")
+        f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
+        f.emit(f"{r} = add i64 {blk}, {off}")
+        f.names[s] = r
+        return
+    # bitmasked: the cells are in the container; the data of an inactive cell is zero
+    off, addr = f.tmp("bo"), f.tmp("ba")
+    f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
+    f.emit(f"{addr} = add i64 {container}, {off}")
+    if mode == "read":
+        f.names[s] = addr
+        return
+    word, bit = _mask_word(f, container, cell, level)
+    is_set = _bit_set(f, word, bit)
+    if mode == "write":
+        _branch(f, is_set, lambda: None, lambda: f.emit(f"atomicrmw or ptr {word}, i32 {bit} monotonic"))
+        f.names[s] = addr
+        return
+    discard = _as_int(f, _pool_word(f, level.pool, rt.POOL_DISCARD))
+    r = f.tmp("ba")
+    f.emit(f"{r} = select i1 {is_set}, i64 {addr}, i64 {discard}")
+    f.names[s] = r
+
+
+def lower_sparse_action(g, f, s) -> None:
+    container, cell = (f.v(o) for o in s.operands)
+    level, op = s.attrs["level"], s.attrs["op"]
+    kind = level.kind
+    r = f.tmp("act")
+    if kind == "pointer" or (kind == "dynamic" and op in ("activate", "deactivate")):
+        if kind == "pointer":
+            so, sa = f.tmp("so"), f.tmp("sa")
+            f.emit(f"{so} = mul i64 {cell}, 8")
+            f.emit(f"{sa} = add i64 {container}, {so}")
+        else:
+            sa = f.tmp("hp")
+            f.emit(f"{sa} = add i64 {container}, 8")
+        slot = _as_ptr(f, sa)
+        if op == "is_active":
+            cur, c = f.tmp("cur"), f.tmp("c")
+            f.emit(f"{cur} = load atomic ptr, ptr {slot} monotonic, align 8")
+            f.emit(f"{c} = icmp ne ptr {cur}, null")
+            f.emit(f"{r} = zext i1 {c} to i32")
+        elif op == "activate":
+            _slot_block(g, f, s, slot, level, "write")
+            f.emit(f"{r} = add i32 0, 0")
+        elif op == "deactivate":
+            _helpers(g)
+            old, c = f.tmp("old"), f.tmp("c")
+            f.emit(f"{old} = atomicrmw xchg ptr {slot}, ptr null monotonic")
+            f.emit(f"{c} = icmp ne ptr {old}, null")
+            if kind == "dynamic":
+                f.emit(f"store atomic i32 0, ptr {_as_ptr(f, container)} monotonic, align 4")
+            _branch(f, c, lambda: f.emit(f"call void @sg_sparse_free(ptr %ctx, i64 {level.pool}, ptr {old})"))
+            f.emit(f"{r} = add i32 0, 0")
+        else:
+            raise AssertionError(f"internal: {op} on a {kind} node")
+        f.names[s] = r
+        return
+    if kind == "dynamic":
+        lp = _as_ptr(f, container)
+        if op == "length":
+            n = f.tmp("len")
+            f.emit(f"{n} = load atomic i32, ptr {lp} monotonic, align 4")
+            f.emit(f"{r} = call i32 @llvm.smin.i32(i32 {n}, i32 {level.ncells})")
+            g.module.declare("declare i32 @llvm.smin.i32(i32, i32)")
+        elif op == "append_slot":
+            f.emit(f"{r} = atomicrmw add ptr {lp}, i32 1 monotonic")
+        elif op == "is_active":
+            n, c, c32 = f.tmp("len"), f.tmp("c"), f.tmp("c32")
+            f.emit(f"{n} = load atomic i32, ptr {lp} monotonic, align 4")
+            f.emit(f"{c32} = trunc i64 {cell} to i32")
+            f.emit(f"{c} = icmp slt i32 {c32}, {n}")
+            f.emit(f"{r} = zext i1 {c} to i32")
+        else:
+            raise AssertionError(f"internal: {op} on a dynamic node")
+        f.names[s] = r
+        return
+    # bitmasked
+    word, bit = _mask_word(f, container, cell, level)
+    if op == "is_active":
+        f.emit(f"{r} = zext i1 {_bit_set(f, word, bit)} to i32")
+    elif op == "activate":
+        f.emit(f"atomicrmw or ptr {word}, i32 {bit} monotonic")
+        f.emit(f"{r} = add i32 0, 0")
+    elif op == "deactivate":
+        nb, old, was, c = f.tmp("nb"), f.tmp("old"), f.tmp("was"), f.tmp("c")
+        f.emit(f"{nb} = xor i32 {bit}, -1")
+        f.emit(f"{old} = atomicrmw and ptr {word}, i32 {nb} monotonic")
+        f.emit(f"{was} = and i32 {old}, {bit}")
+        f.emit(f"{c} = icmp ne i32 {was}, 0")
+        g.module.declare("declare void @llvm.memset.p0.i64(ptr, i8, i64, i1)")
+
+        def clear():
+            off, addr = f.tmp("bo"), f.tmp("ba")
+            f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
+            f.emit(f"{addr} = add i64 {container}, {off}")
+            f.emit(f"call void @llvm.memset.p0.i64(ptr {_as_ptr(f, addr)}, i8 0, i64 {level.cell_size}, i1 false)")
+
+        _branch(f, c, clear)
+        f.emit(f"{r} = add i32 0, 0")
+    else:
+        raise AssertionError(f"internal: {op} on a bitmasked node")
+    f.names[s] = r

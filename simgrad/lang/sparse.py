@@ -1,0 +1,143 @@
+"""Sparse SNode operations as Taichi names them: ti.activate / deactivate / is_active / append / length
+inside kernels (each emits one SNODE_OP that passes/lower_access.py expands), and deactivate_all in
+Python scope (a compiled struct-for over the node, lang/scope_hooks.py)."""
+
+from __future__ import annotations
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradError, SimgradSyntaxError, caller_loc
+from simgrad.ir import context
+from simgrad.ir.fieldref import SNodeRef
+from simgrad.ir.ops import Op
+from simgrad.lang import ops
+from simgrad.lang.expr import Expr
+from simgrad.lang.snode import SNode
+
+
+def _node(x, what: str) -> SNode:
+    """An SNode argument: the node itself, or a field (Taichi accepts `x` for `x.snode` in some places)."""
+    from simgrad.lang.field import Field
+
+    if isinstance(x, Field):
+        x = x.snode
+    if not isinstance(x, SNode):
+        raise SimgradSyntaxError(f"ti.{what} expects an SNode (e.g. x.snode.parent()), got {type(x).__name__}",
+                                 context.current_loc())
+    return x
+
+
+def snode_ref(node: SNode) -> SNodeRef:
+    """The IR's record of a (materialised) SNode."""
+    tree = node.tree
+    assert tree is not None
+    tree.materialize()
+    if not isinstance(node._ref, SNodeRef):
+        node._ref = SNodeRef(_name(node), tree.id, node.levels(), len(node.shape))
+    return node._ref
+
+
+def _name(node: SNode) -> str:
+    fields = [n.field.name for n in node._walk() if n.kind == "place" and n.field is not None]
+    return f"{node.kind}({', '.join(fields[:3])}{', ...' if len(fields) > 3 else ''})"
+
+
+def _indices(node: SNode, indices, what: str, dims: int) -> list[Expr]:
+    from simgrad.lang.matrix import Matrix
+
+    if isinstance(indices, Matrix):
+        indices = list(indices.entries)
+    elif isinstance(indices, (list, tuple)):
+        indices = list(indices)
+    else:
+        indices = [indices]
+    if len(indices) != dims:
+        raise SimgradSyntaxError(f"ti.{what}: this {node.kind} node takes {dims} index(es), got {len(indices)}",
+                                 context.current_loc())
+    return [ops.cast_expr(ops.to_expr(i, dt.i32), dt.i32) for i in indices]
+
+
+def _emit(op: str, node: SNode, idx: list[Expr]) -> Expr:
+    if not node.is_sparse:
+        raise SimgradSyntaxError(f"ti.{_PUBLIC[op]} works on pointer, bitmasked and dynamic SNodes, not on a "
+                                 f"{node.kind} node", context.current_loc())
+    ref = snode_ref(node)
+    return Expr(context.builder().emit(Op.SNODE_OP, dt.i32, tuple(i.stmt for i in idx), {"op": op, "snode": ref}))
+
+
+_PUBLIC = {"activate": "activate", "deactivate": "deactivate", "is_active": "is_active", "length": "length",
+           "append_slot": "append"}
+
+
+def _in_kernel(what: str) -> None:
+    if context.current() is None:
+        raise SimgradError(f"ti.{what} can only be called inside a kernel (in Python scope use "
+                           "snode.deactivate_all() or write the field)", caller_loc())
+
+
+def activate(node, indices) -> None:
+    """Activate the cell of `node` at `indices` (its own index space, e.g. block coordinates)."""
+    _in_kernel("activate")
+    n = _node(node, "activate")
+    _emit("activate", n, _indices(n, indices, "activate", len(n.shape)))
+
+
+def deactivate(node, indices) -> None:
+    """Deactivate a cell: a pointer's block goes back to its pool zeroed, a bitmasked cell is zeroed, a
+    dynamic list becomes empty."""
+    _in_kernel("deactivate")
+    n = _node(node, "deactivate")
+    _emit("deactivate", n, _indices(n, indices, "deactivate", len(n.shape)))
+
+
+def is_active(node, indices):
+    _in_kernel("is_active")
+    n = _node(node, "is_active")
+    return _emit("is_active", n, _indices(n, indices, "is_active", len(n.shape)))
+
+
+def _list_indices(n: SNode, indices, what: str) -> list[Expr]:
+    """A dynamic node's list is named by the indices of its parent's cell; its own axis is added as 0."""
+    if n.kind != "dynamic":
+        raise SimgradSyntaxError(f"ti.{what} works on dynamic SNodes, not on a {n.kind} node",
+                                 context.current_loc())
+    idx = _indices(n, indices, what, len(n.shape) - 1)
+    ax = sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
+    return idx[:ax] + [ops.to_expr(0, dt.i32)] + idx[ax:]
+
+
+def length(node, indices):
+    """The number of elements in a dynamic node's list."""
+    _in_kernel("length")
+    n = _node(node, "length")
+    return _emit("length", n, _list_indices(n, indices, "length"))
+
+
+def append(node, indices, value):
+    """Append `value` to a dynamic list; returns the index it went to (the old length). An append past
+    the node's size stores nothing (the length still counts it; ti.length reports at most the size)."""
+    _in_kernel("append")
+    n = _node(node, "append")
+    idx = _list_indices(n, indices, "append")
+    k = _emit("append_slot", n, idx)
+    fields = [m.field for m in n.children if m.kind == "place" and m.field is not None and m.field.is_primal]
+    if len(fields) != 1:
+        raise SimgradSyntaxError("ti.append needs a dynamic node with exactly one scalar field placed under it",
+                                 context.current_loc())
+    field = fields[0]
+    ax = sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
+    full = idx[:ax] + [k] + idx[ax + 1:]
+    b = context.builder()
+    guard = b.emit(Op.IF, None, (ops.lt(k, n.sizes[0]).stmt,), nblocks=2)
+    with context.current().dynamic(guard.blocks[0]):
+        ptr = b.emit(Op.GLOBAL_PTR, field.dtype, tuple(i.stmt for i in full), {"target": field.ref()})
+        v = ops.cast_expr(ops.to_expr(value, field.dtype), field.dtype)
+        b.emit(Op.GLOBAL_STORE, None, (ptr, v.stmt))
+    return k
+
+
+def deactivate_all_snodes() -> None:
+    """Deactivate every cell of every sparse node of the program (Taichi's ti.deactivate_all_snodes)."""
+    from simgrad.lang.program import get_program
+
+    for tree in get_program().trees:
+        tree.root.deactivate_all()

@@ -1,0 +1,110 @@
+"""Memory of sparse SNodes: one pool of fixed-size blocks per pointer / dynamic node, and a zero block and a
+discard block per sparse node, all described by a table that compiled kernels read (context slot
+CTX_SPARSE) and update with atomics.
+
+A pool reserves address space for every block its node could ever need (mmap with MAP_NORESERVE: pages
+cost memory only once touched) and hands blocks out by bumping an index; blocks given back by
+deactivation are zeroed and kept on a free list that the next activation takes from first. Kernels
+allocate (codegen/llvm.py `@sg_sparse_alloc`) under the pool's spin lock, so activation from many
+threads is safe; a pool that runs out reports an error through the kernel's error buffer. Reads of
+an inactive cell are pointed at the node's zero block (they see 0 and activate nothing), writes that
+must not activate (adjoints into a gradient's inactive cells) at its discard block.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import mmap
+
+import numpy as np
+
+MAX_POOLS = 4096
+#: the words of one pool's entry in the table (i64 each)
+POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_LIVE, POOL_ZERO, POOL_DISCARD = range(9)
+POOL_WORDS = 16
+#: address space one pool may reserve; a node that could need more is capped (running out is an error)
+MAX_RESERVE = 1 << 38
+
+_libc = ctypes.CDLL(None, use_errno=True)
+_libc.mmap.restype = ctypes.c_void_p
+_libc.mmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_long]
+_libc.munmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t]
+_libc.madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+_MAP_NORESERVE = getattr(mmap, "MAP_NORESERVE", 0x4000)
+_MADV_DONTNEED = 4
+
+
+def _reserve(nbytes: int) -> int:
+    flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | _MAP_NORESERVE
+    addr = _libc.mmap(None, nbytes, mmap.PROT_READ | mmap.PROT_WRITE, flags, -1, 0)
+    if addr in (None, ctypes.c_void_p(-1).value):
+        raise MemoryError(f"could not reserve {nbytes} bytes of address space for a sparse SNode pool")
+    return int(addr)
+
+
+class SparseMemory:
+    """The pool table of one program (lang/program.py) and the memory behind it."""
+
+    def __init__(self) -> None:
+        self.table = np.zeros((MAX_POOLS, POOL_WORDS), dtype=np.int64)
+        self.address = self.table.ctypes.data
+        self.count = 0
+        self._maps: list[tuple[int, int]] = []  # (address, bytes) to unmap on release
+        self._names: list[str] = []
+
+    def add_pool(self, name: str, block_size: int, capacity: int) -> int:
+        """A pool of `capacity` blocks of `block_size` bytes (capacity 0: a bitmasked node's zero and
+        discard blocks only). Returns its id, the index the kernels use."""
+        if self.count >= MAX_POOLS:
+            raise RuntimeError(f"more than {MAX_POOLS} sparse SNodes in one program")
+        pid = self.count
+        self.count += 1
+        block_size = max(8, (block_size + 63) // 64 * 64 if block_size >= 64 else (block_size + 7) // 8 * 8)
+        row = self.table[pid]
+        row[POOL_BLOCK] = block_size
+        capacity = min(capacity, MAX_RESERVE // block_size)
+        row[POOL_CAPACITY] = capacity
+        if capacity:
+            row[POOL_BASE] = self._map(capacity * block_size)
+        side = self._map(2 * block_size)  # the zero block, then the discard block
+        row[POOL_ZERO], row[POOL_DISCARD] = side, side + block_size
+        self._names.append(name)
+        return pid
+
+    def _map(self, nbytes: int) -> int:
+        nbytes = (nbytes + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
+        addr = _reserve(nbytes)
+        self._maps.append((addr, nbytes))
+        return addr
+
+    def block_size(self, pid: int) -> int:
+        return int(self.table[pid, POOL_BLOCK])
+
+    def live_blocks(self, pid: int) -> int:
+        return int(self.table[pid, POOL_LIVE])
+
+    def usage(self) -> dict[str, dict[str, int]]:
+        """Per sparse node: blocks in use, blocks ever touched (bumped) and the bytes those hold."""
+        out = {}
+        for pid, name in enumerate(self._names):
+            row = self.table[pid]
+            out[f"{name}#{pid}"] = {"live_blocks": int(row[POOL_LIVE]), "touched_blocks": int(row[POOL_NEXT]),
+                                    "block_bytes": int(row[POOL_BLOCK]),
+                                    "touched_bytes": int(row[POOL_NEXT] * row[POOL_BLOCK])}
+        return out
+
+    def reset_pool(self, pid: int) -> None:
+        """Forget every block of a pool (after all its cells were deactivated) and give its pages back."""
+        row = self.table[pid]
+        if row[POOL_CAPACITY] and row[POOL_NEXT]:
+            nbytes = int(row[POOL_NEXT] * row[POOL_BLOCK])
+            nbytes = (nbytes + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
+            _libc.madvise(ctypes.c_void_p(int(row[POOL_BASE])), nbytes, _MADV_DONTNEED)  # zero pages again
+        row[POOL_NEXT] = row[POOL_FREE] = row[POOL_LIVE] = 0
+
+    def release(self) -> None:
+        for addr, nbytes in self._maps:
+            _libc.munmap(ctypes.c_void_p(addr), nbytes)
+        self._maps.clear()
+        self.table[:] = 0
+        self.count = 0
