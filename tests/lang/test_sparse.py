@@ -15,7 +15,8 @@ the probes). The rules they encode:
 * ``ti.append`` returns the old length; writing ``w[i, j]`` directly extends the length to ``j + 1``.
 
 Taichi-wrong cases: none in this module (see TAICHI_WRONG in tests/autodiff/test_ad_sparse.py). The set exists so a
-run of this file under real Taichi (through a shim module named simgrad) can skip documented Taichi bugs. To run this file under Taichi 1.7.4:
+run of this file under real Taichi (through a shim module named simgrad) can skip documented Taichi bugs. To run
+both files under Taichi 1.7.4:
 
     mkdir -p /tmp/tishim/simgrad /tmp/tirun
     printf 'import sys\nimport taichi\nsys.modules[__name__] = taichi\n' > /tmp/tishim/simgrad/__init__.py
