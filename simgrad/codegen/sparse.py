@@ -2,8 +2,7 @@
 helpers every kernel module that activates or frees gets: `@sg_sparse_alloc` (a block for a slot, under the
 pool's spin lock) and `@sg_sparse_free` (zero a block and put it on the pool's free list). The pool table
 and what its words mean are runtime/sparse.py's; passes/lower_access.py decides which level is looked up
-how (read: an inactive cell is the zero block; write: activate; nowrite: an inactive cell is the discard
-block)."""
+how (read: an inactive cell is the zero block, write: activate it)."""
 
 from __future__ import annotations
 
@@ -168,8 +167,8 @@ def _branch(f, cond: str, then_emit, else_emit=None) -> None:
 
 
 def _slot_block(g, f, s, slot: str, level, mode: str) -> str:
-    """The block a slot points to (pointer cell, dynamic list): by mode, the zero block, a new block or
-    the discard block when it is null."""
+    """The block a slot points to (pointer cell, dynamic list); when it is null, the zero block (read) or
+    a new block (write)."""
     cur = f.tmp("blk")
     f.emit(f"{cur} = load atomic ptr, ptr {slot} monotonic, align 8")
     null = f.tmp("isnull")
@@ -190,9 +189,9 @@ def _slot_block(g, f, s, slot: str, level, mode: str) -> str:
         f.emit(f"{r} = phi ptr [{cur}, %{pre}], [{new}, %{t}]")
         g.need_branch_weights()
         return r
-    other = _pool_word(f, level.pool, rt.POOL_ZERO if mode == "read" else rt.POOL_DISCARD)
+    zero = _pool_word(f, level.pool, rt.POOL_ZERO)
     r = f.tmp("blkr")
-    f.emit(f"{r} = select i1 {null}, ptr {other}, ptr {cur}")
+    f.emit(f"{r} = select i1 {null}, ptr {zero}, ptr {cur}")
     return r
 
 
@@ -242,28 +241,42 @@ def lower_sparse_cell(g, f, s) -> None:
         f.emit(f"{r} = add i64 {blk}, {off}")
         f.names[s] = r
         return
-    # bitmasked: the cells are in the container; the data of an inactive cell is zero
+    # bitmasked: the cells are in the container (reads see what is stored, as in Taichi); a write sets the bit
     off, addr = f.tmp("bo"), f.tmp("ba")
     f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
     f.emit(f"{addr} = add i64 {container}, {off}")
-    if mode == "read":
-        f.names[s] = addr
-        return
-    word, bit = _mask_word(f, container, cell, level)
-    is_set = _bit_set(f, word, bit)
     if mode == "write":
+        word, bit = _mask_word(f, container, cell, level)
+        is_set = _bit_set(f, word, bit)
         _branch(f, is_set, lambda: None, lambda: f.emit(f"atomicrmw or ptr {word}, i32 {bit} monotonic"))
-        f.names[s] = addr
-        return
-    discard = _as_int(f, _pool_word(f, level.pool, rt.POOL_DISCARD))
-    r = f.tmp("ba")
-    f.emit(f"{r} = select i1 {is_set}, i64 {addr}, i64 {discard}")
-    f.names[s] = r
+    f.names[s] = addr
+
+
+def _list_entry(f, s) -> str:
+    """Pointer to entry operands[0] of the struct-for's list (runtime/sparse.py: MAX_LISTS per pool)."""
+    level = s.attrs["level"]
+    base = _pool_word(f, level.pool, rt.POOL_LISTS)
+    k64, p = f.tmp("lk"), f.tmp("lp")
+    f.emit(f"{k64} = sext i32 {f.v(s.operands[0])} to i64")
+    f.emit(f"{p} = getelementptr i32, ptr {base}, i64 {s.attrs['list'] * level.total_cells}")
+    e = f.tmp("le")
+    f.emit(f"{e} = getelementptr i32, ptr {p}, i64 {k64}")
+    return e
 
 
 def lower_sparse_action(g, f, s) -> None:
+    op = s.attrs["op"]
+    if op == "list_get":
+        r = f.tmp("lv")
+        f.emit(f"{r} = load i32, ptr {_list_entry(f, s)}")
+        f.names[s] = r
+        return
+    if op == "list_set":
+        f.emit(f"store i32 {f.v(s.operands[1])}, ptr {_list_entry(f, s)}")
+        f.names[s] = "0"
+        return
     container, cell = (f.v(o) for o in s.operands)
-    level, op = s.attrs["level"], s.attrs["op"]
+    level = s.attrs["level"]
     kind = level.kind
     r = f.tmp("act")
     if kind == "pointer" or (kind == "dynamic" and op in ("activate", "deactivate")):
@@ -322,21 +335,10 @@ def lower_sparse_action(g, f, s) -> None:
     elif op == "activate":
         f.emit(f"atomicrmw or ptr {word}, i32 {bit} monotonic")
         f.emit(f"{r} = add i32 0, 0")
-    elif op == "deactivate":
-        nb, old, was, c = f.tmp("nb"), f.tmp("old"), f.tmp("was"), f.tmp("c")
+    elif op == "deactivate":  # as Taichi: only the bit; the cell's data stays (a direct read still sees it)
+        nb = f.tmp("nb")
         f.emit(f"{nb} = xor i32 {bit}, -1")
-        f.emit(f"{old} = atomicrmw and ptr {word}, i32 {nb} monotonic")
-        f.emit(f"{was} = and i32 {old}, {bit}")
-        f.emit(f"{c} = icmp ne i32 {was}, 0")
-        g.module.declare("declare void @llvm.memset.p0.i64(ptr, i8, i64, i1)")
-
-        def clear():
-            off, addr = f.tmp("bo"), f.tmp("ba")
-            f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
-            f.emit(f"{addr} = add i64 {container}, {off}")
-            f.emit(f"call void @llvm.memset.p0.i64(ptr {_as_ptr(f, addr)}, i8 0, i64 {level.cell_size}, i1 false)")
-
-        _branch(f, c, clear)
+        f.emit(f"atomicrmw and ptr {word}, i32 {nb} monotonic")
         f.emit(f"{r} = add i32 0, 0")
     else:
         raise AssertionError(f"internal: {op} on a bitmasked node")

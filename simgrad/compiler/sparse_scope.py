@@ -3,9 +3,10 @@ through lang/scope_hooks.py). Such fields have no numpy view: an element may liv
 exist at all. Reads of inactive cells give 0 and activate nothing; writes activate, as in kernels.
 
 - `x[i, j]` and `x[i, j] = v`: one-element kernels (indices and value in a small ndarray);
-- `to_numpy`: a loop over the whole index space reading every element (zeros where inactive);
-- `from_numpy`: writes every element (so activates every cell, as Taichi does);
-- `fill(v)`: writes the active cells only (a struct-for, Taichi's fill);
+- `to_numpy`: the active cells into a zeroed array (a struct-for, as Taichi's: a bitmasked cell keeps its
+  value when deactivated, yet to_numpy shows 0 there);
+- `from_numpy` and `fill(v)`: write the active cells only (struct-fors, as Taichi's: from_numpy activates
+  nothing and drops the array's values at inactive cells);
 - `deactivate_all(node)`: a struct-for over the node's active cells deactivating each one.
 None of them is recorded by a Tape."""
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from simgrad.compiler.kernel import kernel
 from simgrad.lang import ad_hooks, scope_hooks
-from simgrad.lang.loops import grouped, ndrange, static
+from simgrad.lang.loops import grouped, static
 from simgrad.lang.matrix import Vector
 from simgrad.lang.sparse import deactivate
 from simgrad.lang.types import ndarray, template
@@ -33,14 +34,14 @@ def _write(f: template(), idx: ndarray(), val: ndarray()):  # type: ignore[valid
 
 @kernel
 def _to_numpy(f: template(), out: ndarray(), off: template()):  # type: ignore[valid-type]
-    for I in grouped(ndrange(*f.shape)):
-        out[I] = f[I + off]
+    for I in grouped(f):
+        out[I - off] = f[I]
 
 
 @kernel
 def _from_numpy(f: template(), arr: ndarray(), off: template()):  # type: ignore[valid-type]
-    for I in grouped(ndrange(*f.shape)):
-        f[I + off] = arr[I]
+    for I in grouped(f):
+        f[I] = arr[I - off]
 
 
 @kernel

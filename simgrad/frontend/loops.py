@@ -152,23 +152,30 @@ def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> No
         for _n, _a, size in digits:
             total *= size
 
-        def body(flat):
+        def cell_coords(flat) -> dict:
             new = dict(coords)
             rest = flat
-            values = []
+            values: list = []
             for _n, _a, size in reversed(digits):
                 values.append(_raw(Op.RAW_MOD, rest, size) if len(values) < len(digits) - 1 else rest)
                 rest = _raw(Op.RAW_DIV, rest, size)
             values.reverse()
             for (_n, a, size), v in zip(digits, values):
                 new[a] = ops.add(ops.mul(new[a], size), v) if a in new else v
+            return new
+
+        if k == 0 and group[-1].is_sparse and _is_top(comp):
+            _listed_loop(comp, group[-1], total, cell_coords, axes, lambda new: level(1, new))
+            return
+
+        def body(flat):
+            new = cell_coords(flat)
             last = group[-1]
             if not last.is_sparse:
                 level(k + 1, new)
                 return
-            here = [a for a in axes if a in new]
             active = sparse._emit("is_active", last, [ops.cast_expr(ops.to_expr(new[a], dt.i32), dt.i32)
-                                                     for a in here])
+                                                     for a in axes if a in new])
             guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
             with comp.dynamic(guard.blocks[0]):
                 level(k + 1, new)
@@ -176,6 +183,56 @@ def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> No
         _emit_loop(comp, 0, total, body)
 
     level(0, {})
+
+
+def _is_top(comp) -> bool:
+    """Whether a loop emitted now is a kernel's top-level (parallel) loop; as in _emit_loop."""
+    return comp.depth == 0 and not comp.loop_stack and not any(f.real for f in comp.frames)
+
+
+def _listed_loop(comp, node: SNode, total: int, cell_coords, axes, inner) -> None:
+    """The outermost loop of a top-level sparse struct-for, as Taichi runs it: a serial pass lists the
+    active cells of `node` (the first sparse node, with its dense ancestors flattened), then the parallel
+    loop runs over that list. Cells the loop activates itself (an adjoint's scatter into neighbours) are
+    not visited, and the parallel loop does no work for inactive cells."""
+    from simgrad.lang import sparse
+    from simgrad.runtime.sparse import MAX_LISTS
+
+    lists = comp.__dict__.setdefault("sparse_lists", {})
+    list_id = lists.get(id(node), 0)
+    if list_id >= MAX_LISTS:
+        from simgrad.ir import context
+
+        raise SimgradSyntaxError(f"more than {MAX_LISTS} struct-fors over one sparse node in a kernel",
+                                 context.current_loc())
+    lists[id(node)] = list_id + 1
+    b = comp.builder
+    count = b.emit(Op.ALLOCA, dt.i32)
+    b.emit(Op.LOCAL_STORE, None, (count, b.const(0, dt.i32)))
+    ref = sparse.snode_ref(node)
+
+    def scan(flat):
+        new = cell_coords(flat)
+        here = [ops.cast_expr(ops.to_expr(new[a], dt.i32), dt.i32) for a in axes if a in new]
+        active = sparse._emit("is_active", node, here)
+        guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
+        with comp.dynamic(guard.blocks[0]):
+            bb = comp.builder
+            n = bb.emit(Op.LOCAL_LOAD, dt.i32, (count,))
+            bb.emit(Op.SNODE_OP, dt.i32, (n, flat.stmt), {"op": "list_set", "snode": ref, "list": list_id})
+            bb.emit(Op.LOCAL_STORE, None, (count, bb.binary(Op.ADD, n, bb.const(1, dt.i32))))
+
+    user_config, comp.next_loop_config = comp.next_loop_config, {"serialize": True}
+    _emit_loop(comp, 0, total, scan)
+    n = Expr(comp.builder.emit(Op.LOCAL_LOAD, dt.i32, (count,)))
+    comp.next_loop_config = user_config  # ti.loop_config(...) meant the loop over the cells
+
+    def body(k):
+        flat = Expr(comp.builder.emit(Op.SNODE_OP, dt.i32, (k.stmt,), {"op": "list_get", "snode": ref,
+                                                                         "list": list_id}))
+        inner(cell_coords(flat))
+
+    _emit_loop(comp, 0, n, body)
 
 
 def _shape_of(comp, target, node):

@@ -855,6 +855,11 @@ def global_ref(comp: Compiler, base, index, node):
         else:
             flat.append(i)
     ndim = base.ndim
+    if isinstance(base, Field) and len(flat) == ndim - 1 and base.parent() is not None and \
+            getattr(base.parent(), "kind", None) == "dynamic":
+        from simgrad.lang.sparse import DynamicList
+
+        return DynamicList(base.parent(), flat)  # `w[i].append(v)`, `w[i].length()`
     if len(flat) != ndim:
         what = f"field {base.name}" if isinstance(base, Field) else f"ndarray '{base.name}'"
         raise SimgradIndexError(f"{what} has {ndim} dimension(s) but is indexed with {len(flat)} index(es)"

@@ -31,6 +31,7 @@ class Level:
     ncells: int
     pool: int = -1
     mask_offset: int = 0
+    total_cells: int = 0  # cells of this node in the whole tree (the length of its struct-for lists)
 
     @property
     def sparse(self) -> bool:

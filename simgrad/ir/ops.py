@@ -27,7 +27,7 @@ class Op(Enum):
     SNODE_OP = auto()
     TREE_ROOT = auto()  # u64 address of an SNode tree's buffer (attrs: tree)
     SPARSE_CELL = auto()  # u64 address of a cell of a sparse level (operands: container address, cell
-    #                       number; attrs: level, mode = read | write | nowrite)
+    #                       number; attrs: level, mode = read | write)
     SPARSE_ACTION = auto()  # SNODE_OP's effect on the last level (operands: container, cell; attrs: level, op)
     RET_STORE = auto()  # kernel return value (attrs: slot)
     # arithmetic

@@ -175,6 +175,12 @@ class _Root:
             if not tree.materialized:
                 tree.root.lazy_dual()
 
+    def deactivate_all(self) -> None:
+        """Every sparse cell of every tree (Taichi warns that this is what ti.root.deactivate_all() does)."""
+        from simgrad.lang.sparse import deactivate_all_snodes
+
+        deactivate_all_snodes()
+
     def __repr__(self):
         return "ti.root"
 
@@ -191,6 +197,15 @@ class FieldsBuilder:
 
     def dense(self, indices, dimensions):
         return self.root.dense(indices, dimensions)
+
+    def pointer(self, indices, dimensions):
+        return self.root.pointer(indices, dimensions)
+
+    def bitmasked(self, indices, dimensions):
+        return self.root.bitmasked(indices, dimensions)
+
+    def dynamic(self, index, dimension, chunk_size=None):
+        return self.root.dynamic(index, dimension, chunk_size)
 
     def place(self, *fields, offset=None):
         return self.root.place(*fields, offset=offset)

@@ -131,6 +131,18 @@ class Field:
     def snode(self):
         return self._components()[0].snode
 
+    def append(self, value):
+        """`l.append(v)` in a kernel, for a 1-D field under a dynamic node (ti.append(l.parent(), [], v))."""
+        from simgrad.lang.sparse import append
+
+        return append(self.parent(), [], value)
+
+    def length(self):
+        """`l.length()` in a kernel, for a 1-D field under a dynamic node."""
+        from simgrad.lang.sparse import length
+
+        return length(self.parent(), [])
+
 
 class ScalarField(Field):
     def __init__(self, dtype, name: str = "field"):

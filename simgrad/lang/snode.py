@@ -74,6 +74,10 @@ class SNode:
         node: SNode | None = self
         for _ in range(n):
             node = node._parent if node is not None else None
+        if node is not None and node.kind == "root":  # as Taichi: any tree's root is ti.root
+            from simgrad.lang.factories import root
+
+            return root  # type: ignore[return-value]
         return node
 
     @property
@@ -287,8 +291,11 @@ class SNode:
             terms = [AccessTerm(t.axis, t.divisor, 0 if t.axis not in first_use else t.modulus, t.stride)
                      for t in terms]
             first_use.update(t.axis for t in terms)
+            total = 1
+            for m in n.path()[1:]:
+                total *= m.num_cells
             levels.append(Level(n.kind, n.offset_in_parent, tuple(terms[::-1]), n.cell_size, n.num_cells,
-                                n.pool, n.mask_offset))
+                                n.pool, n.mask_offset, total))
         return tuple(levels)
 
     def access_terms(self) -> tuple[int, tuple[AccessTerm, ...], tuple[int, ...]]:
@@ -366,7 +373,7 @@ class SNodeTree:
             if c.is_sparse:
                 blocks = instances * c.num_cells if c.kind == "pointer" else instances if c.kind == "dynamic" else 0
                 size = c.block_size if c.kind != "bitmasked" else c.cell_size
-                c.pool = self.program.sparse.add_pool(c.kind, size, blocks)
+                c.pool = self.program.sparse.add_pool(c.kind, size, blocks, instances * c.num_cells)
             self._add_pools(c, instances * c.num_cells)
 
 

@@ -57,6 +57,8 @@ def _indices(node: SNode, indices, what: str, dims: int) -> list[Expr]:
 
 
 def _emit(op: str, node: SNode, idx: list[Expr]) -> Expr:
+    if not node.is_sparse and op in ("activate", "deactivate"):
+        return Expr(ops.to_expr(0, dt.i32).stmt)  # as Taichi: a dense cell is always active, nothing to do
     if not node.is_sparse:
         raise SimgradSyntaxError(f"ti.{_PUBLIC[op]} works on pointer, bitmasked and dynamic SNodes, not on a "
                                  f"{node.kind} node", context.current_loc())
@@ -78,7 +80,7 @@ def activate(node, indices) -> None:
     """Activate the cell of `node` at `indices` (its own index space, e.g. block coordinates)."""
     _in_kernel("activate")
     n = _node(node, "activate")
-    _emit("activate", n, _indices(n, indices, "activate", len(n.shape)))
+    _emit("activate", n, _cell_indices(n, indices, "activate"))
 
 
 def deactivate(node, indices) -> None:
@@ -86,13 +88,28 @@ def deactivate(node, indices) -> None:
     dynamic list becomes empty."""
     _in_kernel("deactivate")
     n = _node(node, "deactivate")
-    _emit("deactivate", n, _indices(n, indices, "deactivate", len(n.shape)))
+    _emit("deactivate", n, _cell_indices(n, indices, "deactivate"))
 
 
 def is_active(node, indices):
     _in_kernel("is_active")
     n = _node(node, "is_active")
-    return _emit("is_active", n, _indices(n, indices, "is_active", len(n.shape)))
+    return _emit("is_active", n, _cell_indices(n, indices, "is_active"))
+
+
+def _cell_indices(n: SNode, indices, what: str) -> list[Expr]:
+    """The indices of a cell of `n`; a dynamic node's list may be named by its parent's indices alone."""
+    if n.kind == "dynamic" and _count(indices) == len(n.shape) - 1:
+        return _list_indices(n, indices, what)
+    return _indices(n, indices, what, len(n.shape))
+
+
+def _count(indices) -> int:
+    from simgrad.lang.matrix import Matrix
+
+    if isinstance(indices, Matrix):
+        return len(indices.entries)
+    return len(indices) if isinstance(indices, (list, tuple)) else 1
 
 
 def _list_indices(n: SNode, indices, what: str) -> list[Expr]:
@@ -133,6 +150,22 @@ def append(node, indices, value):
         v = ops.cast_expr(ops.to_expr(value, field.dtype), field.dtype)
         b.emit(Op.GLOBAL_STORE, None, (ptr, v.stmt))
     return k
+
+
+class DynamicList:
+    """`w[i]` of a field under a dynamic node, indexed by its parent's indices: the list's methods."""
+
+    def __init__(self, node: SNode, indices: list):
+        self.node, self.indices = node, list(indices)
+
+    def load(self):  # the frontend loads what a subscript names; the list is its own value
+        return self
+
+    def append(self, value):
+        return append(self.node, self.indices, value)
+
+    def length(self):
+        return length(self.node, self.indices)
 
 
 def deactivate_all_snodes() -> None:

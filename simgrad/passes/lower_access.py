@@ -65,8 +65,7 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
         if s.op is Op.GLOBAL_PTR and not s.attrs.get("lowered"):
             target = s.attrs["target"]
             if isinstance(target, FieldRef) and target.sparse:
-                mode = ("nowrite" if s.attrs.get("no_activate") else "write") if id(s) in written else "read"
-                out += _lower_sparse(s, target, mode, debug)
+                out += _lower_sparse(s, target, "write" if id(s) in written else "read", debug)
                 changed = True
                 out.append(s)
                 continue
@@ -115,24 +114,16 @@ def _indices(b: Builder, s: Stmt, name: str, shape: tuple, debug: bool) -> list:
     return idx
 
 
-def _sparse_modes(levels: tuple, mode: str) -> list:
-    """Reads look every level up without activating (an inactive one gives its zero block); writes
-    activate every level; a write that must not activate (an adjoint into a gradient) reads its way down
-    and only the last sparse level sends an inactive cell to the discard block."""
-    if mode != "nowrite":
-        return [mode] * len(levels)
-    last = max(k for k, lv in enumerate(levels) if lv.sparse)
-    return ["nowrite" if k == last else "read" for k in range(len(levels))]
-
-
 def _lower_sparse(s: Stmt, target: FieldRef, mode: str, debug: bool) -> list[Stmt]:
-    """A GLOBAL_PTR into a field under sparse SNodes: its absolute address (attrs `absolute`)."""
+    """A GLOBAL_PTR into a field under sparse SNodes: its absolute address (attrs `absolute`). Reads look
+    every level up without activating (an inactive one gives its zero block); writes activate every level
+    (adjoints too: the gradient of a read of an inactive cell lands there, as a dense field's would)."""
     scratch = Block()
     b = Builder(scratch)
     b.loc = s.loc
     idx = _indices(b, s, target.name, target.shape, debug)
     levels = target.levels
-    addr = _walk_levels(b, s, target.layout[0], levels, idx, _sparse_modes(levels, mode))
+    addr = _walk_levels(b, s, target.layout[0], levels, idx, [mode] * len(levels))
     addr = _add(b, addr, b.const(target.value_offset, dt.u64))
     s.operands = (*s.operands, addr)
     s.attrs["lowered"] = True
@@ -148,6 +139,9 @@ def _lower_snode_op(s: Stmt) -> list[Stmt]:
     b.loc = s.loc
     node = s.attrs["snode"]
     op = s.attrs["op"]
+    if op in ("list_get", "list_set"):  # the loop's list of active cells: (entry[, value]), no walk
+        s.op, s.attrs = Op.SPARSE_ACTION, {"level": node.levels[-1], "op": op, "list": s.attrs["list"]}
+        return [s]
     idx = _indices(b, s, node.name, (), False)
     *above, last = node.levels
     mode = "write" if op in ("activate", "append_slot") else "read"

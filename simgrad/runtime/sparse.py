@@ -6,9 +6,9 @@ A pool reserves address space for every block its node could ever need (mmap wit
 cost memory only once touched) and hands blocks out by bumping an index; blocks given back by
 deactivation are zeroed and kept on a free list that the next activation takes from first. Kernels
 allocate (codegen/llvm.py `@sg_sparse_alloc`) under the pool's spin lock, so activation from many
-threads is safe; a pool that runs out reports an error through the kernel's error buffer. Reads of
-an inactive cell are pointed at the node's zero block (they see 0 and activate nothing), writes that
-must not activate (adjoints into a gradient's inactive cells) at its discard block.
+threads is safe; a pool that runs out reports an error through the kernel's error buffer and hands out
+the node's discard block, so the kernel's remaining writes land nowhere harmful. Reads of an inactive
+cell are pointed at the node's zero block (they see 0 and activate nothing).
 """
 
 from __future__ import annotations
@@ -18,10 +18,13 @@ import mmap
 
 import numpy as np
 
-MAX_POOLS = 4096
+MAX_POOLS = 1024
 #: the words of one pool's entry in the table (i64 each)
-POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_LIVE, POOL_ZERO, POOL_DISCARD = range(9)
+(POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_LIVE, POOL_ZERO, POOL_DISCARD,
+ POOL_LISTS) = range(10)
 POOL_WORDS = 16
+#: struct-fors one kernel may run over the same first sparse node (each keeps its own list of active cells)
+MAX_LISTS = 16
 #: address space one pool may reserve; a node that could need more is capped (running out is an error)
 MAX_RESERVE = 1 << 38
 
@@ -46,15 +49,29 @@ class SparseMemory:
     """The pool table of one program (lang/program.py) and the memory behind it."""
 
     def __init__(self) -> None:
-        self.table = np.zeros((MAX_POOLS, POOL_WORDS), dtype=np.int64)
-        self.address = self.table.ctypes.data
+        # the table is mapped with the first pool (a program without sparse nodes maps nothing; a
+        # per-program malloc of this size would leave the allocator's heap fragmented over init cycles)
+        self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)
+        self.address = 0
         self.count = 0
         self._maps: list[tuple[int, int]] = []  # (address, bytes) to unmap on release
         self._names: list[str] = []
 
-    def add_pool(self, name: str, block_size: int, capacity: int) -> int:
+    def _ensure_table(self) -> None:
+        if self.address:
+            return
+        nbytes = MAX_POOLS * POOL_WORDS * 8
+        self.address = self._map(nbytes)
+        words = (ctypes.c_int64 * (MAX_POOLS * POOL_WORDS)).from_address(self.address)
+        self.table = np.ctypeslib.as_array(words).reshape(MAX_POOLS, POOL_WORDS)
+
+    def add_pool(self, name: str, block_size: int, capacity: int, cells: int) -> int:
         """A pool of `capacity` blocks of `block_size` bytes (capacity 0: a bitmasked node's zero and
-        discard blocks only). Returns its id, the index the kernels use."""
+        discard blocks only) for a node of `cells` cells in all. Returns its id, the index the kernels use.
+        With it come MAX_LISTS lists of `cells` i32 each: a struct-for whose first sparse node this is
+        lists the active cells there before its parallel loop starts (as Taichi's listgen), so cells it
+        activates itself (an adjoint's scatter) are not visited by the same loop."""
+        self._ensure_table()
         if self.count >= MAX_POOLS:
             raise RuntimeError(f"more than {MAX_POOLS} sparse SNodes in one program")
         pid = self.count
@@ -68,6 +85,7 @@ class SparseMemory:
             row[POOL_BASE] = self._map(capacity * block_size)
         side = self._map(2 * block_size)  # the zero block, then the discard block
         row[POOL_ZERO], row[POOL_DISCARD] = side, side + block_size
+        row[POOL_LISTS] = self._map(MAX_LISTS * 4 * max(cells, 1))
         self._names.append(name)
         return pid
 
@@ -103,8 +121,9 @@ class SparseMemory:
         row[POOL_NEXT] = row[POOL_FREE] = row[POOL_LIVE] = 0
 
     def release(self) -> None:
+        self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)
         for addr, nbytes in self._maps:
             _libc.munmap(ctypes.c_void_p(addr), nbytes)
         self._maps.clear()
-        self.table[:] = 0
         self.count = 0
+        self.address = 0
