@@ -16,6 +16,8 @@ re-instantiate themselves on whatever program ``ti.init`` made last.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, TypeAlias
+
 import numpy as np
 
 import simgrad as ti
@@ -25,17 +27,32 @@ __all__ = ["EMPTY", "Frame", "nonempty", "render"]
 EMPTY = np.iinfo(np.int64).max
 _ID_MASK = 0xFFFFFFFF
 
-vec3 = ti.types.vector(3, ti.f32)
-vec4 = ti.types.vector(4, ti.f32)
-_F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
-_F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-_V1 = ti.types.ndarray(dtype=vec3, ndim=1)
-_V2 = ti.types.ndarray(dtype=vec3, ndim=2)
-_P1 = ti.types.ndarray(dtype=vec4, ndim=1)
-_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
-_T1 = ti.types.ndarray(dtype=ti.types.vector(3, ti.i32), ndim=1)
-_S1 = ti.types.ndarray(dtype=ti.types.vector(2, ti.i32), ndim=1)
-_D2 = ti.types.ndarray(dtype=ti.i64, ndim=2)
+if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to mypy
+    vec3: TypeAlias = Any
+    _F1: TypeAlias = Any
+    _F2: TypeAlias = Any
+    _V1: TypeAlias = Any
+    _V2: TypeAlias = Any
+    _P1: TypeAlias = Any
+    _T1: TypeAlias = Any
+    _S1: TypeAlias = Any
+    _D2: TypeAlias = Any
+    _I1D: TypeAlias = Any
+    _I32: TypeAlias = Any
+    _F32: TypeAlias = Any
+else:
+    vec3 = ti.types.vector(3, ti.f32)
+    _F1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+    _F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+    _V1 = ti.types.ndarray(dtype=vec3, ndim=1)
+    _V2 = ti.types.ndarray(dtype=vec3, ndim=2)
+    _P1 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)
+    _T1 = ti.types.ndarray(dtype=ti.types.vector(3, ti.i32), ndim=1)
+    _S1 = ti.types.ndarray(dtype=ti.types.vector(2, ti.i32), ndim=1)
+    _D2 = ti.types.ndarray(dtype=ti.i64, ndim=2)
+    _I1D = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    _I32 = ti.i32
+    _F32 = ti.f32
 
 # Layout of the camera array (float32): view matrix rows 0-2 (world -> camera space, camera looks
 # down -z), then screen mapping px = SX * x / w + OX, py = SY * y / w + OY with w = depth for a
@@ -81,13 +98,13 @@ def _key(depth, prim):
 
 
 @ti.kernel
-def clear_depth(depth: _D2):  # type: ignore[valid-type]
+def clear_depth(depth: _D2):
     for i, j in ti.ndrange(depth.shape[0], depth.shape[1]):
         depth[i, j] = EMPTY
 
 
 @ti.kernel
-def project(points: _V1, cam: _F1, out: _P1):  # type: ignore[valid-type]
+def project(points: _V1, cam: _F1, out: _P1):
     """Screen position, depth and 1 / depth of every vertex (depth <= near marks it clipped)."""
     for p in range(points.shape[0]):
         s = _to_screen(cam, _to_view(cam, points[p]))
@@ -95,7 +112,7 @@ def project(points: _V1, cam: _F1, out: _P1):  # type: ignore[valid-type]
 
 
 @ti.kernel
-def splat_particles(centers: _V1, radii: _F1, cam: _F1, depth: _D2, base: ti.i32):  # type: ignore[valid-type]
+def splat_particles(centers: _V1, radii: _F1, cam: _F1, depth: _D2, base: _I32):
     """Sphere impostors: each covered pixel gets the depth of the sphere's front surface there."""
     W = ti.cast(depth.shape[0], ti.f32)
     H = ti.cast(depth.shape[1], ti.f32)
@@ -122,7 +139,7 @@ def _edge(a, b, px, py):
 
 
 @ti.kernel
-def raster_triangles(screen: _P1, tris: _T1, cam: _F1, depth: _D2, base: ti.i32):  # type: ignore[valid-type]
+def raster_triangles(screen: _P1, tris: _T1, cam: _F1, depth: _D2, base: _I32):
     """A pixel is covered when its centre is inside the triangle (edges included); depth is interpolated
     perspective-correctly (1 / depth is linear on the screen).  Triangles crossing the near plane are
     dropped (no clipping)."""
@@ -155,8 +172,8 @@ def raster_triangles(screen: _P1, tris: _T1, cam: _F1, depth: _D2, base: ti.i32)
 
 
 @ti.kernel
-def raster_lines(screen: _P1, segs: _S1, half_width: ti.f32, cam: _F1, depth: _D2,  # type: ignore[valid-type]
-                 base: ti.i32):
+def raster_lines(screen: _P1, segs: _S1, half_width: _F32, cam: _F1, depth: _D2,
+                 base: _I32):
     """Screen-space thick segments (``half_width`` pixels) with round ends, depth interpolated along them."""
     W = ti.cast(depth.shape[0], ti.f32)
     H = ti.cast(depth.shape[1], ti.f32)
@@ -202,9 +219,9 @@ def _lambert(color, pos, n, two_sided, lights, ambient):
 
 
 @ti.kernel
-def shade(depth: _D2, img: _V2, cam: _F1, lights: _F2, ambient: vec3,  # type: ignore[valid-type]
+def shade(depth: _D2, img: _V2, cam: _F1, lights: _F2, ambient: vec3,
           centers: _V1, radii: _F1, pcolors: _V1,
-          verts: _V1, normals: _V1, vcolors: _V1, screen: _P1, tris: _T1, two_sided: _I1,
+          verts: _V1, normals: _V1, vcolors: _V1, screen: _P1, tris: _T1, two_sided: _I1D,
           lcolors: _V1, segs: _S1):
     """Colour every covered pixel from the primitive that won its depth test."""
     n_particles = centers.shape[0]
@@ -270,7 +287,7 @@ def shade(depth: _D2, img: _V2, cam: _F1, lights: _F2, ambient: vec3,  # type: i
 
 
 @ti.kernel
-def vertex_normals(verts: _V1, tris: _T1, out: _V1):  # type: ignore[valid-type]
+def vertex_normals(verts: _V1, tris: _T1, out: _V1):
     """Per-vertex normals as the sum of the unit normals of the triangles around each vertex (normalised
     when shading), as Taichi infers them when a mesh comes without normals."""
     for v in range(out.shape[0]):

@@ -4,7 +4,6 @@ in Taichi, the older ``ti.GUI``)."""
 from .colors import hex_to_rgb, rgb_to_hex
 from .gui import GUI
 from .scene import Camera, ProjectionMode, Scene, make_camera
-
 from .window import (
     ALT,
     BACKSPACE,
