@@ -72,11 +72,15 @@ class Canvas:
             arr = imresize(arr, *self._canvas.res)
         self._canvas.replace(arr)
 
-    def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None):
-        """Circles at ``centers`` with ``radius`` a fraction of the window height."""
+    def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None, per_vertex_radius=None):
+        """Circles at ``centers`` with ``radius`` (or ``per_vertex_radius``) a fraction of the window height."""
         pos = _vertices(centers)
         colors = _vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color)
-        self._canvas.circles(pos, float(radius) * self._canvas.res[1], colors)
+        if per_vertex_radius is not None:
+            radii = to_numpy(per_vertex_radius).astype(np.float64).reshape(-1) * self._canvas.res[1]
+        else:
+            radii = float(radius) * self._canvas.res[1]
+        self._canvas.circles(pos, radii, colors)
 
     def lines(self, vertices, width, indices=None, color=(0.5, 0.5, 0.5), per_vertex_color=None):
         """Segments between vertex pairs (or index pairs); ``width`` a fraction of the height."""

@@ -181,3 +181,14 @@ def test_ply_writer_ascii_and_errors(tmp_path):
     bad.add_faces(np.array([0, 1, 5]))
     with pytest.raises(ValueError, match="face indices"):
         bad.export(str(tmp_path / "b.ply"))
+
+
+def test_canvas_circles_per_vertex_radius():
+    window = ti.ui.Window("w", (100, 100), show_window=False)
+    canvas = window.get_canvas()
+    canvas.set_background_color((0.0, 0.0, 0.0))
+    centers = np.array([[0.25, 0.5], [0.75, 0.5]], np.float32)
+    canvas.circles(centers, radius=0.0, per_vertex_radius=np.array([0.05, 0.15], np.float32), color=(1.0, 1.0, 1.0))
+    img = window.get_image_buffer_as_numpy()[..., 0]
+    left, right = img[:50].sum(), img[50:].sum()
+    assert abs(left - np.pi * 5 ** 2) < 2 * np.pi * 5 and abs(right - np.pi * 15 ** 2) < 2 * np.pi * 15
