@@ -187,7 +187,9 @@ def _vectors(x, method: str, name: str, widths=(3,)) -> np.ndarray:
     if arr.ndim < 2 or arr.shape[-1] not in widths:
         want = " or ".join(f"(n, {w})" for w in widths)
         _fail(method, f"{name} must be a field/array of {widths[0]}-vectors, shape {want}; got shape {arr.shape}")
-    return np.ascontiguousarray(arr.reshape(-1, arr.shape[-1])[:, :3], dtype=np.float32)
+    out = np.ascontiguousarray(arr.reshape(-1, arr.shape[-1])[:, :3], dtype=np.float32)
+    # a snapshot, as Taichi copies into its vertex buffer: later changes to the array must not show
+    return out.copy() if isinstance(x, np.ndarray) and np.shares_memory(out, x) else out
 
 
 def _color(c, method: str, name: str = "color") -> np.ndarray:
@@ -350,6 +352,8 @@ class Scene:
         f32, i32 = np.float32, np.int32
 
         def cat(parts, cols, dtype):
+            if len(parts) == 1:  # the common case: no copy when the one part is already contiguous
+                return np.ascontiguousarray(parts[0], dtype)
             return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros((0, cols), dtype), dtype)
 
         centers = cat([p[0] for p in self._particles], 3, f32)
@@ -359,13 +363,13 @@ class Scene:
         verts = cat([m.verts for m in self._meshes], 3, f32)
         normals = cat([m.normals for m in self._meshes], 3, f32)
         vcolors = cat([m.colors for m in self._meshes], 3, f32)
-        tris = cat([m.tris + s for m, s in zip(self._meshes, starts)], 3, i32)
+        tris = cat([m.tris + s if s else m.tris for m, s in zip(self._meshes, starts)], 3, i32)
         two_sided = cat([np.full(len(m.tris), m.two_sided, i32) for m in self._meshes], 1, i32).reshape(-1)
         lstarts = np.cumsum([0] + [len(v) for v, _, _, _ in self._lines])
         sstarts = np.cumsum([0] + [len(s) for _, _, s, _ in self._lines])
         line_verts = cat([v for v, _, _, _ in self._lines], 3, f32)
         lcolors = cat([c for _, c, _, _ in self._lines], 3, f32)
-        segs = cat([s + o for (_, _, s, _), o in zip(self._lines, lstarts)], 2, i32)
+        segs = cat([s + o if o else s for (_, _, s, _), o in zip(self._lines, lstarts)], 2, i32)
         widths = [(int(s0), len(s), w) for (_, _, s, w), s0 in zip(self._lines, sstarts)]
         lights = cat(self._lights, 6, f32).reshape(-1, 6)
         frame = render3d.Frame(self._camera._screen(res), lights, self._ambient, centers, radii, pcolors, verts,

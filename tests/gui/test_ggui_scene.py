@@ -317,3 +317,15 @@ def test_bad_inputs_raise_located_errors():
         scene.particles(np.array([["a", "b", "c"]]), radius=0.1)
     with pytest.raises(ti.SimgradTypeError, match="4x4 matrices"):
         scene.mesh_instance(np.zeros((3, 3), np.float32), transforms=np.zeros((2, 3, 3)))
+
+
+def test_declared_arrays_are_snapshots():
+    # what a scene draws is what the arrays held when declared, as Taichi copies them into its buffers
+    window = ti.ui.Window("t", (W, H), show_window=False)
+    canvas, scene = window.get_canvas(), window.get_scene()
+    scene.set_camera(camera())
+    centers = np.zeros((1, 3), np.float32)
+    scene.particles(centers, radius=0.3, color=(1.0, 0.0, 0.0))
+    centers[0, 0] = 5.0  # moved out of view after the declaration
+    canvas.scene(scene)
+    assert window.get_image_buffer_as_numpy()[W // 2, H // 2, 0] > 0
