@@ -135,8 +135,8 @@ def _edge(a, b, px, py):
 @ti.kernel
 def raster_triangles(screen: _P1, tris: _T1, cam: _F1, depth: _D2, base: _I32):
     """A pixel is covered when its centre is inside the triangle (edges included); depth is interpolated
-    perspective-correctly (1 / depth is linear on the screen).  Triangles crossing the near plane are
-    dropped (no clipping)."""
+    perspective-correctly (1 / depth is linear on the screen).  Triangles crossing the near plane were cut
+    by clip_near; any left with a vertex behind it are skipped."""
     W = ti.cast(depth.shape[0], ti.f32)
     H = ti.cast(depth.shape[1], ti.f32)
     ortho = cam[CAM_ORTHO] != 0.0
@@ -315,6 +315,50 @@ def nonempty(arr, shape, dtype):
 _depth_cache: dict = {}
 
 
+def clip_near(frame: Frame, screen: np.ndarray) -> np.ndarray:
+    """Cut the triangles that cross the camera's near plane at (just in front of) it, so a floor that runs
+    behind the camera is drawn up to the picture's edge instead of vanishing.  A triangle with one vertex
+    behind becomes two, with two behind one; new vertices interpolate position, normal and colour (exact:
+    camera depth is linear along an edge).  Changes ``frame``'s mesh arrays; returns the extended screen
+    array.  Costs one min() over the vertices when no vertex is behind the plane."""
+    near = float(frame.cam[CAM_NEAR])
+    d = screen[: len(frame.verts), 2].astype(np.float64)
+    if d.min() > near:
+        return screen
+    behind = d[frame.tris] <= near
+    n_behind = behind.sum(axis=1)
+    cross = (n_behind == 1) | (n_behind == 2)
+    if not cross.any():
+        return screen
+    tris, flags = frame.tris[cross], frame.two_sided[cross]
+    odd = np.where((n_behind[cross] == 1)[:, None], behind[cross], ~behind[cross])  # unlike the other two
+    roll = np.argmax(odd, axis=1)
+    tris = tris[np.arange(len(tris))[:, None], (roll[:, None] + np.arange(3)) % 3]  # odd one first
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    plane = near * (1 + 1e-4) + 1e-7
+
+    def cut(p, q):
+        t = ((plane - d[p]) / (d[q] - d[p]))[:, None]
+        return [(1 - t) * arr[p] + t * arr[q] for arr in (frame.verts, frame.normals, frame.vcolors)]
+
+    ab, ca = cut(a, b), cut(c, a)
+    base = len(frame.verts)
+    m = len(tris)
+    new = [np.concatenate([x, y]).astype(np.float32) for x, y in zip(ab, ca)]
+    i_ab, i_ca = base + np.arange(m), base + m + np.arange(m)
+    one = n_behind[cross] == 1  # odd vertex behind: quad (ab, b, c, ca); else triangle (a, ab, ca)
+    added = np.concatenate([np.stack([i_ab, b, c], 1)[one], np.stack([i_ab, c, i_ca], 1)[one],
+                            np.stack([a, i_ab, i_ca], 1)[~one]]).astype(np.int32)
+    frame.verts = np.concatenate([frame.verts, new[0]])
+    frame.normals = np.concatenate([frame.normals, new[1]])
+    frame.vcolors = np.concatenate([frame.vcolors, new[2]])
+    frame.tris = np.ascontiguousarray(np.concatenate([frame.tris[~cross], added]), np.int32)
+    frame.two_sided = np.concatenate([frame.two_sided[~cross], flags[one], flags[one], flags[~one]]).astype(np.int32)
+    extra = np.empty((2 * m, 4), np.float32)
+    project(new[0], frame.cam, extra)
+    return np.concatenate([screen[:base], extra])
+
+
 def render(img: np.ndarray, frame: Frame) -> np.ndarray:
     """Draw ``frame`` over ``img`` (float32 (W, H, 3), changed in place); returns the depth keys."""
     W, H = img.shape[:2]
@@ -329,6 +373,8 @@ def render(img: np.ndarray, frame: Frame) -> np.ndarray:
     screen = np.empty((max(1, len(frame.verts)), 4), np.float32)
     if n_t:
         project(frame.verts, cam, screen)
+        screen = clip_near(frame, screen)
+        n_t = len(frame.tris)
         raster_triangles(screen, frame.tris, cam, depth, n_p)
     line_screen = np.empty((max(1, len(frame.line_verts)), 4), np.float32)
     if len(frame.segs):

@@ -329,3 +329,20 @@ def test_declared_arrays_are_snapshots():
     centers[0, 0] = 5.0  # moved out of view after the declaration
     canvas.scene(scene)
     assert window.get_image_buffer_as_numpy()[W // 2, H // 2, 0] > 0
+
+
+def test_floor_running_behind_the_camera_is_clipped_not_dropped():
+    # two big triangles of a floor at y = -1 reaching far behind the camera (at z = 3): the floor must fill
+    # the lower part of the picture up to its bottom edge; which rows it covers follows from the camera
+    v = np.array([[-50, -1, -50], [50, -1, -50], [50, -1, 50], [-50, -1, 50]], np.float32)
+    i = np.array([0, 2, 1, 0, 3, 2], np.int32)  # facing up
+    img = render(lambda s: s.mesh(v, indices=i, color=(0.0, 0.0, 0.0)), lights=())
+    mask = covered(img)
+    column = mask[W // 2]
+    # a row is floor when its ray goes down steeply enough to hit y = -1 within 53 units (the far edge)
+    slope = -((np.arange(H) + 0.5) - H / 2) / FOCAL  # downward slope of each row's ray
+    expected = slope * 53 > 1
+    assert (column != expected).sum() <= 1
+    assert column[0] and column[: H // 2 - 4].all()  # down to the bottom row, though vertices are behind
+    # each triangle had a vertex behind the camera and was split: the picture is still seamless
+    assert mask[:, : H // 2 - 4].all()
