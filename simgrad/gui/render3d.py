@@ -86,9 +86,9 @@ def _to_screen(cam, v):
 def _box(lo, hi, size):
     """Pixel index range [first, last] whose centres can lie in [lo, hi] (clamped to the image; floats are
     clamped before the cast so far-away primitives cannot overflow it)."""
-    first = ti.cast(ti.max(ti.floor(ti.max(lo, -1.0) - 0.5) + 1.0, 0.0), ti.i32)
-    last = ti.cast(ti.min(ti.floor(ti.min(hi, size + 1.0) - 0.5), size - 1.0), ti.i32)
-    return first, last
+    first = ti.cast(ti.floor(ti.min(ti.max(lo, -1.0), size + 1.0) - 0.5) + 1.0, ti.i32)
+    last = ti.cast(ti.floor(ti.min(ti.max(hi, -1.0), size + 1.0) - 0.5), ti.i32)
+    return ti.max(first, 0), ti.min(last, ti.cast(size, ti.i32) - 1)
 
 
 @ti.func
@@ -114,7 +114,8 @@ def splat_particles(centers: _V1, radii: _F1, cam: _F1, depth: _D2, base: _I32):
         s = _to_screen(cam, _to_view(cam, centers[p]))
         r = radii[p]
         R = r * s[3]
-        if s[2] > cam[CAM_NEAR] and s[2] < cam[CAM_FAR] and R > 0.0:
+        # (NaN or far-off centres fail the bounds test: an exploded simulation draws nothing, fast)
+        if s[2] > cam[CAM_NEAR] and s[2] < cam[CAM_FAR] and R > 0.0 and ti.abs(s[0]) < 1e9 and ti.abs(s[1]) < 1e9:
             x0, x1 = _box(s[0] - R, s[0] + R, W)
             y0, y1 = _box(s[1] - R, s[1] + R, H)
             inv = 1.0 / R
@@ -147,7 +148,8 @@ def raster_triangles(screen: _P1, tris: _T1, cam: _F1, depth: _D2, base: _I32):
         near = cam[CAM_NEAR]
         far = cam[CAM_FAR]
         area = _edge(a, b, c[0], c[1])
-        if ti.min(a[2], b[2], c[2]) > near and ti.max(a[2], b[2], c[2]) < far and area != 0.0:
+        if ti.min(a[2], b[2], c[2]) > near and ti.max(a[2], b[2], c[2]) < far and area != 0.0 \
+                and ti.abs(area) < 1e30:  # (false for NaN vertices)
             x0, x1 = _box(ti.min(a[0], b[0], c[0]), ti.max(a[0], b[0], c[0]), W)
             y0, y1 = _box(ti.min(a[1], b[1], c[1]), ti.max(a[1], b[1], c[1]), H)
             inv = 1.0 / area
@@ -175,7 +177,8 @@ def raster_lines(screen: _P1, segs: _S1, half_width: _F32, cam: _F1, depth: _D2,
     for s in range(segs.shape[0]):
         a = screen[segs[s][0]]
         b = screen[segs[s][1]]
-        if ti.min(a[2], b[2]) > cam[CAM_NEAR] and ti.max(a[2], b[2]) < cam[CAM_FAR]:
+        extent = ti.abs(a[0]) + ti.abs(a[1]) + ti.abs(b[0]) + ti.abs(b[1])  # (NaN fails the test below)
+        if ti.min(a[2], b[2]) > cam[CAM_NEAR] and ti.max(a[2], b[2]) < cam[CAM_FAR] and extent < 1e30:
             x0, x1 = _box(ti.min(a[0], b[0]) - half_width, ti.max(a[0], b[0]) + half_width, W)
             y0, y1 = _box(ti.min(a[1], b[1]) - half_width, ti.max(a[1], b[1]) + half_width, H)
             dx = b[0] - a[0]

@@ -257,7 +257,11 @@ class Scene:
 
     def particles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None, per_vertex_radius=None,
                   index_offset: int = 0, index_count=None):
-        """Spheres of ``radius`` (world units) at ``centers``, shaded as Taichi's particle impostors."""
+        """Spheres of ``radius`` (world units) at ``centers``, shaded as Taichi's particle impostors.
+
+        On screen a sphere is a disc of radius ``radius * focal / depth`` pixels, its geometric size.  (Taichi's
+        GGUI scales the disc by the window's width instead of its height, so on a 4:3 window its particles
+        look 4/3 as large as here.)"""
         c = _vectors(centers, "particles", "centers")
         sel = _count(len(c), index_offset, index_count, "particles", "index")
         if per_vertex_radius is not None:

@@ -346,3 +346,15 @@ def test_floor_running_behind_the_camera_is_clipped_not_dropped():
     assert column[0] and column[: H // 2 - 4].all()  # down to the bottom row, though vertices are behind
     # each triangle had a vertex behind the camera and was split: the picture is still seamless
     assert mask[:, : H // 2 - 4].all()
+
+
+def test_non_finite_geometry_draws_nothing_and_does_not_stall():
+    bad = np.array([[np.nan, 0, 0], [0, np.inf, 0], [1e30, 1e30, 1], [0, 0, np.nan]], np.float32)
+    v = np.array([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0], [1e30, 0, 0], [0, 1e30, 0], [0, 0, -1e30]], np.float32)
+    img = render(lambda s: (s.particles(np.repeat(bad, 2000, axis=0), radius=0.1),
+                            s.mesh(v, indices=np.array([0, 1, 2], np.int32)),
+                            s.lines(v[:2], width=3)))
+    assert not covered(img).any()
+    # an infinite radius covers the whole picture at the depth of the camera (finite colours)
+    img = render(lambda s: s.particles(np.zeros((1, 3), np.float32), radius=np.inf, color=(0.0, 0.0, 0.0)))
+    assert covered(img).all() and np.isfinite(img).all()
