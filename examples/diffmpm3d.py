@@ -263,35 +263,41 @@ def build(scene: Scene, n_grid: int = 64, steps: int = 512, dt: float = 2e-3):
     return type("Sim", (), ns)
 
 
-def project(xs: np.ndarray) -> np.ndarray:
-    """Oblique view of the region where the robot walks: depth (z) moves a point up and to the right."""
-    u = 1.1 * (xs[:, 0] + 0.3 * (xs[:, 2] - 0.25)) - 0.05
-    w = 1.1 * (xs[:, 1] + 0.25 * (xs[:, 2] - 0.25)) + 0.1
-    return np.stack([u, w], axis=1)
-
-
 def render(sim, xs: np.ndarray, acts: np.ndarray, out: str, prefix: str, n_png: int, n_gif: int = 0,
            name: str = "diffmpm3d"):
-    """Draw a trajectory xs[step, particle]: `n_png` states as PNGs, `n_gif` states into out/<name>.gif."""
-    gui = ti.GUI(name, res=512, background_color=0xFFFFFF, show_gui=False)
+    """Draw a trajectory xs[step, particle] in 3-D through ti.ui.Scene: `n_png` states as PNGs, `n_gif`
+    states into out/<name>.gif. Particles are spheres coloured by their actuator's signal (red extending,
+    blue contracting, grey passive, light blue liquid) above the floor of the walking region."""
+    window = ti.ui.Window(name, (640, 400), show_window=False)
+    canvas, scene = window.get_canvas(), window.get_scene()
+    camera = ti.ui.Camera()
+    camera.position(0.5, 0.38, 1.2)
+    camera.lookat(0.4, 0.1, 0.45)
+    camera.fov(40)
     ids, types = sim.act_id0, sim.type0
     n = len(xs)
     png_steps = set(np.linspace(0, n - 1, n_png).astype(int).tolist()) if n_png else set()
     gif_steps = set(np.linspace(0, n - 1, n_gif).astype(int).tolist()) if n_gif else set()
     y0 = 3 / sim.n_grid
-    floor = project(np.array([[0, y0, 0.25], [1, y0, 0.25], [1, y0, 0.65], [0, y0, 0.65]], dtype=np.float64))
+    floor = np.array([[-0.2, y0, 0.0], [1.2, y0, 0.0], [1.2, y0, 0.9], [-0.2, y0, 0.9]], dtype=np.float32)
+    floor_tris = np.array([0, 2, 1, 0, 3, 2], dtype=np.int32)  # counter-clockwise seen from above
+    radius = 0.6 * sim.dx / sim.scene.per_cell  # a little over half the spacing: no gaps between spheres
     frames = []
     for s in sorted(png_steps | gif_steps):
-        order = np.argsort(-xs[s][:, 2])  # far (large z) first
         act = acts[max(s - 1, 0)][np.maximum(ids, 0)]
-        colors = actuation_colors(act, ids >= 0)
-        colors = np.where(types == FLUID, np.uint32(0x4499EE), colors)
-        for a in range(4):
-            gui.line(floor[a], floor[(a + 1) % 4], radius=1.5, color=0x888888)
-        gui.circles(project(xs[s][order]), radius=2.5, color=colors[order])
+        colors = ti.hex_to_rgb(np.where(types == FLUID, np.uint32(0x4499EE), actuation_colors(act, ids >= 0)))
+        canvas.set_background_color((1.0, 1.0, 1.0))
+        scene.set_camera(camera)
+        scene.ambient_light((0.35, 0.35, 0.35))
+        scene.point_light(pos=(0.3, 2.0, 1.5), color=(0.75, 0.75, 0.75))
+        scene.mesh(floor, indices=floor_tris, color=(0.55, 0.6, 0.55))
+        scene.particles(xs[s].astype(np.float32), radius=radius, per_vertex_color=colors.astype(np.float32))
+        canvas.scene(scene)
+        if s in png_steps:
+            window.save_image(os.path.join(out, f"{prefix}{s:04d}.png"))
         if s in gif_steps:
-            frames.append(gui.get_image()[:, :, :3])
-        gui.show(os.path.join(out, f"{prefix}{s:04d}.png") if s in png_steps else None)
+            frames.append(window.get_image_buffer_as_numpy()[:, :, :3])
+        window.show()
     if frames:
         write_gif(ti, frames, out, name)
 

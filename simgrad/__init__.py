@@ -157,12 +157,18 @@ _NOT_SUPPORTED = {
 
 
 def __getattr__(name):
-    if name in ("GUI", "rgb_to_hex", "hex_to_rgb", "tools", "ui"):
+    if name in ("GUI", "rgb_to_hex", "hex_to_rgb", "ui"):
         import simgrad.gui as _gui
 
-        if name == "tools":
-            return _gui
         return getattr(_gui, name)
+    if name == "tools":  # PLYWriter, imshow, imwrite, imread, imresize, VideoManager
+        import simgrad.gui.tools as _tools
+
+        return _tools
+    if name == "_lib":  # ti._lib.core.with_vulkan() and the other backend probes answer False
+        import simgrad._lib as _lib_module
+
+        return _lib_module
     if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
         import simgrad.linalg as _linalg
 

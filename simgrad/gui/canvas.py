@@ -142,6 +142,12 @@ class ImageCanvas:
         self._fill, self._pending = None, []
         self._pixels()[...] = rgb
 
+    def pixels(self) -> np.ndarray:
+        """The pixel buffer itself (float32 RGB, C-contiguous) with everything pending drawn, for renderers
+        that draw into it in place."""
+        self.img  # noqa: B018 (draws what is pending)
+        return self._pixels()
+
     def to_uint8(self) -> np.ndarray:
         """The canvas as uint8 RGB of shape (W, H, 3), rounded like ``ti.tools.imwrite``."""
         return (np.clip(np.nan_to_num(self.img), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .canvas import to_numpy
 
-__all__ = ["imwrite", "imread", "imresize", "VideoManager"]
+__all__ = ["imwrite", "imread", "imresize", "imshow", "VideoManager"]
 
 _MODES = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}
 
@@ -74,6 +74,28 @@ def imresize(img, w, h=None):
     x = np.minimum((np.arange(w) * (arr.shape[0] / w)).astype(np.int64), arr.shape[0] - 1)
     y = np.minimum((np.arange(h) * (arr.shape[1] / h)).astype(np.int64), arr.shape[1] - 1)
     return arr[x[:, None], y[None, :]]
+
+
+def imshow(img, title="imshow"):
+    """Show an image (W, H[, C]) in a window until it is closed or Escape is pressed.  Without a display
+    there is nothing to show and it returns at once (Taichi's would wait forever for a closed window)."""
+    from .gui import GUI
+
+    arr = to_numpy(img)
+    if arr.ndim not in (2, 3):
+        raise ValueError(f"Image must be either RGB/RGBA or greyscale of shape (W, H[, C]), got {arr.shape}")
+    gui = GUI(title, res=arr.shape[:2])
+    try:
+        if not gui.show_gui:
+            return
+        gui.set_image(arr)
+        while gui.running:
+            if gui.get_event(GUI.ESCAPE):
+                break
+            gui.set_image(arr)
+            gui.show()
+    finally:
+        gui.close()
 
 
 class VideoManager:

@@ -1,5 +1,9 @@
-"""``ti.ui`` namespace: the GGUI-style window, canvas and key/event constants."""
+"""``ti.ui`` namespace: the GGUI-style window, canvas, 3D scene and camera, key/event constants (and, as
+in Taichi, the older ``ti.GUI``)."""
 
+from .colors import hex_to_rgb, rgb_to_hex
+from .gui import GUI
+from .scene import Camera, ProjectionMode, Scene, make_camera
 from .window import (
     ALT,
     BACKSPACE,
@@ -28,6 +32,13 @@ __all__ = [
     "Window",
     "Canvas",
     "Gui",
+    "GUI",
+    "Scene",
+    "Camera",
+    "ProjectionMode",
+    "make_camera",
+    "rgb_to_hex",
+    "hex_to_rgb",
     "PRESS",
     "RELEASE",
     "SHIFT",

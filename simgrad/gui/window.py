@@ -1,14 +1,23 @@
-"""A minimal ``ti.ui`` (GGUI) ``Window`` and ``Canvas`` on top of the numpy canvas.
+"""``ti.ui`` (GGUI) ``Window`` and ``Canvas`` on top of the numpy canvas ``ti.GUI`` uses.
 
-GGUI programs draw vertex fields each frame and call ``window.show()``; this module rasterises the
-2D part of that API (circles, lines, triangles, images) into the same numpy canvas ``ti.GUI`` uses,
-so GGUI programs run headless and can save frames.  Sizes follow ``ti.ui``: radii and line widths
-are fractions of the window height, colours are float RGB tuples.
+GGUI programs draw vertex fields each frame and call ``window.show()``.  The 2D primitives (circles,
+lines, triangles, images) go through the numpy canvas, 3D scenes through the kernels of
+:mod:`.render3d`, so GGUI programs run headless and can save frames; a Tk window shows them where a
+display exists.  Sizes follow ``ti.ui``: 2D radii and line widths are fractions of the window height,
+colours are float RGB tuples.
+
+Two environment variables help running GGUI programs unattended: ``SIMGRAD_UI_FRAMES=<folder>``
+records every shown frame there (and assembles ``<folder>/<window name>.gif`` when the window is
+destroyed or the program exits), ``SIMGRAD_UI_MAX_FRAMES=<n>`` makes ``window.running`` False after
+``n`` frames, so a ``while window.running`` loop ends headless.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import os
+import re
 
 import numpy as np
 
@@ -63,11 +72,15 @@ class Canvas:
             arr = imresize(arr, *self._canvas.res)
         self._canvas.replace(arr)
 
-    def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None):
-        """Circles at ``centers`` with ``radius`` a fraction of the window height."""
+    def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None, per_vertex_radius=None):
+        """Circles at ``centers`` with ``radius`` (or ``per_vertex_radius``) a fraction of the window height."""
         pos = _vertices(centers)
         colors = _vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color)
-        self._canvas.circles(pos, float(radius) * self._canvas.res[1], colors)
+        if per_vertex_radius is not None:
+            radii = to_numpy(per_vertex_radius).astype(np.float64).reshape(-1) * self._canvas.res[1]
+        else:
+            radii = float(radius) * self._canvas.res[1]
+        self._canvas.circles(pos, radii, colors)
 
     def lines(self, vertices, width, indices=None, color=(0.5, 0.5, 0.5), per_vertex_color=None):
         """Segments between vertex pairs (or index pairs); ``width`` a fraction of the height."""
@@ -93,7 +106,11 @@ class Canvas:
         self._canvas.triangles(v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]], _rgb(color), vertex_colors=vc)
 
     def scene(self, scene):
-        raise NotImplementedError("3D scenes are not supported by simgrad's software canvas")
+        """Render a :class:`~.scene.Scene` over the canvas (z-buffered; uncovered pixels are kept)."""
+        from . import render3d
+
+        frame = scene._take_frame(self._canvas.res)
+        render3d.render(self._canvas.pixels(), frame)
 
 
 def _rgb(color):
@@ -134,20 +151,35 @@ class Gui:
 class Window:
     """``ti.ui.Window(name, res, vsync=False, show_window=True)``; headless without a display."""
 
-    def __init__(self, name, res, vsync=False, show_window=True, fps_limit=1000, pos=(100, 100)):
+    def __init__(self, name, res, vsync=False, show_window=True, fps_limit=1000, pos=(100, 100),
+                 frames_dir=None, max_frames=None):
         self.name = name
         self.res = (int(res[0]), int(res[1]))
         self._image = ImageCanvas(self.res)
         self._canvas = Canvas(self._image)
+        self._scene = None
         self._gui = Gui()
         self._running = True
         self._window = _tk.open_window(name, self.res) if show_window else None
         self.event = None
         self.frame = 0
+        if max_frames is None and os.environ.get("SIMGRAD_UI_MAX_FRAMES"):
+            max_frames = int(os.environ["SIMGRAD_UI_MAX_FRAMES"])
+        self.max_frames = max_frames
+        frames_dir = frames_dir or os.environ.get("SIMGRAD_UI_FRAMES")
+        self._video = None
+        if frames_dir:
+            from .image import VideoManager
+
+            video_name = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)) or "video"
+            self._video = VideoManager(frames_dir, video_filename=video_name, automatic_build=False)
+            atexit.register(self.make_video)
 
     @property
     def running(self):
-        """False once closed (window closed, ``destroy()``, or ``running = False``)."""
+        """False once closed (window closed, ``destroy()``, ``running = False``, or ``max_frames`` shown)."""
+        if self.max_frames is not None and self.frame >= self.max_frames:
+            return False
         return self._running and not (self._window is not None and self._window.closed)
 
     @running.setter
@@ -162,13 +194,24 @@ class Window:
 
     GUI = property(get_gui)
 
+    def get_scene(self):
+        """The window's 3D :class:`~.scene.Scene` (one per window, drawn by ``canvas.scene(scene)``)."""
+        if self._scene is None:
+            from .scene import Scene
+
+            self._scene = Scene()
+        return self._scene
+
     def get_window_shape(self):
         return self.res
 
     def show(self):
-        """Present the frame, then start the next one from the background colour."""
+        """Present the frame (and record it, when recording), then start the next one from the background
+        colour."""
         if self._window is not None:
             self._window.update(self._image.to_uint8())
+        if self._video is not None:
+            self._video.write_frame(self._image.to_uint8())
         self.frame += 1
         self._image.clear(self._canvas._background)
 
@@ -221,11 +264,23 @@ class Window:
         """Cursor position in [0, 1]^2 with y up; the centre when headless."""
         return (0.5, 0.5) if self._window is None else tuple(self._window.cursor)
 
+    def make_video(self, gif=True, mp4=False):
+        """Assemble the recorded frames into ``<frames_dir>/<name>.gif`` (and ``.mp4`` on request); the
+        frame PNGs stay in ``<frames_dir>/frames``.  Returns the GIF's path, None when not recording."""
+        if self._video is None or not self._video.frame_fns:
+            return None
+        self._video.make_video(gif=gif, mp4=mp4)
+        return self._video.get_output_filename(".gif")
+
     def destroy(self):
         if self._window is not None:
             self._window.close()
             self._window = None
         self._running = False
+        self.make_video()
+        if self._video is not None:
+            atexit.unregister(self.make_video)
+            self._video = None
 
 
 class _Event:

@@ -1,0 +1,33 @@
+"""``ti._lib.core``: Taichi programs choose a backend with ``ti._lib.core.with_vulkan()`` and friends; simgrad
+compiles for the CPU only, so every GPU probe answers False (and such programs fall back to ``ti.cuda``,
+which ``ti.init`` maps to the CPU).  GGUI is available: ``ti.ui`` renders on the CPU."""
+
+GGUI_AVAILABLE = True
+
+
+def with_vulkan() -> bool:
+    return False
+
+
+def with_cuda() -> bool:
+    return False
+
+
+def with_metal() -> bool:
+    return False
+
+
+def with_opengl() -> bool:
+    return False
+
+
+def with_dx11() -> bool:
+    return False
+
+
+def with_dx12() -> bool:
+    return False
+
+
+def with_amdgpu() -> bool:
+    return False
