@@ -194,7 +194,7 @@ class KeyBuilder:
         from simgrad.lang.kernel import Func
         from simgrad.lang.loops import ndrange
         from simgrad.lang.matrix import Matrix
-        from simgrad.lang.snode import Axis
+        from simgrad.lang.snode import Axis, SNode
         from simgrad.lang.types import MatrixType, NdarrayType, Template, _Types, is_sparse_matrix_builder
 
         if isinstance(v, dt.DataType):
@@ -217,6 +217,11 @@ class KeyBuilder:
             return ("sparse_matrix_builder",)
         if isinstance(v, Axis):
             return ("axis", v.index)
+        if isinstance(v, SNode):
+            if v.tree is None or v.tree.program.released:
+                raise Unkeyable("an SNode of no live program")
+            v.tree.materialize()  # the layout, pools included, is what gets compiled in
+            return ("snode", v.tree.id, _path(v))
         if isinstance(v, ndrange):
             return ("ndrange", self.value(v.bounds, depth + 1))
         if isinstance(v, Arch):
@@ -236,9 +241,16 @@ class KeyBuilder:
                 getattr(f, "_needs_grad", None), comps, grad, dual)
 
 
+def _path(node) -> tuple:
+    """An SNode's path as compiled code sees it: kinds, sizes, offsets, and a sparse node's pool, mask and
+    block (pool ids follow the order sparse nodes were materialised in, so they must be in the key)."""
+    return tuple((n.kind, n.axes, n.sizes, n.offset_in_parent, n.cell_size, n.pool, n.mask_offset, n.block_size)
+                 for n in node.path())
+
+
 def _component(c) -> tuple:
     node = c.snode
-    path = tuple((n.kind, n.axes, n.sizes, n.offset_in_parent, n.cell_size) for n in node.path()) if node else None
+    path = _path(node) if node else None
     tree = node.tree.id if node is not None and node.tree is not None else None
     return (c.name, c.dtype.name, c.offset, c.layout, tree, path, c.is_primal)
 

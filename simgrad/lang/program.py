@@ -12,7 +12,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.runtime import abi
 from simgrad.runtime.memory import Memory
-from simgrad.runtime.sparse import SparseMemory
+from simgrad.runtime.sparse import MAX_RESERVE, SparseMemory
 
 if TYPE_CHECKING:
     from simgrad.runtime.jit import CodeSpace
@@ -70,7 +70,8 @@ class Program:
         self.config = Config(**kw)
         self.set_default_types(self.config.default_fp, self.config.default_ip)
         self.memory = Memory()
-        self.sparse = SparseMemory()
+        gb = kw.get("device_memory_GB")
+        self.sparse = SparseMemory(int(gb * 2**30) if gb else MAX_RESERVE)
         self.trees: list = []
         self._open_tree = None
         self.profiler = Profiler()

@@ -173,6 +173,17 @@ class SNode:
                 self.place(gdual, offset=offset)
         return self
 
+    def memory_usage(self) -> dict[str, int]:
+        """A sparse node's pool: blocks in use (`live_blocks`), blocks ever handed out (`touched_blocks`:
+        their pages are resident until ti.root.deactivate_all / deactivate_all_snodes give them back),
+        `block_bytes` and `touched_bytes`."""
+        if not self.is_sparse:
+            raise SimgradError(f"memory_usage() is for pointer, bitmasked and dynamic nodes, not {self.kind}",
+                               caller_loc())
+        assert self.tree is not None
+        self.tree.materialize()
+        return self.tree.program.sparse.usage_of(self.pool)
+
     def deactivate_all(self) -> None:
         """Deactivate every cell of every sparse node at or under this one (deepest first, so no block
         is freed while it still points to others); a pool whose node was emptied everywhere gives its
@@ -373,7 +384,7 @@ class SNodeTree:
             if c.is_sparse:
                 blocks = instances * c.num_cells if c.kind == "pointer" else instances if c.kind == "dynamic" else 0
                 size = c.block_size if c.kind != "bitmasked" else c.cell_size
-                c.pool = self.program.sparse.add_pool(c.kind, size, blocks, instances * c.num_cells)
+                c.pool = self.program.sparse.add_pool(size, blocks, instances * c.num_cells)
             self._add_pools(c, instances * c.num_cells)
 
 

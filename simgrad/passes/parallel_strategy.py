@@ -139,7 +139,7 @@ def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
     if p1.op is not Op.GLOBAL_PTR or p2.op is not Op.GLOBAL_PTR or p1.operands != p2.operands:
         return False
     t1, t2 = p1.attrs["target"], p2.attrs["target"]
-    if not isinstance(t1, FieldRef) or not isinstance(t2, FieldRef):
+    if not isinstance(t1, FieldRef) or not isinstance(t2, FieldRef) or t1.sparse or t2.sparse:
         return False
     (tree1, c1, terms1, _), (tree2, c2, terms2, _) = t1.layout, t2.layout
     return tree1 == tree2 and terms1 == terms2 and c2 == c1 + 4 and c1 % 8 == 0 \
@@ -167,6 +167,9 @@ def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
                 continue
             key: tuple
             if o.op is Op.GLOBAL_PTR:
+                if getattr(o.attrs["target"], "sparse", False):  # its address is looked up in the loop
+                    spoiled.add(id(o.attrs["target"]))
+                    continue
                 if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):
                     spoiled.add(id(o.attrs["target"]))
                     continue

@@ -121,7 +121,7 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
     weight = 0
     for tid, updates in adds.items():
         f = updates[0][0].operands[0].attrs["target"]
-        if tid not in shared or tid in reduced or not isinstance(f, FieldRef) \
+        if tid not in shared or tid in reduced or not isinstance(f, FieldRef) or f.sparse \
                 or f.layout is None or f.dtype.name not in ("f32", "f64", "i32", "i64"):
             continue
         ptrs = [a.operands[0] for a, _times in updates]

@@ -175,6 +175,10 @@ class Launcher:
             raise SimgradAssertionError(f"assertion failed: {detail}", loc)
         if kind == "adstack":
             raise SimgradRuntimeError(detail, loc)
+        if kind == "sparse_pool":
+            raise SimgradRuntimeError(f"out of memory for {detail} SNode blocks: its pool holds {value} blocks "
+                                      "and all are in use (deactivate cells, or raise ti.init(device_memory_GB=...))",
+                                      loc)
         raise SimgradRuntimeError(f"kernel {self.kernel_name} reported error {code}", loc)
 
 

@@ -48,14 +48,14 @@ def _reserve(nbytes: int) -> int:
 class SparseMemory:
     """The pool table of one program (lang/program.py) and the memory behind it."""
 
-    def __init__(self) -> None:
+    def __init__(self, reserve_limit: int = MAX_RESERVE) -> None:
+        self.reserve_limit = reserve_limit  # bytes one pool may reserve (ti.init(device_memory_GB=...))
         # the table is mapped with the first pool (a program without sparse nodes maps nothing; a
         # per-program malloc of this size would leave the allocator's heap fragmented over init cycles)
         self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)
         self.address = 0
         self.count = 0
         self._maps: list[tuple[int, int]] = []  # (address, bytes) to unmap on release
-        self._names: list[str] = []
 
     def _ensure_table(self) -> None:
         if self.address:
@@ -65,7 +65,7 @@ class SparseMemory:
         words = (ctypes.c_int64 * (MAX_POOLS * POOL_WORDS)).from_address(self.address)
         self.table = np.ctypeslib.as_array(words).reshape(MAX_POOLS, POOL_WORDS)
 
-    def add_pool(self, name: str, block_size: int, capacity: int, cells: int) -> int:
+    def add_pool(self, block_size: int, capacity: int, cells: int) -> int:
         """A pool of `capacity` blocks of `block_size` bytes (capacity 0: a bitmasked node's zero and
         discard blocks only) for a node of `cells` cells in all. Returns its id, the index the kernels use.
         With it come MAX_LISTS lists of `cells` i32 each: a struct-for whose first sparse node this is
@@ -79,14 +79,13 @@ class SparseMemory:
         block_size = max(8, (block_size + 63) // 64 * 64 if block_size >= 64 else (block_size + 7) // 8 * 8)
         row = self.table[pid]
         row[POOL_BLOCK] = block_size
-        capacity = min(capacity, MAX_RESERVE // block_size)
+        capacity = min(capacity, self.reserve_limit // block_size)
         row[POOL_CAPACITY] = capacity
         if capacity:
             row[POOL_BASE] = self._map(capacity * block_size)
         side = self._map(2 * block_size)  # the zero block, then the discard block
         row[POOL_ZERO], row[POOL_DISCARD] = side, side + block_size
         row[POOL_LISTS] = self._map(MAX_LISTS * 4 * max(cells, 1))
-        self._names.append(name)
         return pid
 
     def _map(self, nbytes: int) -> int:
@@ -101,15 +100,11 @@ class SparseMemory:
     def live_blocks(self, pid: int) -> int:
         return int(self.table[pid, POOL_LIVE])
 
-    def usage(self) -> dict[str, dict[str, int]]:
-        """Per sparse node: blocks in use, blocks ever touched (bumped) and the bytes those hold."""
-        out = {}
-        for pid, name in enumerate(self._names):
-            row = self.table[pid]
-            out[f"{name}#{pid}"] = {"live_blocks": int(row[POOL_LIVE]), "touched_blocks": int(row[POOL_NEXT]),
-                                    "block_bytes": int(row[POOL_BLOCK]),
-                                    "touched_bytes": int(row[POOL_NEXT] * row[POOL_BLOCK])}
-        return out
+    def usage_of(self, pid: int) -> dict[str, int]:
+        """A pool's blocks in use, blocks ever handed out (bumped) and the bytes those hold."""
+        row = self.table[pid]
+        return {"live_blocks": int(row[POOL_LIVE]), "touched_blocks": int(row[POOL_NEXT]),
+                "block_bytes": int(row[POOL_BLOCK]), "touched_bytes": int(row[POOL_NEXT] * row[POOL_BLOCK])}
 
     def reset_pool(self, pid: int) -> None:
         """Forget every block of a pool (after all its cells were deactivated) and give its pages back."""
