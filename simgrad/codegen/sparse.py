@@ -36,11 +36,49 @@ define internal void @sg_pool_unlock(ptr %row) {
   ret void
 }
 
-; the block behind *slot, allocating it (zeroed) when the slot is still null; a pool that has run out
-; reports error `code` and hands out the discard block
+; the block behind *slot, allocating it (zeroed) when the slot is still null. Without freed blocks to reuse,
+; a fresh block is bumped off the pool and installed by compare-and-swap, with no lock (the common case:
+; many threads activating at once); a block that lost the race goes to the free list. Freed blocks are
+; reused under the pool's lock. A pool that has run out reports error `code` and hands out the discard block.
 define internal ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code) noinline {
 entry:
   %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
+  %free0 = load atomic ptr, ptr %fp monotonic, align 8
+  %has_free0 = icmp ne ptr %free0, null
+  br i1 %has_free0, label %locked, label %bump
+bump:
+  %np = getelementptr i64, ptr %row, i64 @POOL_NEXT@
+  %n = atomicrmw add ptr %np, i64 1 monotonic
+  %cp = getelementptr i64, ptr %row, i64 @POOL_CAPACITY@
+  %cap = load i64, ptr %cp
+  %full = icmp uge i64 %n, %cap
+  br i1 %full, label %exhausted, label %fresh
+fresh:
+  %bp = getelementptr i64, ptr %row, i64 @POOL_BASE@
+  %base = load ptr, ptr %bp
+  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
+  %sz = load i64, ptr %szp
+  %boff = mul i64 %n, %sz
+  %blk = getelementptr i8, ptr %base, i64 %boff
+  %cas = cmpxchg ptr %slot, ptr null, ptr %blk acq_rel monotonic
+  %won = extractvalue { ptr, i1 } %cas, 1
+  br i1 %won, label %done_fresh, label %lost
+done_fresh:
+  ret ptr %blk
+lost:
+  %other = extractvalue { ptr, i1 } %cas, 0
+  call void @sg_pool_lock(ptr %row)
+  %f1 = load ptr, ptr %fp
+  store ptr %f1, ptr %blk
+  store ptr %blk, ptr %fp
+  %cnp = getelementptr i64, ptr %row, i64 @POOL_FREECOUNT@
+  %c1 = load i64, ptr %cnp
+  %c2 = add i64 %c1, 1
+  store i64 %c2, ptr %cnp
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %other
+locked:
   call void @sg_pool_lock(ptr %row)
   %cur = load atomic ptr, ptr %slot acquire, align 8
   %have = icmp ne ptr %cur, null
@@ -49,43 +87,32 @@ unlock_cur:
   call void @sg_pool_unlock(ptr %row)
   ret ptr %cur
 take:
-  %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
   %free = load ptr, ptr %fp
   %has_free = icmp ne ptr %free, null
-  br i1 %has_free, label %reuse, label %bump
+  br i1 %has_free, label %reuse, label %unlock_bump
+unlock_bump:
+  call void @sg_pool_unlock(ptr %row)
+  br label %bump
 reuse:
+  ; a lock-free bump elsewhere may install a block meanwhile: install by compare-and-swap here too
+  %cas2 = cmpxchg ptr %slot, ptr null, ptr %free acq_rel monotonic
+  %won2 = extractvalue { ptr, i1 } %cas2, 1
+  br i1 %won2, label %popped, label %kept
+popped:
   %next = load ptr, ptr %free
   store ptr %next, ptr %fp
   store i64 0, ptr %free
-  br label %got
-bump:
-  %np = getelementptr i64, ptr %row, i64 @POOL_NEXT@
-  %n = load i64, ptr %np
-  %cp = getelementptr i64, ptr %row, i64 @POOL_CAPACITY@
-  %cap = load i64, ptr %cp
-  %full = icmp uge i64 %n, %cap
-  br i1 %full, label %exhausted, label %fresh
-fresh:
-  %n1 = add i64 %n, 1
-  store i64 %n1, ptr %np
-  %bp = getelementptr i64, ptr %row, i64 @POOL_BASE@
-  %base = load ptr, ptr %bp
-  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
-  %sz = load i64, ptr %szp
-  %boff = mul i64 %n, %sz
-  %blk = getelementptr i8, ptr %base, i64 %boff
-  br label %got
-got:
-  %b = phi ptr [%free, %reuse], [%blk, %fresh]
-  %lp = getelementptr i64, ptr %row, i64 @POOL_LIVE@
-  %live = load i64, ptr %lp
-  %live1 = add i64 %live, 1
-  store i64 %live1, ptr %lp
-  store atomic ptr %b, ptr %slot release, align 8
+  %cnp2 = getelementptr i64, ptr %row, i64 @POOL_FREECOUNT@
+  %d1 = load i64, ptr %cnp2
+  %d2 = sub i64 %d1, 1
+  store i64 %d2, ptr %cnp2
   call void @sg_pool_unlock(ptr %row)
-  ret ptr %b
+  ret ptr %free
+kept:
+  %other2 = extractvalue { ptr, i1 } %cas2, 0
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %other2
 exhausted:
-  call void @sg_pool_unlock(ptr %row)
   call void @sg_report(ptr %ctx, i64 %code, i64 %cap)
   %dp = getelementptr i64, ptr %row, i64 @POOL_DISCARD@
   %discard = load ptr, ptr %dp
@@ -102,18 +129,18 @@ define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
   %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
   %free = load ptr, ptr %fp
   store ptr %free, ptr %blk
-  store ptr %blk, ptr %fp
-  %lp = getelementptr i64, ptr %row, i64 @POOL_LIVE@
-  %live = load i64, ptr %lp
-  %live1 = sub i64 %live, 1
-  store i64 %live1, ptr %lp
+  store atomic ptr %blk, ptr %fp release, align 8
+  %cnp = getelementptr i64, ptr %row, i64 @POOL_FREECOUNT@
+  %c1 = load i64, ptr %cnp
+  %c2 = add i64 %c1, 1
+  store i64 %c2, ptr %cnp
   call void @sg_pool_unlock(ptr %row)
   ret void
 }
 """
 for _name, _value in (("CTX_SPARSE", abi.CTX_SPARSE), ("POOL_WORDS", rt.POOL_WORDS), ("POOL_FREE", rt.POOL_FREE),
                       ("POOL_NEXT", rt.POOL_NEXT), ("POOL_CAPACITY", rt.POOL_CAPACITY),
-                      ("POOL_BASE", rt.POOL_BASE), ("POOL_BLOCK", rt.POOL_BLOCK), ("POOL_LIVE", rt.POOL_LIVE),
+                      ("POOL_BASE", rt.POOL_BASE), ("POOL_BLOCK", rt.POOL_BLOCK), ("POOL_FREECOUNT", rt.POOL_FREECOUNT),
                       ("POOL_DISCARD", rt.POOL_DISCARD)):
     _HELPERS = _HELPERS.replace(f"@{_name}@", str(_value))
 

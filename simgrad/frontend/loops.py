@@ -122,6 +122,9 @@ def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> No
         idx = [coords[a] for a in axes]
         if offset:
             idx = [ops.add(i, o) for i, o in zip(idx, offset)]
+        if all(isinstance(i, Expr) and i.stmt.op is not Op.CONST for i in idx):
+            for k, i in enumerate(idx):  # the cell's indices: each iteration owns its cell (parallel_strategy)
+                i.stmt.attrs["cell_index"] = k
         if grouped_:
             comp.bind(names[0], Matrix(idx))
         else:
@@ -228,6 +231,7 @@ def _listed_loop(comp, node: SNode, total: int, cell_coords, axes, inner) -> Non
     comp.next_loop_config = user_config  # ti.loop_config(...) meant the loop over the cells
 
     def body(k):
+        k.stmt.attrs["cells"] = len(axes)  # a struct-for: its cell_index statements name distinct cells
         flat = Expr(comp.builder.emit(Op.SNODE_OP, dt.i32, (k.stmt,), {"op": "list_get", "snode": ref,
                                                                          "list": list_id}))
         inner(cell_coords(flat))

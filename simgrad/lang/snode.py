@@ -175,7 +175,7 @@ class SNode:
 
     def memory_usage(self) -> dict[str, int]:
         """A sparse node's pool: blocks in use (`live_blocks`), blocks ever handed out (`touched_blocks`:
-        their pages are resident until ti.root.deactivate_all / deactivate_all_snodes give them back),
+        resident memory, reused after deactivation, given back to the system by ti.reset / ti.init),
         `block_bytes` and `touched_bytes`."""
         if not self.is_sparse:
             raise SimgradError(f"memory_usage() is for pointer, bitmasked and dynamic nodes, not {self.kind}",
@@ -186,8 +186,8 @@ class SNode:
 
     def deactivate_all(self) -> None:
         """Deactivate every cell of every sparse node at or under this one (deepest first, so no block
-        is freed while it still points to others); a pool whose node was emptied everywhere gives its
-        pages back."""
+        is freed while it still points to others). Freed blocks stay with their pool, zeroed, for the
+        next activations (as Taichi keeps them): their pages are not faulted in again."""
         from simgrad.lang import scope_hooks
 
         if self.tree is None:
@@ -195,9 +195,9 @@ class SNode:
         self.tree.materialize()
         nodes = [n for n in self._walk() if n.is_sparse]
         for n in sorted(nodes, key=lambda n: -len(n.path())):
-            scope_hooks.sparse.deactivate_all(n)
-            if not any(a.is_sparse for a in n.path()[:-1]) and self in n.path():
-                n.tree.program.sparse.reset_pool(n.pool)
+            scope_hooks.sparse.deactivate_all(n)  # freed blocks are zeroed and kept for the next activations
+            if n.kind != "bitmasked":
+                n.tree.program.sparse.restart_if_empty(n.pool)
 
     def lazy_grad(self) -> None:
         """Place the gradient of every field under this node that needs one, beside its primal."""

@@ -148,7 +148,12 @@ def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
 
 def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
     """True when the element's indices determine the loop index: apart from loop-invariant values they
-    are digits `(index // d) % m` of it that chain from d = 1 up to a digit without modulus."""
+    are digits `(index // d) % m` of it that chain from d = 1 up to a digit without modulus; or, in a
+    struct-for over sparse cells (loop attrs `cells`), they are the cell's own indices, every one."""
+    ncells = loop.attrs.get("cells")
+    if ncells and len(ptr.operands) == ncells and all(
+            id(o) in inside and o.attrs.get("cell_index") == k for k, o in enumerate(ptr.operands)):
+        return True
     if any(o.op is not Op.CONST and id(o) in inside and digit_of(o, loop) is None for o in ptr.operands):
         return False  # an index computed in the iteration some other way
     return digit_chain(ptr.operands, loop) is not None

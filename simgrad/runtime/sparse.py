@@ -3,10 +3,11 @@ discard block per sparse node, all described by a table that compiled kernels re
 CTX_SPARSE) and update with atomics.
 
 A pool reserves address space for every block its node could ever need (mmap with MAP_NORESERVE: pages
-cost memory only once touched) and hands blocks out by bumping an index; blocks given back by
-deactivation are zeroed and kept on a free list that the next activation takes from first. Kernels
-allocate (codegen/llvm.py `@sg_sparse_alloc`) under the pool's spin lock, so activation from many
-threads is safe; a pool that runs out reports an error through the kernel's error buffer and hands out
+cost memory only once touched) and hands blocks out by bumping an index (an atomic add: many threads
+activate at once without a lock); blocks given back by deactivation are zeroed and kept on a free list,
+under the pool's spin lock, that the next activations take from first; once every block of a pool is
+free again (deactivate_all) the pool starts over at its first, already resident, block. Kernels
+allocate in codegen/sparse.py `@sg_sparse_alloc`; a pool that runs out reports an error through the kernel's error buffer and hands out
 the node's discard block, so the kernel's remaining writes land nowhere harmful. Reads of an inactive
 cell are pointed at the node's zero block (they see 0 and activate nothing).
 """
@@ -20,7 +21,7 @@ import numpy as np
 
 MAX_POOLS = 1024
 #: the words of one pool's entry in the table (i64 each)
-(POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_LIVE, POOL_ZERO, POOL_DISCARD,
+(POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_FREECOUNT, POOL_ZERO, POOL_DISCARD,
  POOL_LISTS) = range(10)
 POOL_WORDS = 16
 #: struct-fors one kernel may run over the same first sparse node (each keeps its own list of active cells)
@@ -32,9 +33,7 @@ _libc = ctypes.CDLL(None, use_errno=True)
 _libc.mmap.restype = ctypes.c_void_p
 _libc.mmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_long]
 _libc.munmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t]
-_libc.madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
 _MAP_NORESERVE = getattr(mmap, "MAP_NORESERVE", 0x4000)
-_MADV_DONTNEED = 4
 
 
 def _reserve(nbytes: int) -> int:
@@ -55,6 +54,7 @@ class SparseMemory:
         self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)
         self.address = 0
         self.count = 0
+        self.touched: dict[int, int] = {}  # pool -> most blocks ever bumped (across restarts)
         self._maps: list[tuple[int, int]] = []  # (address, bytes) to unmap on release
 
     def _ensure_table(self) -> None:
@@ -103,17 +103,18 @@ class SparseMemory:
     def usage_of(self, pid: int) -> dict[str, int]:
         """A pool's blocks in use, blocks ever handed out (bumped) and the bytes those hold."""
         row = self.table[pid]
-        return {"live_blocks": int(row[POOL_LIVE]), "touched_blocks": int(row[POOL_NEXT]),
-                "block_bytes": int(row[POOL_BLOCK]), "touched_bytes": int(row[POOL_NEXT] * row[POOL_BLOCK])}
+        bumped = min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY]))
+        self.touched[pid] = max(self.touched.get(pid, 0), bumped)
+        return {"live_blocks": bumped - int(row[POOL_FREECOUNT]), "touched_blocks": self.touched[pid],
+                "block_bytes": int(row[POOL_BLOCK]), "touched_bytes": self.touched[pid] * int(row[POOL_BLOCK])}
 
-    def reset_pool(self, pid: int) -> None:
-        """Forget every block of a pool (after all its cells were deactivated) and give its pages back."""
+    def restart_if_empty(self, pid: int) -> None:
+        """After a deactivate_all: when no block of the pool is in use, forget the free list and bump from
+        the first block again (every freed block was zeroed), so activations take the lock-free path."""
         row = self.table[pid]
-        if row[POOL_CAPACITY] and row[POOL_NEXT]:
-            nbytes = int(row[POOL_NEXT] * row[POOL_BLOCK])
-            nbytes = (nbytes + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
-            _libc.madvise(ctypes.c_void_p(int(row[POOL_BASE])), nbytes, _MADV_DONTNEED)  # zero pages again
-        row[POOL_NEXT] = row[POOL_FREE] = row[POOL_LIVE] = 0
+        if row[POOL_CAPACITY] and min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) == row[POOL_FREECOUNT]:
+            self.touched[pid] = max(self.touched.get(pid, 0), int(row[POOL_NEXT]))
+            row[POOL_NEXT] = row[POOL_FREE] = row[POOL_FREECOUNT] = 0
 
     def release(self) -> None:
         self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)

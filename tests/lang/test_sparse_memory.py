@@ -36,7 +36,7 @@ def test_parallel_scatter_into_a_pointer_field_matches_numpy():
     assert blk.memory_usage()["live_blocks"] == touched_blocks
 
 
-def test_deactivated_blocks_are_reused_and_pages_given_back():
+def test_deactivated_blocks_are_reused():
     x, blk = _blocked(1024, 8)
 
     @ti.kernel
@@ -47,7 +47,7 @@ def test_deactivated_blocks_are_reused_and_pages_given_back():
     write(0, 512)
     use = blk.memory_usage()
     assert use["live_blocks"] == 64 and use["touched_blocks"] == 64
-    blk.deactivate_all()  # the pool is reset: its pages go back to the system
+    blk.deactivate_all()  # the blocks go back to the pool's free list, zeroed
     assert blk.memory_usage()["live_blocks"] == 0
     write(512, 1024)
     use = blk.memory_usage()
