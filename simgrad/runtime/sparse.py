@@ -7,8 +7,9 @@ cost memory only once touched) and hands blocks out by bumping an index (an atom
 activate at once without a lock); blocks given back by deactivation are zeroed and kept on a free list,
 under the pool's spin lock, that the next activations take from first; once every block of a pool is
 free again (deactivate_all) the pool starts over at its first, already resident, block. Kernels
-allocate in codegen/sparse.py `@sg_sparse_alloc`; a pool that runs out reports an error through the kernel's error buffer and hands out
-the node's discard block, so the kernel's remaining writes land nowhere harmful. Reads of an inactive
+allocate in codegen/sparse.py `@sg_sparse_alloc`; a pool that runs out reports an error through the
+kernel's error buffer and hands out the node's discard block, so the kernel's remaining writes land
+nowhere harmful. Reads of an inactive
 cell are pointed at the node's zero block (they see 0 and activate nothing).
 """
 
@@ -96,9 +97,6 @@ class SparseMemory:
 
     def block_size(self, pid: int) -> int:
         return int(self.table[pid, POOL_BLOCK])
-
-    def live_blocks(self, pid: int) -> int:
-        return int(self.table[pid, POOL_LIVE])
 
     def usage_of(self, pid: int) -> dict[str, int]:
         """A pool's blocks in use, blocks ever handed out (bumped) and the bytes those hold."""
