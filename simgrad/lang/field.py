@@ -143,6 +143,12 @@ class Field:
 
         return length(self.parent(), [])
 
+    def deactivate(self):
+        """`l.deactivate()` in a kernel: empty a 1-D field's dynamic list."""
+        from simgrad.lang.sparse import deactivate
+
+        return deactivate(self.parent(), [])
+
 
 class ScalarField(Field):
     def __init__(self, dtype, name: str = "field"):

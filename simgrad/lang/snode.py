@@ -173,6 +173,16 @@ class SNode:
                 self.place(gdual, offset=offset)
         return self
 
+    @property
+    def _num_dynamically_allocated(self) -> int:
+        """Taichi's count of blocks ever allocated for this node (pointer/dynamic; 0 for others)."""
+        return self.memory_usage()["touched_blocks"] if self.kind in ("pointer", "dynamic") else 0
+
+    @property
+    def _snode_tree_id(self) -> int:
+        assert self.tree is not None
+        return self.tree.id
+
     def memory_usage(self) -> dict[str, int]:
         """A sparse node's pool: blocks in use (`live_blocks`), blocks ever handed out (`touched_blocks`:
         resident memory, reused after deactivation, given back to the system by ti.reset / ti.init),

@@ -137,19 +137,31 @@ def append(node, indices, value):
     idx = _list_indices(n, indices, "append")
     k = _emit("append_slot", n, idx)
     fields = [m.field for m in n.children if m.kind == "place" and m.field is not None and m.field.is_primal]
-    if len(fields) != 1:
-        raise SimgradSyntaxError("ti.append needs a dynamic node with exactly one scalar field placed under it",
-                                 context.current_loc())
-    field = fields[0]
+    values = _leaves(value)
+    if len(values) != len(fields):
+        raise SimgradSyntaxError(f"ti.append: this dynamic node holds {len(fields)} value(s) per element (the "
+                                 f"fields placed under it), got {len(values)}", context.current_loc())
     ax = sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
     full = idx[:ax] + [k] + idx[ax + 1:]
     b = context.builder()
     guard = b.emit(Op.IF, None, (ops.lt(k, n.sizes[0]).stmt,), nblocks=2)
     with context.current().dynamic(guard.blocks[0]):
-        ptr = b.emit(Op.GLOBAL_PTR, field.dtype, tuple(i.stmt for i in full), {"target": field.ref()})
-        v = ops.cast_expr(ops.to_expr(value, field.dtype), field.dtype)
-        b.emit(Op.GLOBAL_STORE, None, (ptr, v.stmt))
+        for field, v in zip(fields, values):
+            ptr = b.emit(Op.GLOBAL_PTR, field.dtype, tuple(i.stmt for i in full), {"target": field.ref()})
+            b.emit(Op.GLOBAL_STORE, None, (ptr, ops.cast_expr(ops.to_expr(v, field.dtype), field.dtype).stmt))
     return k
+
+
+def _leaves(value) -> list:
+    """The scalars of an appended value in placement order: a struct's members, a matrix's entries."""
+    from simgrad.lang.matrix import Matrix
+    from simgrad.lang.struct import Struct
+
+    if isinstance(value, Struct):
+        return [leaf for _k, v in value.items() for leaf in _leaves(v)]
+    if isinstance(value, Matrix):
+        return list(value.entries)
+    return [value]
 
 
 class DynamicList:
@@ -166,6 +178,9 @@ class DynamicList:
 
     def length(self):
         return length(self.node, self.indices)
+
+    def deactivate(self):
+        return deactivate(self.node, self.indices)
 
 
 def deactivate_all_snodes() -> None:
