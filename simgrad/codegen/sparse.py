@@ -61,6 +61,7 @@ fresh:
   %sz = load i64, ptr %szp
   %boff = mul i64 %n, %sz
   %blk = getelementptr i8, ptr %base, i64 %boff
+  store i64 0, ptr %blk  ; after a pool restart the first word may still hold a free-list link
   %cas = cmpxchg ptr %slot, ptr null, ptr %blk acq_rel monotonic
   %won = extractvalue { ptr, i1 } %cas, 1
   br i1 %won, label %done_fresh, label %lost

@@ -113,3 +113,34 @@ def test_kernel_cache_keys_pools(tmp_path):
     for av, bv in results:
         np.testing.assert_array_equal(av, np.arange(32) + 1.0)
         np.testing.assert_array_equal(bv, -np.arange(512) - 1.0)
+
+
+def test_nested_pointers_survive_deactivate_all_cycles():
+    """Three pointer levels (Taichi's taichi_sparse.py layout): after deactivate_all every pool starts over
+    on its freed blocks, whose first word held a free-list link; a block of slots must come back all null
+    (a stale link there was followed as a child block: a crash)."""
+    x = ti.field(ti.i32)
+    b1 = ti.root.pointer(ti.ij, 8)
+    b2 = b1.pointer(ti.ij, 4)
+    b3 = b2.pointer(ti.ij, 4)
+    b3.dense(ti.ij, 4).place(x)
+
+    @ti.kernel
+    def stripe(m: ti.i32):
+        for i, j in ti.ndrange(512, 512):
+            if (i + j) % m == 0:
+                x[i, j] = 1
+
+    @ti.kernel
+    def total() -> ti.i32:
+        c = 0
+        for i, j in x:
+            c += x[i, j]
+        return c
+
+    i, j = np.meshgrid(np.arange(512), np.arange(512), indexing="ij")
+    for m in (7, 5, 7, 3):
+        b1.deactivate_all()
+        stripe(m)
+        assert total() == int(((i + j) % m == 0).sum())
+        np.testing.assert_array_equal(x.to_numpy(), ((i + j) % m == 0).astype(np.int32))
