@@ -21,8 +21,9 @@ import re
 
 import numpy as np
 
-from . import _tk
-from .canvas import ImageCanvas, cook_image, to_numpy
+from . import _tk, render2d
+from .canvas import ImageCanvas, _per_item, cook_image, to_numpy
+from .colors import as_rgb
 from .gui import GUI as _GUI
 from .image import imresize
 
@@ -74,36 +75,41 @@ class Canvas:
 
     def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None, per_vertex_radius=None):
         """Circles at ``centers`` with ``radius`` (or ``per_vertex_radius``) a fraction of the window height."""
-        pos = _vertices(centers)
-        colors = _vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color)
+        c = _vertices(centers) * self._scale()
+        n = len(c)
+        rgb = as_rgb(_vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color), n)
         if per_vertex_radius is not None:
-            radii = to_numpy(per_vertex_radius).astype(np.float64).reshape(-1) * self._canvas.res[1]
+            r = _per_item(to_numpy(per_vertex_radius).reshape(-1), n, "per_vertex_radius") * self._canvas.res[1]
         else:
-            radii = float(radius) * self._canvas.res[1]
-        self._canvas.circles(pos, radii, colors)
+            r = np.full(n, float(radius) * self._canvas.res[1])
+        self._canvas.defer(lambda img: render2d.circles(img, c, r, rgb))
 
     def lines(self, vertices, width, indices=None, color=(0.5, 0.5, 0.5), per_vertex_color=None):
         """Segments between vertex pairs (or index pairs); ``width`` a fraction of the height."""
-        v = _vertices(vertices)
+        v = _vertices(vertices) * self._scale()
         idx = _indices(indices, 2)
         if idx is None:
             idx = np.arange(len(v) - len(v) % 2).reshape(-1, 2)
-        vc = None
-        if per_vertex_color is not None:
-            vc = _vertex_colors(per_vertex_color)[idx]
-        half = 0.5 * float(width) * self._canvas.res[1]
-        self._canvas.lines(v[idx[:, 0]], v[idx[:, 1]], half, _rgb(color), vertex_colors=vc)
+        n = len(idx)
+        vc = _vertex_colors(per_vertex_color)[idx] if per_vertex_color is not None else None
+        rgb = as_rgb(_rgb(color), n)
+        r = np.full(n, 0.5 * float(width) * self._canvas.res[1])
+        A, B = v[idx[:, 0]], v[idx[:, 1]]
+        self._canvas.defer(lambda img: render2d.lines(img, A, B, r, rgb, vertex_colors=vc))
 
     def triangles(self, vertices, color=(0.5, 0.5, 0.5), indices=None, per_vertex_color=None):
         """Filled triangles from vertex triples (or index triples)."""
-        v = _vertices(vertices)
+        v = _vertices(vertices) * self._scale()
         idx = _indices(indices, 3)
         if idx is None:
             idx = np.arange(len(v) - len(v) % 3).reshape(-1, 3)
-        vc = None
-        if per_vertex_color is not None:
-            vc = _vertex_colors(per_vertex_color)[idx]
-        self._canvas.triangles(v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]], _rgb(color), vertex_colors=vc)
+        vc = _vertex_colors(per_vertex_color)[idx] if per_vertex_color is not None else None
+        rgb = as_rgb(_rgb(color), len(idx))
+        P = v[idx]
+        self._canvas.defer(lambda img: render2d.triangles(img, P, rgb, vertex_colors=vc))
+
+    def _scale(self):
+        return np.array(self._canvas.res, np.float64)
 
     def scene(self, scene):
         """Render a :class:`~.scene.Scene` over the canvas (z-buffered; uncovered pixels are kept)."""
