@@ -48,33 +48,47 @@ else:
 def bin_boxes(x0, y0, x1, y1, res):
     """Tile lists of pixel boxes (inclusive, in drawing order; clipped here): returns ``start`` (one more
     than the tile count) and ``items`` (box indices), tile ``t`` holding ``items[start[t]:start[t + 1]]`` in
-    ascending order, plus the clipped boxes as int32 (n, 4).  Tiles are numbered x-major."""
+    ascending order, plus the clipped boxes as int32 (n, 4).  Tiles are numbered x-major.  The lists are
+    filled by a serial kernel (a counting sort: cheaper than numpy's repeat/sort chain)."""
     W, H = res
     tiles_y = -(-H // TILE)
     n_tiles = -(-W // TILE) * tiles_y
-    x0 = np.clip(x0, 0, W).astype(np.int64)
-    y0 = np.clip(y0, 0, H).astype(np.int64)
-    x1 = np.clip(x1, -1, W - 1).astype(np.int64)
-    y1 = np.clip(y1, -1, H - 1).astype(np.int64)
-    ids = np.flatnonzero((x1 >= x0) & (y1 >= y0))
-    tx0, ty0 = x0[ids] // TILE, y0[ids] // TILE
-    nty = y1[ids] // TILE - ty0 + 1
-    count = (x1[ids] // TILE - tx0 + 1) * nty
-    if (count == 1).all():  # the common case of small primitives: one tile each
-        tile = tx0 * tiles_y + ty0
-        owner = ids
-    else:
-        which = np.repeat(np.arange(ids.size), count)
-        dtx, dty = np.divmod(np.arange(which.size) - np.repeat(np.cumsum(count) - count, count), nty[which])
-        tile = (tx0[which] + dtx) * tiles_y + ty0[which] + dty
-        owner = ids[which]
-    # a stable sort keeps drawing order within a tile (radix sort for 16-bit keys)
-    key = tile.astype(np.uint16) if n_tiles <= 1 << 16 else tile
-    order = np.argsort(key, kind="stable")
+    x0 = np.clip(x0, 0, W).astype(np.int32)
+    y0 = np.clip(y0, 0, H).astype(np.int32)
+    x1 = np.clip(x1, -1, W - 1).astype(np.int32)
+    y1 = np.clip(y1, -1, H - 1).astype(np.int32)
+    boxes = np.stack([x0, y0, x1, y1], axis=1)
+    count = (x1 // TILE - x0 // TILE + 1) * (y1 // TILE - y0 // TILE + 1)
+    total = int(count[(x1 >= x0) & (y1 >= y0)].sum(dtype=np.int64))
     start = np.zeros(n_tiles + 1, np.int32)
-    np.cumsum(np.bincount(tile, minlength=n_tiles), out=start[1:])
-    boxes = np.stack([x0, y0, x1, y1], axis=1).astype(np.int32)
-    return start, np.ascontiguousarray(owner[order], np.int32), boxes
+    items = np.empty(max(total, 1), np.int32)
+    if total:
+        _bin(boxes, start, np.empty(n_tiles, np.int32), items, tiles_y)
+    return start, items[:total], boxes
+
+
+@ti.kernel
+def _bin(boxes: _B1, start: _I1, cursor: _I1, items: _I1, tiles_y: _I32):
+    """Counting sort of the boxes' (tile, box) pairs by tile; serial loops keep box order within a tile."""
+    for p in range(boxes.shape[0]):  # start[t + 1] = pairs in tile t (parallel, atomic)
+        b = boxes[p]
+        if b[2] >= b[0] and b[3] >= b[1]:
+            for tx in range(b[0] // TILE, b[2] // TILE + 1):
+                for ty in range(b[1] // TILE, b[3] // TILE + 1):
+                    ti.atomic_add(start[tx * tiles_y + ty + 1], 1)
+    ti.loop_config(serialize=True)
+    for t in range(cursor.shape[0]):
+        start[t + 1] += start[t]
+        cursor[t] = start[t]
+    ti.loop_config(serialize=True)
+    for p in range(boxes.shape[0]):
+        b = boxes[p]
+        if b[2] >= b[0] and b[3] >= b[1]:
+            for tx in range(b[0] // TILE, b[2] // TILE + 1):
+                for ty in range(b[1] // TILE, b[3] // TILE + 1):
+                    t = tx * tiles_y + ty
+                    items[cursor[t]] = p
+                    cursor[t] += 1
 
 
 @ti.func
@@ -131,10 +145,15 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
             l2 = geo[o, 4]
             r = geo[o, 5]
             n = ti.cast(geo[o, 6], ti.i32)
+            # pixels at least r from the segment's line are skipped before the division and square root
+            band = (r + 1e-6) * (r + 1e-6) * l2
             for i in range(ti.max(b[0], tx0), ti.min(b[2], tx1) + 1):
                 px = i + 0.5 - ax
                 for j in range(ti.max(b[1], ty0), ti.min(b[3], ty1) + 1):
                     py = j + 0.5 - ay
+                    cross = px * dy - py * dx
+                    if l2 > 0.0 and cross * cross >= band:
+                        continue
                     s = 0.0
                     if l2 > 0.0:
                         s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
