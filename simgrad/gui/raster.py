@@ -126,7 +126,9 @@ def triangle_spans(P, ok, res):
         root = -e0 / np.where(ay == 0, 1.0, ay)
         hi = np.where(s * ay > 0, np.minimum(hi, root), hi)
         lo = np.where(s * ay < 0, np.maximum(lo, root), lo)
-        lo = np.where((ay == 0) & (s * e0 > 0), np.inf, lo)
+        # a horizontal edge decides whole rows: outside, or (clockwise) centres on it, which Taichi's test
+        # leaves uncovered; the end fix-ups below only move a span by one pixel
+        lo = np.where((ay == 0) & ((s * e0 > 0) | ((s < 0) & (e0 == 0))), np.inf, lo)
     bx0 = np.clip(lo_xy[owner, 0], 0, W)
     bx1 = np.clip(hi_xy[owner, 0], -1, W - 1)
     x0 = np.clip(np.ceil(np.maximum(lo, -1.0) - 0.5), bx0, bx1 + 1).astype(np.int64)

@@ -90,6 +90,10 @@ def test_pixel_centres_on_edges_follow_taichis_tie_rule(ccw):
     d = (i - 20) + (j - 10)  # centres at i + 0.5, j + 0.5: left edge i = 20, bottom j = 10, hypotenuse d = 80
     want = (i >= 20) & (j >= 10) & (d <= 80) if ccw else (i > 20) & (j > 10) & (d < 80)
     np.testing.assert_array_equal(img == 1.0, want)
+    ref = ImageCanvas((n, n))  # the numpy rasteriser (ti.GUI) agrees
+    P = (v if ccw else v[::-1]).astype(np.float64)
+    ref.triangles(P[0:1], P[1:2], P[2:3], (1.0, 1.0, 1.0))
+    np.testing.assert_array_equal(ref.img[..., 0] == 1.0, want)
 
 
 def test_two_triangles_of_a_square_cover_it_once():
