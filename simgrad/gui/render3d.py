@@ -56,9 +56,10 @@ else:
 
 # Layout of the camera array (float32): view matrix rows 0-2 (world -> camera space, camera looks
 # down -z), then screen mapping px = SX * x / w + OX, py = SY * y / w + OY with w = depth for a
-# perspective camera and 1 for an orthographic one, then the clip range.
-CAM_SX, CAM_OX, CAM_SY, CAM_OY, CAM_ORTHO, CAM_NEAR, CAM_FAR = 12, 13, 14, 15, 16, 17, 18
-CAM_SIZE = 19
+# perspective camera and 1 for an orthographic one, then the clip range, then Taichi's particle scale: a
+# sphere of radius r at distance d from the camera is a disc of r * PSCALE / d pixels.
+CAM_SX, CAM_OX, CAM_SY, CAM_OY, CAM_ORTHO, CAM_NEAR, CAM_FAR, CAM_PSCALE = 12, 13, 14, 15, 16, 17, 18, 19
+CAM_SIZE = 20
 
 
 @ti.func
@@ -73,13 +74,20 @@ def _to_view(cam, p):
 
 @ti.func
 def _to_screen(cam, v):
-    """Camera-space point -> (pixel x, pixel y, depth, pixels per world unit at that depth)."""
+    """Camera-space point -> (pixel x, pixel y, depth)."""
     d = -v[2]
     w = 1.0
     if cam[CAM_ORTHO] == 0.0:
         w = ti.max(d, 1e-20)
-    return ti.Vector([cam[CAM_SX] * v[0] / w + cam[CAM_OX], cam[CAM_SY] * v[1] / w + cam[CAM_OY], d,
-                      ti.abs(cam[CAM_SY]) / w])
+    return ti.Vector([cam[CAM_SX] * v[0] / w + cam[CAM_OX], cam[CAM_SY] * v[1] / w + cam[CAM_OY], d])
+
+
+@ti.func
+def _disc_radius(cam, v, r):
+    """Screen radius in pixels of a sphere of radius ``r`` at camera-space ``v``, as Taichi's particle shader
+    sizes it: ``r / (tan(fov / 2) * distance)`` of half the window's width, distance measured from the camera
+    position (not the depth), in orthographic mode too."""
+    return r * cam[CAM_PSCALE] / ti.max(v.norm(), 1e-20)
 
 
 @ti.func
@@ -111,9 +119,10 @@ def splat_particles(centers: _V1, radii: _F1, cam: _F1, depth: _D2, base: _I32):
     W = ti.cast(depth.shape[0], ti.f32)
     H = ti.cast(depth.shape[1], ti.f32)
     for p in range(centers.shape[0]):
-        s = _to_screen(cam, _to_view(cam, centers[p]))
+        v = _to_view(cam, centers[p])
+        s = _to_screen(cam, v)
         r = radii[p]
-        R = r * s[3]
+        R = _disc_radius(cam, v, r)
         # (NaN or far-off centres fail the bounds test: an exploded simulation draws nothing, fast)
         if s[2] > cam[CAM_NEAR] and s[2] < cam[CAM_FAR] and R > 0.0 and ti.abs(s[0]) < 1e9 and ti.abs(s[1]) < 1e9:
             x0, x1 = _box(s[0] - R, s[0] + R, W)
@@ -233,8 +242,9 @@ def shade(depth: _D2, img: _V2, cam: _F1, lights: _F2, ambient: vec3,
             color = ti.Vector([0.0, 0.0, 0.0])
             if prim < n_particles:
                 c = centers[prim]
-                s = _to_screen(cam, _to_view(cam, c))
-                R = radii[prim] * s[3]
+                v = _to_view(cam, c)
+                s = _to_screen(cam, v)
+                R = _disc_radius(cam, v, radii[prim])
                 u = (px - s[0]) / R
                 t = (py - s[1]) / R
                 nz = ti.sqrt(ti.max(1.0 - u * u - t * t, 0.0))

@@ -124,6 +124,7 @@ class Camera:
             cam[render3d.CAM_SY], cam[render3d.CAM_OY] = sy, -self.curr_top * sy
             cam[render3d.CAM_ORTHO] = 1.0
         cam[render3d.CAM_NEAR], cam[render3d.CAM_FAR] = self.curr_z_near, self.curr_z_far
+        cam[render3d.CAM_PSCALE] = (W / 2) / math.tan(math.radians(self.curr_fov) / 2)
         return cam
 
     def _copy(self) -> Camera:
@@ -259,9 +260,9 @@ class Scene:
                   index_offset: int = 0, index_count=None):
         """Spheres of ``radius`` (world units) at ``centers``, shaded as Taichi's particle impostors.
 
-        On screen a sphere is a disc of radius ``radius * focal / depth`` pixels, its geometric size.  (Taichi's
-        GGUI scales the disc by the window's width instead of its height, so on a 4:3 window its particles
-        look 4/3 as large as here.)"""
+        On screen a sphere is a disc of ``radius / (tan(fov / 2) * distance)`` times half the window's width
+        (distance from the camera position), as Taichi's GGUI draws it: on a 4:3 window that is 4/3 of the
+        sphere's geometric silhouette, and orthographic cameras size particles the same way."""
         c = _vectors(centers, "particles", "centers")
         sel = _count(len(c), index_offset, index_count, "particles", "index")
         if per_vertex_radius is not None:

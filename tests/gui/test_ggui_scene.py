@@ -12,6 +12,9 @@ import simgrad as ti
 
 W, H = 160, 120
 FOCAL = (H / 2) / math.tan(math.radians(45) / 2)  # pixels per unit at distance 1 (fov 45 degrees)
+# Taichi's particle shader sizes a sphere of radius r at distance d as a disc of r * PSCALE / d pixels, half
+# the window's WIDTH over tan(fov / 2): 4/3 of the geometric silhouette r * FOCAL / d on a 4:3 window
+PSCALE = (W / 2) / math.tan(math.radians(45) / 2)
 BG = (1.0, 1.0, 1.0)
 
 
@@ -69,12 +72,20 @@ def test_particle_silhouette_matches_the_projected_radius():
     centers = ti.Vector.field(3, ti.f32, 1)  # a field, as GGUI programs pass them
     img = render(lambda s: s.particles(centers, radius=r, color=(1.0, 0.2, 0.2)))
     mask = covered(img)
-    R = r * FOCAL / d  # the impostor's radius in pixels
+    R = r * PSCALE / d  # the impostor's radius in pixels
+    assert abs(R / (r * FOCAL / d) - W / H) < 1e-12
     assert abs(mask.sum() - math.pi * R * R) < 2 * math.pi * R  # area within one pixel ring
     ii, jj = np.nonzero(mask)
     assert abs(ii.mean() + 0.5 - W / 2) < 0.3 and abs(jj.mean() + 0.5 - H / 2) < 0.3
     width = mask[:, H // 2].sum()
     assert abs(width - 2 * R) <= 1.0
+    # off the axis the distance is from the camera position, not the depth
+    x, r, res = 1.5, 0.1, (400, 300)
+    img = render(lambda s: s.particles(np.array([[x, 0.0, 0.0]], np.float32), radius=r, color=(1.0, 0.2, 0.2)),
+                 res=res)
+    R_seen = math.sqrt(covered(img).sum() / math.pi)
+    pscale = (res[0] / 2) / math.tan(math.radians(45) / 2)
+    assert abs(R_seen - r * pscale / math.hypot(x, d)) < 0.3  # 14.4 pixels, 16.1 by the depth
 
 
 def test_mesh_sphere_silhouette_is_the_tangent_cone():
@@ -183,7 +194,7 @@ def test_camera_moves_shift_the_picture_by_the_projection():
     assert abs(x2 - W / 2) < 0.3
 
 
-def test_camera_behind_sees_nothing_and_orthographic_size_ignores_distance():
+def test_camera_behind_sees_nothing_and_orthographic_particles_are_sized_as_in_taichi():
     centers = np.zeros((1, 3), np.float32)
     behind = render(lambda s: s.particles(centers, radius=0.3, color=(0, 0, 0)),
                     cam=camera((0.0, 0.0, 3.0), (0.0, 0.0, 6.0)))
@@ -192,7 +203,8 @@ def test_camera_behind_sees_nothing_and_orthographic_size_ignores_distance():
         cam = camera((0.0, 0.0, dist))
         cam.projection_mode(ti.ui.ProjectionMode.Orthogonal)
         mask = covered(render(lambda s: s.particles(centers, radius=0.5, color=(0, 0, 0)), cam=cam))
-        assert abs(mask[:, H // 2].sum() - 2 * 0.5 * H / 2) <= 1.0  # radius 0.5 of [-1, 1] -> H / 4 pixels
+        # Taichi's shader ignores the orthographic box here: radius * PSCALE / distance, as in perspective
+        assert abs(mask[:, H // 2].sum() - 2 * 0.5 * PSCALE / dist) <= 1.0
 
 
 def test_two_sided_lights_a_back_face():
