@@ -22,7 +22,7 @@ import numpy as np
 
 import simgrad as ti
 
-__all__ = ["EMPTY", "Frame", "nonempty", "render"]
+__all__ = ["EMPTY", "Frame", "depth_buffer", "nonempty", "render"]
 
 EMPTY = np.iinfo(np.int64).max
 _ID_MASK = 0xFFFFFFFF
@@ -372,12 +372,14 @@ def clip_near(frame: Frame, screen: np.ndarray) -> np.ndarray:
     return np.concatenate([screen[:base], extra])
 
 
-def render(img: np.ndarray, frame: Frame) -> np.ndarray:
-    """Draw ``frame`` over ``img`` (float32 (W, H, 3), changed in place); returns the depth keys."""
+def render(img: np.ndarray, frame: Frame, depth: np.ndarray | None = None) -> np.ndarray:
+    """Draw ``frame`` over ``img`` (float32 (W, H, 3), changed in place); returns the depth keys, written into
+    ``depth`` (int64 (W, H)) when given, else into a buffer shared per resolution."""
     W, H = img.shape[:2]
-    depth = _depth_cache.get((W, H))
     if depth is None:
-        depth = _depth_cache[(W, H)] = np.empty((W, H), np.int64)
+        depth = _depth_cache.get((W, H))
+        if depth is None:
+            depth = _depth_cache[(W, H)] = np.empty((W, H), np.int64)
     depth.fill(EMPTY)  # a memset: numpy does it 5x faster than a kernel launch
     cam = frame.cam
     n_p, n_t = len(frame.centers), len(frame.tris)
@@ -402,3 +404,17 @@ def render(img: np.ndarray, frame: Frame) -> np.ndarray:
           nonempty(frame.vcolors, v3, np.float32), screen, frame.tris, nonempty(frame.two_sided, (1,), np.int32),
           nonempty(frame.lcolors, v3, np.float32), nonempty(frame.segs, (1, 2), np.int32))
     return depth
+
+
+def depth_buffer(keys: np.ndarray, cam: np.ndarray) -> np.ndarray:
+    """Taichi's depth buffer (``window.get_depth_buffer_as_numpy()``) from the depth keys of a render: float32
+    (W, H) of reversed Z in [0, 1], 1 at the near plane, 0 at the far plane and where nothing was drawn (GGUI
+    builds glm's zero-to-one projection with near and far swapped, and clears depth to 0)."""
+    d = (keys >> 32).astype(np.int32).view(np.float32).astype(np.float64)
+    n, f = float(cam[CAM_NEAR]), float(cam[CAM_FAR])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if cam[CAM_ORTHO] != 0.0:
+            z = (f - d) / (f - n)
+        else:
+            z = n * (f - d) / (d * (f - n))
+    return np.where(keys == EMPTY, 0.0, np.clip(z, 0.0, 1.0)).astype(np.float32)

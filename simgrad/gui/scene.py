@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 import math
+import warnings
 
 import numpy as np
 
@@ -236,6 +237,19 @@ class Scene:
     """Particles, meshes, lines and lights of one frame, plus the camera and ambient light that persist."""
 
     def __init__(self):
+        # Taichi 1.7.4's words: a scene belongs to a window now
+        warnings.warn("Instantiating ti.ui.Scene directly is deprecated, use the get_scene() function from a "
+                      "taichi.ui.Window object instead.", DeprecationWarning, stacklevel=2)
+        self._setup()
+
+    @classmethod
+    def _for_window(cls) -> Scene:
+        """The scene ``window.get_scene()`` returns (no deprecation warning)."""
+        scene = cls.__new__(cls)
+        scene._setup()
+        return scene
+
+    def _setup(self):
         self._camera = Camera()
         self._ambient = np.array([0.1, 0.1, 0.1], np.float32)
         self._clear()

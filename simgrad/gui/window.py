@@ -21,6 +21,8 @@ import re
 
 import numpy as np
 
+import simgrad as ti
+
 from . import _tk, render2d
 from .canvas import ImageCanvas, _per_item, cook_image, to_numpy
 from .colors import as_rgb
@@ -60,6 +62,9 @@ class Canvas:
     def __init__(self, image_canvas: ImageCanvas):
         self._canvas = image_canvas
         self._background = (0.0, 0.0, 0.0)
+        # depth keys of the last canvas.scene() (this window's own buffer) and its camera
+        self._depth: np.ndarray | None = None
+        self._depth_cam: np.ndarray | None = None
 
     def set_background_color(self, color):
         """Set the clear colour (float RGB) and fill the canvas with it."""
@@ -116,7 +121,10 @@ class Canvas:
         from . import render3d
 
         frame = scene._take_frame(self._canvas.res)
-        render3d.render(self._canvas.pixels(), frame)
+        if self._depth is None:
+            self._depth = np.empty(self._canvas.res, np.int64)
+        render3d.render(self._canvas.pixels(), frame, self._depth)
+        self._depth_cam = frame.cam
 
 
 def _rgb(color):
@@ -205,7 +213,7 @@ class Window:
         if self._scene is None:
             from .scene import Scene
 
-            self._scene = Scene()
+            self._scene = Scene._for_window()
         return self._scene
 
     def get_window_shape(self):
@@ -232,6 +240,27 @@ class Window:
         rgba = np.ones(self.res + (4,), np.float32)
         rgba[..., :3] = self._image.img
         return rgba
+
+    def get_depth_buffer_as_numpy(self):
+        """The depth of the last 3-D scene drawn on the canvas as float32 (W, H), Taichi's convention: reversed Z
+        in [0, 1] (1 at the camera's near plane, 0 at its far plane and where the scene drew nothing); zeros
+        before any scene was drawn."""
+        from . import render3d
+
+        canvas = self._canvas
+        if canvas._depth is None or canvas._depth_cam is None:
+            return np.zeros(self.res, np.float32)
+        return render3d.depth_buffer(canvas._depth, canvas._depth_cam)
+
+    def get_depth_buffer(self, depth):
+        """Copy :meth:`get_depth_buffer_as_numpy` into ``depth``, a 2-D f32 field or ndarray of the window's
+        shape."""
+        shape = tuple(getattr(depth, "shape", ()))
+        if len(shape) != 2 or getattr(depth, "dtype", None) != ti.f32:
+            raise TypeError(f"get_depth_buffer needs a 2-D ti.f32 field or ndarray, got shape {shape}")
+        if shape != self.res:
+            raise ValueError(f"get_depth_buffer: depth has shape {shape}, the window is {self.res}")
+        depth.from_numpy(self.get_depth_buffer_as_numpy())
 
     def _take_events(self, tag, limit=None):
         """Pop waiting key/mouse events of type ``tag`` (all types if None), keeping the others."""

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -370,3 +371,47 @@ def test_non_finite_geometry_draws_nothing_and_does_not_stall():
     # an infinite radius covers the whole picture at the depth of the camera (finite colours)
     img = render(lambda s: s.particles(np.zeros((1, 3), np.float32), radius=np.inf, color=(0.0, 0.0, 0.0)))
     assert covered(img).all() and np.isfinite(img).all()
+
+
+def reversed_z(d, near=0.1, far=1000.0, ortho=False):
+    """Taichi's depth buffer value for camera depth d: glm's zero-to-one projection with near and far swapped."""
+    return (far - d) / (far - near) if ortho else near * (far - d) / (d * (far - near))
+
+
+def test_depth_buffer_is_taichis_reversed_z():
+    window = ti.ui.Window("test", (W, H), show_window=False)
+    assert not window.get_depth_buffer_as_numpy().any()  # nothing drawn yet
+    canvas, scene = window.get_canvas(), window.get_scene()
+    scene.set_camera(camera())
+    v, i = quad(-1.0, half=0.6)
+    scene.mesh(v, indices=i, color=(0.5, 0.5, 0.5))
+    scene.particles(np.array([[0.0, 0.0, 0.0]], np.float32), radius=0.25, color=(1.0, 0.0, 0.0))
+    canvas.scene(scene)
+    depth = window.get_depth_buffer_as_numpy()
+    assert depth.dtype == np.float32 and depth.shape == (W, H)
+    assert depth[0, 0] == 0.0  # background: cleared to the far end
+    # the sphere's front surface at the centre is 3 - 0.25 from the camera; the quad behind it at depth 4
+    np.testing.assert_allclose(depth[W // 2, H // 2], reversed_z(2.75), rtol=1e-3)
+    np.testing.assert_allclose(depth[W // 2 + 19, H // 2], reversed_z(4.0), rtol=1e-5)  # quad 21.7 px, disc 16
+    field = ti.field(ti.f32, (W, H))
+    window.get_depth_buffer(field)
+    np.testing.assert_array_equal(field.to_numpy(), depth)
+    with pytest.raises(ValueError):
+        window.get_depth_buffer(ti.field(ti.f32, (W, H + 1)))
+    cam = camera()
+    cam.projection_mode(ti.ui.ProjectionMode.Orthogonal)
+    scene.set_camera(cam)
+    scene.mesh(v, indices=i, color=(0.5, 0.5, 0.5))
+    canvas.scene(scene)
+    np.testing.assert_allclose(window.get_depth_buffer_as_numpy()[W // 2, H // 2], reversed_z(4.0, ortho=True),
+                               rtol=1e-6)
+
+
+def test_scene_made_directly_is_deprecated_as_in_taichi():
+    with pytest.warns(DeprecationWarning, match=r"Instantiating ti.ui.Scene directly is deprecated, use the "
+                                                r"get_scene\(\) function from a taichi.ui.Window object instead."):
+        scene = ti.ui.Scene()
+    scene.particles(np.zeros((1, 3), np.float32), radius=0.5)  # and still works
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ti.ui.Window("w", (8, 8), show_window=False).get_scene()
