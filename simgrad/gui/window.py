@@ -1,10 +1,10 @@
 """``ti.ui`` (GGUI) ``Window`` and ``Canvas`` on top of the numpy canvas ``ti.GUI`` uses.
 
-GGUI programs draw vertex fields each frame and call ``window.show()``.  The 2D primitives (circles,
-lines, triangles, images) go through the numpy canvas, 3D scenes through the kernels of
-:mod:`.render3d`, so GGUI programs run headless and can save frames; a Tk window shows them where a
-display exists.  Sizes follow ``ti.ui``: 2D radii and line widths are fractions of the window height,
-colours are float RGB tuples.
+GGUI programs draw vertex fields each frame and call ``window.show()``.  The pixels live in the numpy
+canvas ``ti.GUI`` uses; the 2D primitives (circles, lines, triangles) are drawn into it by the kernels of
+:mod:`.render2d`, 3D scenes by those of :mod:`.render3d`, so GGUI programs run headless and can save
+frames; a Tk window shows them where a display exists.  Sizes follow ``ti.ui``: 2D radii and line widths
+are fractions of the window height, colours are float RGB tuples.
 
 Two environment variables help running GGUI programs unattended: ``SIMGRAD_UI_FRAMES=<folder>``
 records every shown frame there (and assembles ``<folder>/<window name>.gif`` when the window is
