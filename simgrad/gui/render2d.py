@@ -154,7 +154,7 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
                     cross = px * dy - py * dx
                     if l2 > 0.0 and cross * cross >= band:
                         continue
-                    s = 0.0
+                    s = ti.cast(0.0, ti.f64)  # (a bare 0.0 would make s an f32)
                     if l2 > 0.0:
                         s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
                     ex = px - s * dx

@@ -258,7 +258,7 @@ def test_random_scenes_match_the_numpy_rasteriser(seed):
         getattr(canvas, kind)(**kw)
     got = pixels(win)
     want = numpy_canvas(res, draws)
-    np.testing.assert_allclose(got, want, atol=1e-5)
+    np.testing.assert_allclose(got, want, atol=1e-6)
 
 
 def test_many_overlapping_circles_match_the_numpy_rasteriser():
@@ -270,7 +270,7 @@ def test_many_overlapping_circles_match_the_numpy_rasteriser():
     canvas = win.get_canvas()
     canvas.set_background_color((0.2, 0.3, 0.4))
     canvas.circles(**draws[0][1])
-    np.testing.assert_allclose(pixels(win), numpy_canvas((W, H), draws), atol=1e-5)
+    np.testing.assert_allclose(pixels(win), numpy_canvas((W, H), draws), atol=1e-6)
 
 
 def test_drawing_is_deferred_but_snapshots_its_input():
