@@ -1,8 +1,8 @@
 """Taichi-compatible GUI and image tools: ``ti.GUI``, ``ti.ui``, ``ti.tools.imwrite`` and friends.
 
-Everything renders into a numpy canvas (3-D scenes by simgrad kernels, render3d.py), so it works headless
-(servers, CI) and needs only numpy, Pillow and imageio; a tkinter window is opened only when a display is
-available.
+Everything renders into a numpy canvas (``ti.ui``'s 2-D primitives and 3-D scenes by simgrad kernels,
+render2d.py and render3d.py), so it works headless (servers, CI) and needs only numpy, Pillow and imageio;
+a tkinter window is opened only when a display is available.
 """
 
 from . import tools, ui

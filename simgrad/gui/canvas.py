@@ -21,10 +21,6 @@ from .colors import as_rgb
 
 __all__ = ["ImageCanvas", "cook_image", "to_numpy"]
 
-# Long segments are split into pieces of at least this many pixels so their bounding boxes stay tight.
-_PIECE = 8.0
-
-
 def to_numpy(x):
     """Convert fields (anything with ``to_numpy()``), sequences and arrays to a numpy array."""
     if isinstance(x, np.ndarray):
@@ -200,27 +196,10 @@ class ImageCanvas:
             vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
         else:
             rgb = as_rgb(color, n)
-        D = B - A
-        L2 = (D**2).sum(axis=1)
         ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
-        pad = np.where(ok, r + 1.0, 0.0)
-        ta, tb = raster.clip_segments(
-            np.where(ok[:, None], A, 0.0), np.where(ok[:, None], D, 0.0), pad, self.res
-        )
-        ok &= tb >= ta
-        visible = np.where(ok, (tb - ta) * np.sqrt(L2), 0.0)
-        piece_len = np.maximum(_PIECE, 2.0 * pad)
-        pieces = np.where(ok, np.maximum(1, np.ceil(visible / piece_len)), 0).astype(np.int64)
-        owner = np.repeat(np.arange(n), pieces)
-        k = np.arange(owner.size) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-        # Shade against the clipped segment: same coverage on the canvas, no precision loss when an
-        # endpoint is far away.  ``t`` is mapped back to the full segment for vertex colours.
-        span_all = np.where(ok, tb - ta, 0.0)
-        A, D = A + D * np.where(ok, ta, 0.0)[:, None], D * span_all[:, None]
-        L2 = (D**2).sum(axis=1)
-        P0 = A[owner] + D[owner] * (k / pieces[owner])[:, None]
-        P1 = A[owner] + D[owner] * ((k + 1) / pieces[owner])[:, None]
-        lo, hi = np.minimum(P0, P1) - pad[owner, None], np.maximum(P0, P1) + pad[owner, None]
+        seg = raster.SegmentPieces(A, B, r, ok, self.res)
+        owner, k, pieces, ta, span_all = seg.owner, seg.k, seg.pieces, seg.ta, seg.span
+        A, D, L2 = seg.A, seg.D, seg.L2
 
         def shade(b, i, j):
             o = owner[b]
@@ -236,7 +215,7 @@ class ImageCanvas:
             t = (ta[o] + t * span_all[o])[:, None]
             return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
 
-        self._draw(owner, np.floor(lo[:, 0]), np.floor(lo[:, 1]), np.ceil(hi[:, 0]), np.ceil(hi[:, 1]), shade)
+        self._draw(owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
@@ -331,5 +310,10 @@ class ImageCanvas:
             self._img = np.ascontiguousarray(self._img, dtype=np.float32)
         return self._img
 
+    def defer(self, draw) -> None:
+        """Queue ``draw(pixels)`` (pixels: float32 (W, H, 3), C-contiguous, changed in place) to run, after
+        what is already queued, when the pixels are next looked at."""
+        self._pending.append(draw)
+
     def _draw(self, owner, x0, y0, x1, y1, shade):
-        self._pending.append(lambda img: raster.rasterize(img, owner, x0, y0, x1, y1, shade))
+        self.defer(lambda img: raster.rasterize(img, owner, x0, y0, x1, y1, shade))

@@ -22,7 +22,7 @@ import numpy as np
 
 import simgrad as ti
 
-__all__ = ["EMPTY", "Frame", "nonempty", "render"]
+__all__ = ["EMPTY", "Frame", "depth_buffer", "nonempty", "render"]
 
 EMPTY = np.iinfo(np.int64).max
 _ID_MASK = 0xFFFFFFFF
@@ -56,9 +56,10 @@ else:
 
 # Layout of the camera array (float32): view matrix rows 0-2 (world -> camera space, camera looks
 # down -z), then screen mapping px = SX * x / w + OX, py = SY * y / w + OY with w = depth for a
-# perspective camera and 1 for an orthographic one, then the clip range.
-CAM_SX, CAM_OX, CAM_SY, CAM_OY, CAM_ORTHO, CAM_NEAR, CAM_FAR = 12, 13, 14, 15, 16, 17, 18
-CAM_SIZE = 19
+# perspective camera and 1 for an orthographic one, then the clip range, then Taichi's particle scale: a
+# sphere of radius r at distance d from the camera is a disc of r * PSCALE / d pixels.
+CAM_SX, CAM_OX, CAM_SY, CAM_OY, CAM_ORTHO, CAM_NEAR, CAM_FAR, CAM_PSCALE = 12, 13, 14, 15, 16, 17, 18, 19
+CAM_SIZE = 20
 
 
 @ti.func
@@ -73,13 +74,20 @@ def _to_view(cam, p):
 
 @ti.func
 def _to_screen(cam, v):
-    """Camera-space point -> (pixel x, pixel y, depth, pixels per world unit at that depth)."""
+    """Camera-space point -> (pixel x, pixel y, depth)."""
     d = -v[2]
     w = 1.0
     if cam[CAM_ORTHO] == 0.0:
         w = ti.max(d, 1e-20)
-    return ti.Vector([cam[CAM_SX] * v[0] / w + cam[CAM_OX], cam[CAM_SY] * v[1] / w + cam[CAM_OY], d,
-                      ti.abs(cam[CAM_SY]) / w])
+    return ti.Vector([cam[CAM_SX] * v[0] / w + cam[CAM_OX], cam[CAM_SY] * v[1] / w + cam[CAM_OY], d])
+
+
+@ti.func
+def _disc_radius(cam, v, r):
+    """Screen radius in pixels of a sphere of radius ``r`` at camera-space ``v``, as Taichi's particle shader
+    sizes it: ``r / (tan(fov / 2) * distance)`` of half the window's width, distance measured from the camera
+    position (not the depth), in orthographic mode too."""
+    return r * cam[CAM_PSCALE] / ti.max(v.norm(), 1e-20)
 
 
 @ti.func
@@ -111,9 +119,10 @@ def splat_particles(centers: _V1, radii: _F1, cam: _F1, depth: _D2, base: _I32):
     W = ti.cast(depth.shape[0], ti.f32)
     H = ti.cast(depth.shape[1], ti.f32)
     for p in range(centers.shape[0]):
-        s = _to_screen(cam, _to_view(cam, centers[p]))
+        v = _to_view(cam, centers[p])
+        s = _to_screen(cam, v)
         r = radii[p]
-        R = r * s[3]
+        R = _disc_radius(cam, v, r)
         # (NaN or far-off centres fail the bounds test: an exploded simulation draws nothing, fast)
         if s[2] > cam[CAM_NEAR] and s[2] < cam[CAM_FAR] and R > 0.0 and ti.abs(s[0]) < 1e9 and ti.abs(s[1]) < 1e9:
             x0, x1 = _box(s[0] - R, s[0] + R, W)
@@ -233,8 +242,9 @@ def shade(depth: _D2, img: _V2, cam: _F1, lights: _F2, ambient: vec3,
             color = ti.Vector([0.0, 0.0, 0.0])
             if prim < n_particles:
                 c = centers[prim]
-                s = _to_screen(cam, _to_view(cam, c))
-                R = radii[prim] * s[3]
+                v = _to_view(cam, c)
+                s = _to_screen(cam, v)
+                R = _disc_radius(cam, v, radii[prim])
                 u = (px - s[0]) / R
                 t = (py - s[1]) / R
                 nz = ti.sqrt(ti.max(1.0 - u * u - t * t, 0.0))
@@ -362,12 +372,14 @@ def clip_near(frame: Frame, screen: np.ndarray) -> np.ndarray:
     return np.concatenate([screen[:base], extra])
 
 
-def render(img: np.ndarray, frame: Frame) -> np.ndarray:
-    """Draw ``frame`` over ``img`` (float32 (W, H, 3), changed in place); returns the depth keys."""
+def render(img: np.ndarray, frame: Frame, depth: np.ndarray | None = None) -> np.ndarray:
+    """Draw ``frame`` over ``img`` (float32 (W, H, 3), changed in place); returns the depth keys, written into
+    ``depth`` (int64 (W, H)) when given, else into a buffer shared per resolution."""
     W, H = img.shape[:2]
-    depth = _depth_cache.get((W, H))
     if depth is None:
-        depth = _depth_cache[(W, H)] = np.empty((W, H), np.int64)
+        depth = _depth_cache.get((W, H))
+        if depth is None:
+            depth = _depth_cache[(W, H)] = np.empty((W, H), np.int64)
     depth.fill(EMPTY)  # a memset: numpy does it 5x faster than a kernel launch
     cam = frame.cam
     n_p, n_t = len(frame.centers), len(frame.tris)
@@ -392,3 +404,17 @@ def render(img: np.ndarray, frame: Frame) -> np.ndarray:
           nonempty(frame.vcolors, v3, np.float32), screen, frame.tris, nonempty(frame.two_sided, (1,), np.int32),
           nonempty(frame.lcolors, v3, np.float32), nonempty(frame.segs, (1, 2), np.int32))
     return depth
+
+
+def depth_buffer(keys: np.ndarray, cam: np.ndarray) -> np.ndarray:
+    """Taichi's depth buffer (``window.get_depth_buffer_as_numpy()``) from the depth keys of a render: float32
+    (W, H) of reversed Z in [0, 1], 1 at the near plane, 0 at the far plane and where nothing was drawn (GGUI
+    builds glm's zero-to-one projection with near and far swapped, and clears depth to 0)."""
+    d = (keys >> 32).astype(np.int32).view(np.float32).astype(np.float64)
+    n, f = float(cam[CAM_NEAR]), float(cam[CAM_FAR])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if cam[CAM_ORTHO] != 0.0:
+            z = (f - d) / (f - n)
+        else:
+            z = n * (f - d) / (d * (f - n))
+    return np.where(keys == EMPTY, 0.0, np.clip(z, 0.0, 1.0)).astype(np.float32)

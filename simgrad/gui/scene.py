@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 import math
+import warnings
 
 import numpy as np
 
@@ -124,6 +125,7 @@ class Camera:
             cam[render3d.CAM_SY], cam[render3d.CAM_OY] = sy, -self.curr_top * sy
             cam[render3d.CAM_ORTHO] = 1.0
         cam[render3d.CAM_NEAR], cam[render3d.CAM_FAR] = self.curr_z_near, self.curr_z_far
+        cam[render3d.CAM_PSCALE] = (W / 2) / math.tan(math.radians(self.curr_fov) / 2)
         return cam
 
     def _copy(self) -> Camera:
@@ -235,6 +237,19 @@ class Scene:
     """Particles, meshes, lines and lights of one frame, plus the camera and ambient light that persist."""
 
     def __init__(self):
+        # Taichi 1.7.4's words: a scene belongs to a window now
+        warnings.warn("Instantiating ti.ui.Scene directly is deprecated, use the get_scene() function from a "
+                      "taichi.ui.Window object instead.", DeprecationWarning, stacklevel=2)
+        self._setup()
+
+    @classmethod
+    def _for_window(cls) -> Scene:
+        """The scene ``window.get_scene()`` returns (no deprecation warning)."""
+        scene = cls.__new__(cls)
+        scene._setup()
+        return scene
+
+    def _setup(self):
         self._camera = Camera()
         self._ambient = np.array([0.1, 0.1, 0.1], np.float32)
         self._clear()
@@ -259,9 +274,9 @@ class Scene:
                   index_offset: int = 0, index_count=None):
         """Spheres of ``radius`` (world units) at ``centers``, shaded as Taichi's particle impostors.
 
-        On screen a sphere is a disc of radius ``radius * focal / depth`` pixels, its geometric size.  (Taichi's
-        GGUI scales the disc by the window's width instead of its height, so on a 4:3 window its particles
-        look 4/3 as large as here.)"""
+        On screen a sphere is a disc of ``radius / (tan(fov / 2) * distance)`` times half the window's width
+        (distance from the camera position), as Taichi's GGUI draws it: on a 4:3 window that is 4/3 of the
+        sphere's geometric silhouette, and orthographic cameras size particles the same way."""
         c = _vectors(centers, "particles", "centers")
         sel = _count(len(c), index_offset, index_count, "particles", "index")
         if per_vertex_radius is not None:

@@ -1,10 +1,10 @@
 """``ti.ui`` (GGUI) ``Window`` and ``Canvas`` on top of the numpy canvas ``ti.GUI`` uses.
 
-GGUI programs draw vertex fields each frame and call ``window.show()``.  The 2D primitives (circles,
-lines, triangles, images) go through the numpy canvas, 3D scenes through the kernels of
-:mod:`.render3d`, so GGUI programs run headless and can save frames; a Tk window shows them where a
-display exists.  Sizes follow ``ti.ui``: 2D radii and line widths are fractions of the window height,
-colours are float RGB tuples.
+GGUI programs draw vertex fields each frame and call ``window.show()``.  The pixels live in the numpy
+canvas ``ti.GUI`` uses; the 2D primitives (circles, lines, triangles) are drawn into it by the kernels of
+:mod:`.render2d`, 3D scenes by those of :mod:`.render3d`, so GGUI programs run headless and can save
+frames; a Tk window shows them where a display exists.  Sizes follow ``ti.ui``: 2D radii and line widths
+are fractions of the window height, colours are float RGB tuples.
 
 Two environment variables help running GGUI programs unattended: ``SIMGRAD_UI_FRAMES=<folder>``
 records every shown frame there (and assembles ``<folder>/<window name>.gif`` when the window is
@@ -21,8 +21,11 @@ import re
 
 import numpy as np
 
-from . import _tk
-from .canvas import ImageCanvas, cook_image, to_numpy
+import simgrad as ti
+
+from . import _tk, render2d
+from .canvas import ImageCanvas, _per_item, cook_image, to_numpy
+from .colors import as_rgb
 from .gui import GUI as _GUI
 from .image import imresize
 
@@ -59,6 +62,9 @@ class Canvas:
     def __init__(self, image_canvas: ImageCanvas):
         self._canvas = image_canvas
         self._background = (0.0, 0.0, 0.0)
+        # depth keys of the last canvas.scene() (this window's own buffer) and its camera
+        self._depth: np.ndarray | None = None
+        self._depth_cam: np.ndarray | None = None
 
     def set_background_color(self, color):
         """Set the clear colour (float RGB) and fill the canvas with it."""
@@ -74,43 +80,51 @@ class Canvas:
 
     def circles(self, centers, radius, color=(0.5, 0.5, 0.5), per_vertex_color=None, per_vertex_radius=None):
         """Circles at ``centers`` with ``radius`` (or ``per_vertex_radius``) a fraction of the window height."""
-        pos = _vertices(centers)
-        colors = _vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color)
+        c = _vertices(centers) * self._scale()
+        n = len(c)
+        rgb = as_rgb(_vertex_colors(per_vertex_color) if per_vertex_color is not None else _rgb(color), n)
         if per_vertex_radius is not None:
-            radii = to_numpy(per_vertex_radius).astype(np.float64).reshape(-1) * self._canvas.res[1]
+            r = _per_item(to_numpy(per_vertex_radius).reshape(-1), n, "per_vertex_radius") * self._canvas.res[1]
         else:
-            radii = float(radius) * self._canvas.res[1]
-        self._canvas.circles(pos, radii, colors)
+            r = np.full(n, float(radius) * self._canvas.res[1])
+        self._canvas.defer(lambda img: render2d.circles(img, c, r, rgb))
 
     def lines(self, vertices, width, indices=None, color=(0.5, 0.5, 0.5), per_vertex_color=None):
         """Segments between vertex pairs (or index pairs); ``width`` a fraction of the height."""
-        v = _vertices(vertices)
+        v = _vertices(vertices) * self._scale()
         idx = _indices(indices, 2)
         if idx is None:
             idx = np.arange(len(v) - len(v) % 2).reshape(-1, 2)
-        vc = None
-        if per_vertex_color is not None:
-            vc = _vertex_colors(per_vertex_color)[idx]
-        half = 0.5 * float(width) * self._canvas.res[1]
-        self._canvas.lines(v[idx[:, 0]], v[idx[:, 1]], half, _rgb(color), vertex_colors=vc)
+        n = len(idx)
+        vc = _vertex_colors(per_vertex_color)[idx] if per_vertex_color is not None else None
+        rgb = as_rgb(_rgb(color), n)
+        r = np.full(n, 0.5 * float(width) * self._canvas.res[1])
+        A, B = v[idx[:, 0]], v[idx[:, 1]]
+        self._canvas.defer(lambda img: render2d.lines(img, A, B, r, rgb, vertex_colors=vc))
 
     def triangles(self, vertices, color=(0.5, 0.5, 0.5), indices=None, per_vertex_color=None):
         """Filled triangles from vertex triples (or index triples)."""
-        v = _vertices(vertices)
+        v = _vertices(vertices) * self._scale()
         idx = _indices(indices, 3)
         if idx is None:
             idx = np.arange(len(v) - len(v) % 3).reshape(-1, 3)
-        vc = None
-        if per_vertex_color is not None:
-            vc = _vertex_colors(per_vertex_color)[idx]
-        self._canvas.triangles(v[idx[:, 0]], v[idx[:, 1]], v[idx[:, 2]], _rgb(color), vertex_colors=vc)
+        vc = _vertex_colors(per_vertex_color)[idx] if per_vertex_color is not None else None
+        rgb = as_rgb(_rgb(color), len(idx))
+        P = v[idx]
+        self._canvas.defer(lambda img: render2d.triangles(img, P, rgb, vertex_colors=vc))
+
+    def _scale(self):
+        return np.array(self._canvas.res, np.float64)
 
     def scene(self, scene):
         """Render a :class:`~.scene.Scene` over the canvas (z-buffered; uncovered pixels are kept)."""
         from . import render3d
 
         frame = scene._take_frame(self._canvas.res)
-        render3d.render(self._canvas.pixels(), frame)
+        if self._depth is None:
+            self._depth = np.empty(self._canvas.res, np.int64)
+        render3d.render(self._canvas.pixels(), frame, self._depth)
+        self._depth_cam = frame.cam
 
 
 def _rgb(color):
@@ -199,7 +213,7 @@ class Window:
         if self._scene is None:
             from .scene import Scene
 
-            self._scene = Scene()
+            self._scene = Scene._for_window()
         return self._scene
 
     def get_window_shape(self):
@@ -226,6 +240,27 @@ class Window:
         rgba = np.ones(self.res + (4,), np.float32)
         rgba[..., :3] = self._image.img
         return rgba
+
+    def get_depth_buffer_as_numpy(self):
+        """The depth of the last 3-D scene drawn on the canvas as float32 (W, H), Taichi's convention: reversed Z
+        in [0, 1] (1 at the camera's near plane, 0 at its far plane and where the scene drew nothing); zeros
+        before any scene was drawn."""
+        from . import render3d
+
+        canvas = self._canvas
+        if canvas._depth is None or canvas._depth_cam is None:
+            return np.zeros(self.res, np.float32)
+        return render3d.depth_buffer(canvas._depth, canvas._depth_cam)
+
+    def get_depth_buffer(self, depth):
+        """Copy :meth:`get_depth_buffer_as_numpy` into ``depth``, a 2-D f32 field or ndarray of the window's
+        shape."""
+        shape = tuple(getattr(depth, "shape", ()))
+        if len(shape) != 2 or getattr(depth, "dtype", None) != ti.f32:
+            raise TypeError(f"get_depth_buffer needs a 2-D ti.f32 field or ndarray, got shape {shape}")
+        if shape != self.res:
+            raise ValueError(f"get_depth_buffer: depth has shape {shape}, the window is {self.res}")
+        depth.from_numpy(self.get_depth_buffer_as_numpy())
 
     def _take_events(self, tag, limit=None):
         """Pop waiting key/mouse events of type ``tag`` (all types if None), keeping the others."""

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -12,6 +13,9 @@ import simgrad as ti
 
 W, H = 160, 120
 FOCAL = (H / 2) / math.tan(math.radians(45) / 2)  # pixels per unit at distance 1 (fov 45 degrees)
+# Taichi's particle shader sizes a sphere of radius r at distance d as a disc of r * PSCALE / d pixels, half
+# the window's WIDTH over tan(fov / 2): 4/3 of the geometric silhouette r * FOCAL / d on a 4:3 window
+PSCALE = (W / 2) / math.tan(math.radians(45) / 2)
 BG = (1.0, 1.0, 1.0)
 
 
@@ -69,12 +73,20 @@ def test_particle_silhouette_matches_the_projected_radius():
     centers = ti.Vector.field(3, ti.f32, 1)  # a field, as GGUI programs pass them
     img = render(lambda s: s.particles(centers, radius=r, color=(1.0, 0.2, 0.2)))
     mask = covered(img)
-    R = r * FOCAL / d  # the impostor's radius in pixels
+    R = r * PSCALE / d  # the impostor's radius in pixels
+    assert abs(R / (r * FOCAL / d) - W / H) < 1e-12
     assert abs(mask.sum() - math.pi * R * R) < 2 * math.pi * R  # area within one pixel ring
     ii, jj = np.nonzero(mask)
     assert abs(ii.mean() + 0.5 - W / 2) < 0.3 and abs(jj.mean() + 0.5 - H / 2) < 0.3
     width = mask[:, H // 2].sum()
     assert abs(width - 2 * R) <= 1.0
+    # off the axis the distance is from the camera position, not the depth
+    x, r, res = 1.5, 0.1, (400, 300)
+    img = render(lambda s: s.particles(np.array([[x, 0.0, 0.0]], np.float32), radius=r, color=(1.0, 0.2, 0.2)),
+                 res=res)
+    R_seen = math.sqrt(covered(img).sum() / math.pi)
+    pscale = (res[0] / 2) / math.tan(math.radians(45) / 2)
+    assert abs(R_seen - r * pscale / math.hypot(x, d)) < 0.3  # 14.4 pixels, 16.1 by the depth
 
 
 def test_mesh_sphere_silhouette_is_the_tangent_cone():
@@ -183,7 +195,7 @@ def test_camera_moves_shift_the_picture_by_the_projection():
     assert abs(x2 - W / 2) < 0.3
 
 
-def test_camera_behind_sees_nothing_and_orthographic_size_ignores_distance():
+def test_camera_behind_sees_nothing_and_orthographic_particles_are_sized_as_in_taichi():
     centers = np.zeros((1, 3), np.float32)
     behind = render(lambda s: s.particles(centers, radius=0.3, color=(0, 0, 0)),
                     cam=camera((0.0, 0.0, 3.0), (0.0, 0.0, 6.0)))
@@ -192,7 +204,8 @@ def test_camera_behind_sees_nothing_and_orthographic_size_ignores_distance():
         cam = camera((0.0, 0.0, dist))
         cam.projection_mode(ti.ui.ProjectionMode.Orthogonal)
         mask = covered(render(lambda s: s.particles(centers, radius=0.5, color=(0, 0, 0)), cam=cam))
-        assert abs(mask[:, H // 2].sum() - 2 * 0.5 * H / 2) <= 1.0  # radius 0.5 of [-1, 1] -> H / 4 pixels
+        # Taichi's shader ignores the orthographic box here: radius * PSCALE / distance, as in perspective
+        assert abs(mask[:, H // 2].sum() - 2 * 0.5 * PSCALE / dist) <= 1.0
 
 
 def test_two_sided_lights_a_back_face():
@@ -358,3 +371,47 @@ def test_non_finite_geometry_draws_nothing_and_does_not_stall():
     # an infinite radius covers the whole picture at the depth of the camera (finite colours)
     img = render(lambda s: s.particles(np.zeros((1, 3), np.float32), radius=np.inf, color=(0.0, 0.0, 0.0)))
     assert covered(img).all() and np.isfinite(img).all()
+
+
+def reversed_z(d, near=0.1, far=1000.0, ortho=False):
+    """Taichi's depth buffer value for camera depth d: glm's zero-to-one projection with near and far swapped."""
+    return (far - d) / (far - near) if ortho else near * (far - d) / (d * (far - near))
+
+
+def test_depth_buffer_is_taichis_reversed_z():
+    window = ti.ui.Window("test", (W, H), show_window=False)
+    assert not window.get_depth_buffer_as_numpy().any()  # nothing drawn yet
+    canvas, scene = window.get_canvas(), window.get_scene()
+    scene.set_camera(camera())
+    v, i = quad(-1.0, half=0.6)
+    scene.mesh(v, indices=i, color=(0.5, 0.5, 0.5))
+    scene.particles(np.array([[0.0, 0.0, 0.0]], np.float32), radius=0.25, color=(1.0, 0.0, 0.0))
+    canvas.scene(scene)
+    depth = window.get_depth_buffer_as_numpy()
+    assert depth.dtype == np.float32 and depth.shape == (W, H)
+    assert depth[0, 0] == 0.0  # background: cleared to the far end
+    # the sphere's front surface at the centre is 3 - 0.25 from the camera; the quad behind it at depth 4
+    np.testing.assert_allclose(depth[W // 2, H // 2], reversed_z(2.75), rtol=1e-3)
+    np.testing.assert_allclose(depth[W // 2 + 19, H // 2], reversed_z(4.0), rtol=1e-5)  # quad 21.7 px, disc 16
+    field = ti.field(ti.f32, (W, H))
+    window.get_depth_buffer(field)
+    np.testing.assert_array_equal(field.to_numpy(), depth)
+    with pytest.raises(ValueError):
+        window.get_depth_buffer(ti.field(ti.f32, (W, H + 1)))
+    cam = camera()
+    cam.projection_mode(ti.ui.ProjectionMode.Orthogonal)
+    scene.set_camera(cam)
+    scene.mesh(v, indices=i, color=(0.5, 0.5, 0.5))
+    canvas.scene(scene)
+    np.testing.assert_allclose(window.get_depth_buffer_as_numpy()[W // 2, H // 2], reversed_z(4.0, ortho=True),
+                               rtol=1e-6)
+
+
+def test_scene_made_directly_is_deprecated_as_in_taichi():
+    with pytest.warns(DeprecationWarning, match=r"Instantiating ti.ui.Scene directly is deprecated, use the "
+                                                r"get_scene\(\) function from a taichi.ui.Window object instead."):
+        scene = ti.ui.Scene()
+    scene.particles(np.zeros((1, 3), np.float32), radius=0.5)  # and still works
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ti.ui.Window("w", (8, 8), show_window=False).get_scene()

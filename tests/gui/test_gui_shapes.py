@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 import simgrad.gui as tg
-from simgrad.gui import canvas as canvas_mod
 from simgrad.gui import raster
 
 W, H = 64, 48
@@ -217,7 +216,7 @@ def test_chunked_rasterisation_is_identical(monkeypatch):
     ref.circles(pos, 4.0, 0xFF00FF)
     ref.lines(begin, end, 1.5, 0x00FFFF)
     monkeypatch.setattr(raster, "CHUNK", 50)
-    monkeypatch.setattr(canvas_mod, "_PIECE", 3.0)
+    monkeypatch.setattr(raster, "PIECE", 3.0)
     small = tg.ImageCanvas((W, H))
     small.circles(pos, 4.0, 0xFF00FF)
     small.lines(begin, end, 1.5, 0x00FFFF)

@@ -1,0 +1,277 @@
+"""The ``ti.ui`` canvas's 2-D primitives (circles, lines, triangles) drawn by simgrad kernels.
+
+Coverage follows the numpy rasteriser (raster.py, canvas.py), which follows Taichi's C++ canvas: circles
+are anti-aliased by ``clamp(r - distance)`` from integer pixel coordinates, lines by the same from pixel
+centres to the segment, triangles cover the pixel centres inside them (edges included, per-vertex
+colours barycentric).  Each covered pixel is blended ``dest * (1 - a) + colour * a``, so the primitives of
+one call must land on a pixel in index order.  Parallelising over primitives would race and reorder, so
+the image is cut into TILE x TILE tiles: numpy bins every primitive's pixel box into the tiles it touches
+(a stable sort keeps index order within a tile), and a kernel loops over tiles in parallel, each thread
+drawing its tile's primitives one after another.  Long segments are cut into short pieces first
+(:class:`.raster.SegmentPieces`) so their boxes stay tight.
+
+Geometry and blending are float64, as in numpy, so pictures agree with the numpy rasteriser to float32
+rounding.  Kernels take ndarrays only: nothing lands in the user's SNode tree and they re-instantiate on
+whatever program ``ti.init`` made last (as render3d.py's).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, TypeAlias
+
+import numpy as np
+
+import simgrad as ti
+
+from . import raster
+
+__all__ = ["TILE", "bin_boxes", "circles", "lines", "triangles"]
+
+TILE = 16
+
+if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to mypy
+    _IMG: TypeAlias = Any
+    _I1: TypeAlias = Any
+    _B1: TypeAlias = Any
+    _G2: TypeAlias = Any
+    _C1: TypeAlias = Any
+    _I32: TypeAlias = Any
+else:
+    _IMG = ti.types.ndarray(dtype=ti.types.vector(3, ti.f32), ndim=2)
+    _I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    _B1 = ti.types.ndarray(dtype=ti.types.vector(4, ti.i32), ndim=1)
+    _G2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+    _C1 = ti.types.ndarray(dtype=ti.types.vector(3, ti.f64), ndim=1)
+    _I32 = ti.i32
+
+
+def bin_boxes(x0, y0, x1, y1, res):
+    """Tile lists of pixel boxes (inclusive, in drawing order; clipped here): returns ``start`` (one more
+    than the tile count) and ``items`` (box indices), tile ``t`` holding ``items[start[t]:start[t + 1]]`` in
+    ascending order, plus the clipped boxes as int32 (n, 4).  Tiles are numbered x-major.  The lists are
+    filled by a serial kernel (a counting sort: cheaper than numpy's repeat/sort chain)."""
+    W, H = res
+    tiles_y = -(-H // TILE)
+    n_tiles = -(-W // TILE) * tiles_y
+    x0 = np.clip(x0, 0, W).astype(np.int32)
+    y0 = np.clip(y0, 0, H).astype(np.int32)
+    x1 = np.clip(x1, -1, W - 1).astype(np.int32)
+    y1 = np.clip(y1, -1, H - 1).astype(np.int32)
+    boxes = np.stack([x0, y0, x1, y1], axis=1)
+    count = (x1 // TILE - x0 // TILE + 1) * (y1 // TILE - y0 // TILE + 1)
+    total = int(count[(x1 >= x0) & (y1 >= y0)].sum(dtype=np.int64))
+    start = np.zeros(n_tiles + 1, np.int32)
+    items = np.empty(max(total, 1), np.int32)
+    if total:
+        _bin(boxes, start, np.empty(n_tiles, np.int32), items, tiles_y)
+    return start, items[:total], boxes
+
+
+@ti.kernel
+def _bin(boxes: _B1, start: _I1, cursor: _I1, items: _I1, tiles_y: _I32):
+    """Counting sort of the boxes' (tile, box) pairs by tile; serial loops keep box order within a tile."""
+    for p in range(boxes.shape[0]):  # start[t + 1] = pairs in tile t (parallel, atomic)
+        b = boxes[p]
+        if b[2] >= b[0] and b[3] >= b[1]:
+            for tx in range(b[0] // TILE, b[2] // TILE + 1):
+                for ty in range(b[1] // TILE, b[3] // TILE + 1):
+                    ti.atomic_add(start[tx * tiles_y + ty + 1], 1)
+    ti.loop_config(serialize=True)
+    for t in range(cursor.shape[0]):
+        start[t + 1] += start[t]
+        cursor[t] = start[t]
+    ti.loop_config(serialize=True)
+    for p in range(boxes.shape[0]):
+        b = boxes[p]
+        if b[2] >= b[0] and b[3] >= b[1]:
+            for tx in range(b[0] // TILE, b[2] // TILE + 1):
+                for ty in range(b[1] // TILE, b[3] // TILE + 1):
+                    t = tx * tiles_y + ty
+                    items[cursor[t]] = p
+                    cursor[t] += 1
+
+
+@ti.func
+def _tile(t, tiles_y, W, H):
+    """Pixel range [x0, x1] x [y0, y1] of tile ``t``."""
+    tx = t // tiles_y
+    ty = t - tx * tiles_y
+    return tx * TILE, ti.min(tx * TILE + TILE, W) - 1, ty * TILE, ti.min(ty * TILE + TILE, H) - 1
+
+
+@ti.func
+def _blend(img, i, j, a, c):
+    """``lerp(a, dest, c)`` in float64; an opaque sample replaces the pixel (even a NaN one)."""
+    if a >= 1.0:
+        img[i, j] = ti.cast(c, ti.f32)
+    elif a > 0.0:
+        img[i, j] = ti.cast(ti.cast(img[i, j], ti.f64) * (1.0 - a) + c * a, ti.f32)
+
+
+@ti.kernel
+def _circles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: _C1, tiles_y: _I32):
+    """``geo`` rows: centre x, y and radius in pixels."""
+    for t in range(start.shape[0] - 1):
+        tx0, tx1, ty0, ty1 = _tile(t, tiles_y, img.shape[0], img.shape[1])
+        for k in range(start[t], start[t + 1]):
+            p = items[k]
+            b = boxes[p]
+            cx = geo[p, 0]
+            cy = geo[p, 1]
+            r = geo[p, 2]
+            c = colors[p]
+            for i in range(ti.max(b[0], tx0), ti.min(b[2], tx1) + 1):
+                dx = cx - i
+                for j in range(ti.max(b[1], ty0), ti.min(b[3], ty1) + 1):
+                    dy = cy - j
+                    _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
+
+
+@ti.kernel
+def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1, geo: _G2, c0: _C1, c1: _C1,
+           per_vertex: _I32, tiles_y: _I32):
+    """Items are segment pieces; ``geo`` rows per segment: clipped start x, y, direction x, y, squared length,
+    half-width, pieces, ``ta`` and ``span`` (where the clipped segment lies on the original one)."""
+    for t in range(start.shape[0] - 1):
+        tx0, tx1, ty0, ty1 = _tile(t, tiles_y, img.shape[0], img.shape[1])
+        for k in range(start[t], start[t + 1]):
+            q = items[k]
+            b = boxes[q]
+            o = owner[q]
+            ax = geo[o, 0]
+            ay = geo[o, 1]
+            dx = geo[o, 2]
+            dy = geo[o, 3]
+            l2 = geo[o, 4]
+            r = geo[o, 5]
+            n = ti.cast(geo[o, 6], ti.i32)
+            # pixels at least r from the segment's line are skipped before the division and square root
+            band = (r + 1e-6) * (r + 1e-6) * l2
+            for i in range(ti.max(b[0], tx0), ti.min(b[2], tx1) + 1):
+                px = i + 0.5 - ax
+                for j in range(ti.max(b[1], ty0), ti.min(b[3], ty1) + 1):
+                    py = j + 0.5 - ay
+                    cross = px * dy - py * dx
+                    if l2 > 0.0 and cross * cross >= band:
+                        continue
+                    s = ti.cast(0.0, ti.f64)  # (a bare 0.0 would make s an f32)
+                    if l2 > 0.0:
+                        s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
+                    ex = px - s * dx
+                    ey = py - s * dy
+                    a = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+                    # piece boxes overlap: a pixel belongs to the piece holding its nearest point
+                    if a > 0.0 and ti.min(ti.cast(s * n, ti.i32), n - 1) == piece[q]:
+                        c = c0[o]
+                        if per_vertex != 0:
+                            u = geo[o, 7] + s * geo[o, 8]
+                            c = c0[o] * (1.0 - u) + c1[o] * u
+                        _blend(img, i, j, a, c)
+
+
+@ti.func
+def _edge(ux, uy, vx, vy, px, py):
+    """Taichi's edge function cross(p - u, v - u), in raster.edge_functions' operation order."""
+    return (px - ux) * (vy - uy) - (py - uy) * (vx - ux)
+
+
+@ti.kernel
+def _triangles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: _G2, per_vertex: _I32,
+               tiles_y: _I32):
+    """``geo`` rows: the vertices (x, y) * 3 in pixels and twice the signed area; ``colors`` rows: one RGB,
+    or three (one per vertex) when ``per_vertex``."""
+    for t in range(start.shape[0] - 1):
+        tx0, tx1, ty0, ty1 = _tile(t, tiles_y, img.shape[0], img.shape[1])
+        for k in range(start[t], start[t + 1]):
+            p = items[k]
+            b = boxes[p]
+            x0 = geo[p, 0]
+            y0 = geo[p, 1]
+            x1 = geo[p, 2]
+            y1 = geo[p, 3]
+            x2 = geo[p, 4]
+            y2 = geo[p, 5]
+            area2 = geo[p, 6]
+            c = ti.Vector([colors[p, 0], colors[p, 1], colors[p, 2]])
+            for i in range(ti.max(b[0], tx0), ti.min(b[2], tx1) + 1):
+                px = i + 0.5
+                for j in range(ti.max(b[1], ty0), ti.min(b[3], ty1) + 1):
+                    py = j + 0.5
+                    e0 = _edge(x0, y0, x1, y1, px, py)
+                    e1 = _edge(x1, y1, x2, y2, px, py)
+                    e2 = _edge(x2, y2, x0, y0, px, py)
+                    # Taichi's test: the centre on the inner side of all three edges, ties included
+                    inside = (e0 <= 0.0) == (e1 <= 0.0) and (e0 <= 0.0) == (e2 <= 0.0)
+                    if inside:
+                        if per_vertex != 0:
+                            # a vertex's weight is the opposite edge's function over -area2
+                            w0 = ti.min(ti.max(e1 / -area2, 0.0), 1.0)
+                            w1 = ti.min(ti.max(e2 / -area2, 0.0), 1.0)
+                            w2 = ti.min(ti.max(e0 / -area2, 0.0), 1.0)
+                            norm = ti.max(w0 + w1 + w2, 1e-12)
+                            w0 /= norm
+                            w1 /= norm
+                            w2 /= norm
+                            c = ti.Vector([w0 * colors[p, 0] + w1 * colors[p, 3] + w2 * colors[p, 6],
+                                           w0 * colors[p, 1] + w1 * colors[p, 4] + w2 * colors[p, 7],
+                                           w0 * colors[p, 2] + w1 * colors[p, 5] + w2 * colors[p, 8]])
+                        _blend(img, i, j, 1.0, c)
+
+
+def _tiles_y(img):
+    return -(-img.shape[1] // TILE)
+
+
+def circles(img, centers, radii, colors):
+    """Draw circles into ``img`` (float32 (W, H, 3), C-contiguous): ``centers`` (n, 2) and ``radii`` (n,) in
+    pixels, ``colors`` (n, 3) float RGB."""
+    c = np.asarray(centers, np.float64)
+    r = np.asarray(radii, np.float64)
+    ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
+    lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
+    start, items, boxes = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], img.shape[:2])
+    if items.size:
+        geo = np.ascontiguousarray(np.column_stack([c, r]))
+        _circles(img, start, items, boxes, geo, np.ascontiguousarray(colors, np.float64), _tiles_y(img))
+
+
+def lines(img, A, B, radius, colors, vertex_colors=None):
+    """Draw round-capped segments A -> B (n, 2 pixels) of half-width ``radius`` (n,) into ``img``, coloured
+    ``colors`` (n, 3), or ``vertex_colors`` (n, 2, 3) interpolated along each segment."""
+    A = np.asarray(A, np.float64)
+    B = np.asarray(B, np.float64)
+    r = np.asarray(radius, np.float64)
+    ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
+    seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])
+    start, items, boxes = bin_boxes(seg.x0, seg.y0, seg.x1, seg.y1, img.shape[:2])
+    if not items.size:
+        return
+    geo = np.ascontiguousarray(np.column_stack([seg.A, seg.D, seg.L2, r, seg.pieces, seg.ta, seg.span]))
+    if vertex_colors is not None:
+        vc = np.asarray(vertex_colors, np.float64)
+        c0, c1 = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1])
+    else:
+        c0 = c1 = np.ascontiguousarray(colors, np.float64)
+    _lines(img, start, items, boxes, seg.owner.astype(np.int32), seg.k.astype(np.int32), geo, c0, c1,
+           int(vertex_colors is not None), _tiles_y(img))
+
+
+def triangles(img, P, colors, vertex_colors=None):
+    """Draw triangles ``P`` (n, 3, 2 pixels) into ``img``: a pixel is covered when its centre is inside
+    (edges included, Taichi's rule); colour ``colors`` (n, 3) or ``vertex_colors`` (n, 3, 3) barycentric."""
+    P = np.asarray(P, np.float64)
+    W, H = img.shape[:2]
+    area2 = raster.triangle_area2(P)
+    ok = np.isfinite(P).all(axis=(1, 2)) & (area2 != 0)
+    lo = np.where(ok[:, None], np.floor(np.where(ok[:, None, None], P, 0.0).min(axis=1)), 0.0)
+    hi = np.where(ok[:, None], np.ceil(np.where(ok[:, None, None], P, 0.0).max(axis=1)) - 1, -1.0)
+    start, items, boxes = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], (W, H))
+    if not items.size:
+        return
+    geo = np.ascontiguousarray(np.column_stack([P.reshape(-1, 6), area2]))
+    if vertex_colors is not None:
+        col = np.asarray(vertex_colors, np.float64).reshape(-1, 9)
+    else:
+        col = np.asarray(colors, np.float64).reshape(-1, 3)
+    _triangles(img, start, items, boxes, geo, np.ascontiguousarray(col), int(vertex_colors is not None),
+               _tiles_y(img))
