@@ -3,13 +3,16 @@
 A GLOBAL_PTR names an element by its indices (what autodiff and the parallel analyses reason about).
 This pass appends the element's byte offset, computed in IR, as the GLOBAL_PTR's last operand and marks
 it `lowered`; codegen then only adds the offset to the tree's root (or to a thread's private copy, or to
-an ndarray's base). The expansion goes level by level over the field's SNode kinds (FieldRef.kinds): a
-dense level is arithmetic, `((I[axis] // divisor) % modulus) * stride` per layout term; pointer,
-bitmasked and dynamic levels will add their lookups and activation here.
+an ndarray's base). A dense field's offset is `((I[axis] // divisor) % modulus) * stride` per layout term.
+A field under sparse SNodes is walked level by level from the tree's root instead (TREE_ROOT, then per
+level a dense offset or a SPARSE_CELL lookup that activates when the access writes), and its GLOBAL_PTR
+gets the absolute address (attrs `absolute`); ti.activate & co. (SNODE_OP) become the same walk ending
+in a SPARSE_ACTION.
 
-- Affine addressing: when the indices are exactly the digits of the enclosing parallel loop's flat index
-  L (`for i, j in g` reading `g[i, j]`, laid out in that order) the offset is `const + L * stride`, with
-  no division, so LLVM sees an affine address and vectorises the loop.
+- Affine addressing: when the indices are digits of the enclosing parallel loop's flat index L plus
+  constants, or loop-invariant (`p[t - 1, i + 1, j]` in `for i, j in g`, laid out in that order), the
+  offset is `L * stride` plus invariant terms and a constant, with no division, so LLVM sees an affine
+  address and vectorises the loop.
 - An offset whose indices are all loop-invariant is computed before the parallel loop, so the task
   captures it (the per-thread sums of a `total[None] += v` add into that place after the loop).
 - Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
