@@ -95,19 +95,35 @@ def _offset_of(target):
 
 
 def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> None:
-    """A struct-for over the active cells of `cells`: nested loops down the SNode path, one per run of
-    levels that ends at a sparse node, each entered only where that node's cell is active (a dynamic
-    node's loop runs to its list's length). The outermost loop (the levels down to the first sparse node,
-    flattened) is the parallel one; the indices are built digit by digit in `cells`' index space."""
-    from simgrad.lang import sparse
-
+    """`for i, j in x` / `for I in ti.grouped(x)` over a field or SNode with sparse nodes on its path."""
     names = _target_names(comp, node.target)
-    axes = sorted({a for n in cells.path() for a in n.axes})
+    naxes = len({a for n in cells.path() for a in n.axes})
     if grouped_ and len(names) != 1:
         raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
-    if not grouped_ and len(names) != len(axes):
-        raise SimgradSyntaxError(f"this loop has {len(axes)} indices but {len(names)} loop variable(s)",
+    if not grouped_ and len(names) != naxes:
+        raise SimgradSyntaxError(f"this loop has {naxes} indices but {len(names)} loop variable(s)",
                                  comp.loc(node.target))
+
+    def body(idx):
+        if grouped_:
+            comp.bind(names[0], Matrix(idx))
+        else:
+            for name, v in zip(names, idx):
+                comp.bind(name, v)
+        comp.visit_block(node.body)
+
+    active_cells_loop(comp, cells, offset, body)
+
+
+def active_cells_loop(comp, cells: SNode, offset, body) -> None:
+    """Loops over the active cells of `cells`, calling `body(indices)` inside: nested loops down the SNode
+    path, one per run of levels that ends at a sparse node, each entered only where that node's cell is
+    active (a dynamic node's loop runs to its list's length). The outermost loop (the levels down to the
+    first sparse node, flattened) is the parallel one; the indices are built digit by digit in `cells`'
+    index space."""
+    from simgrad.lang import sparse
+
+    axes = sorted({a for n in cells.path() for a in n.axes})
     groups: list[list[SNode]] = [[]]
     for n in cells.path()[1:]:
         if n.kind == "dynamic" and groups[-1]:
@@ -125,12 +141,7 @@ def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> No
         if all(isinstance(i, Expr) and i.stmt.op is not Op.CONST for i in idx):
             for k, i in enumerate(idx):  # the cell's indices: each iteration owns its cell (parallel_strategy)
                 i.stmt.attrs["cell_index"] = k
-        if grouped_:
-            comp.bind(names[0], Matrix(idx))
-        else:
-            for name, v in zip(names, idx):
-                comp.bind(name, v)
-        comp.visit_block(node.body)
+        body(idx)
 
     def level(k: int, coords: dict) -> None:
         if k == len(groups):
@@ -455,4 +466,8 @@ def emit_fill(field, value) -> None:
         else:
             refs[0].store(value)
 
+    cells = field._components()[0].snode.parent()
+    if cells is not None and getattr(cells, "has_sparse_path", lambda: False)():
+        active_cells_loop(comp, cells, None, body)  # as in Python scope: the active cells only (raw indices)
+        return
     _nd_loop(comp, [(0, n) for n in field.shape], body)

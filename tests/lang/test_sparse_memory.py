@@ -144,3 +144,34 @@ def test_nested_pointers_survive_deactivate_all_cycles():
         stripe(m)
         assert total() == int(((i + j) % m == 0).sum())
         np.testing.assert_array_equal(x.to_numpy(), ((i + j) % m == 0).astype(np.int32))
+
+
+def test_fill_inside_a_kernel_writes_the_active_cells_only():
+    x, blk = _blocked(64, 8)
+
+    @ti.kernel
+    def touch_and_fill(v: ti.f32):
+        x[3] = 1.0
+        x[40] = 2.0
+        x.fill(v)
+
+    touch_and_fill(5.0)
+    want = np.zeros(64, np.float32)
+    want[0:8] = want[40:48] = 5.0
+    np.testing.assert_array_equal(x.to_numpy(), want)
+    assert blk.memory_usage()["live_blocks"] == 2
+
+
+def test_debug_mode_reports_an_out_of_bounds_sparse_index_at_the_users_line():
+    ti.init(arch=ti.cpu, debug=True)
+    x, _blk = _blocked(64, 8)
+
+    @ti.kernel
+    def poke(i: ti.i32):
+        x[i] = 1.0
+
+    poke(63)
+    with pytest.raises(IndexError, match="Out of bound access") as e:
+        poke(64)
+    assert "test_sparse_memory.py" in str(e.value)
+    assert x[63] == 1.0  # (the refused write went to index 0, as for dense fields: no wild address)
