@@ -96,23 +96,28 @@ def _offset_of(target):
 
 def _sparse_for(comp, node: ast.For, cells: SNode, offset, grouped_: bool) -> None:
     """`for i, j in x` / `for I in ti.grouped(x)` over a field or SNode with sparse nodes on its path."""
+    bind = _binder(comp, node, len({a for n in cells.path() for a in n.axes}), grouped_)
+    active_cells_loop(comp, cells, offset, _visit(comp, node, bind))
+
+
+def _binder(comp, node: ast.For, nd: int, grouped_: bool):
+    """The function binding a loop's targets to its nd indices: one name per index, or one vector name for
+    a grouped loop (checked here, at the loop's line)."""
     names = _target_names(comp, node.target)
-    naxes = len({a for n in cells.path() for a in n.axes})
     if grouped_ and len(names) != 1:
         raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
-    if not grouped_ and len(names) != naxes:
-        raise SimgradSyntaxError(f"this loop has {naxes} indices but {len(names)} loop variable(s)",
+    if not grouped_ and len(names) != nd:
+        raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
                                  comp.loc(node.target))
 
-    def body(idx):
+    def bind(idx):
         if grouped_:
             comp.bind(names[0], Matrix(idx))
         else:
             for name, v in zip(names, idx):
                 comp.bind(name, v)
-        comp.visit_block(node.body)
 
-    active_cells_loop(comp, cells, offset, body)
+    return bind
 
 
 def active_cells_loop(comp, cells: SNode, offset, body) -> None:
@@ -348,23 +353,7 @@ def _range_for(comp, node, r) -> None:
 
 
 def _nd_for(comp, node, bounds, grouped_: bool) -> None:
-    names = _target_names(comp, node.target)
-    nd = len(bounds)
-    if grouped_:
-        if len(names) != 1:
-            raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
-    elif len(names) != nd:
-        raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
-                                 comp.loc(node.target))
-
-    def bind(idx):
-        if grouped_:
-            comp.bind(names[0], Matrix(idx))
-        else:
-            for n, v in zip(names, idx):
-                comp.bind(n, v)
-
-    _nd_loop(comp, bounds, _visit(comp, node, bind))
+    _nd_loop(comp, bounds, _visit(comp, node, _binder(comp, node, len(bounds), grouped_)))
 
 
 def _nd_loop(comp, bounds, body) -> None:

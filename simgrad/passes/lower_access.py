@@ -98,15 +98,20 @@ def _walk_levels(b: Builder, s: Stmt, tree_id: int, levels: tuple, idx: list, mo
 
 
 def _cell_number(b: Builder, level, idx: list) -> Stmt:
-    n = b.const(0, dt.u64)
-    for t in level.terms:
+    return _terms_sum(b, b.const(0, dt.u64), level.terms, idx)
+
+
+def _terms_sum(b: Builder, start: Stmt, terms, idx: list) -> Stmt:
+    """start + sum of ((idx[axis] // divisor) % modulus) * stride over layout terms (u64)."""
+    total = start
+    for t in terms:
         d = idx[t.axis]
         if t.divisor != 1:
             d = _digit(b, Op.RAW_DIV, d, t.divisor)
         if t.modulus:
             d = _digit(b, Op.RAW_MOD, d, t.modulus)
-        n = _add(b, n, _mul(b, d, t.stride))
-    return n
+        total = _add(b, total, _mul(b, d, t.stride))
+    return total
 
 
 def _indices(b: Builder, s: Stmt, name: str, shape: tuple, debug: bool) -> list:
@@ -235,15 +240,7 @@ def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, insi
         text = str(shape) + (f" with offset {tuple(offsets)}" if any(offsets) else "")
         idx = [_checked(b, s, target.name, k, i, b.const(shape[k], dt.u64), text, offsets[k])
                for k, i in enumerate(idx)]
-    off = b.const(const, dt.u64)
-    for t in terms:
-        d = idx[t.axis]
-        if t.divisor != 1:
-            d = _digit(b, Op.RAW_DIV, d, t.divisor)
-        if t.modulus:
-            d = _digit(b, Op.RAW_MOD, d, t.modulus)
-        off = _add(b, off, _mul(b, d, t.stride))
-    return off
+    return _terms_sum(b, b.const(const, dt.u64), terms, idx)
 
 
 def _array_offset(b: Builder, s: Stmt, arg: ArrayRef, debug: bool) -> Stmt:
