@@ -34,9 +34,12 @@ _INT_MAX = 2**31 - 1
 #: most iterations one task call runs: between chunks the pool looks at the cancel flag (Ctrl-C); a
 #: chunk this long costs far more than handing it out (one atomic add)
 CHUNK_CAP = 1 << 18
-#: how long workers (and the caller) spin before sleeping; long enough to stay hot across
-#: back-to-back kernel launches from Python, short enough not to burn a core when idle.
-DEFAULT_SPIN_NS = 50_000
+#: how long workers (and the caller) spin before sleeping: long enough to stay hot across a training loop's
+#: launches from Python (a Tape's bookkeeping between them included). Waking a sleeping worker took so long
+#: on a 2-vCPU VM that with 50 us the caller ran most jobs alone: DiffTaichi's diffmpm took 0.94-1.27 s/iter in
+#: about half the processes instead of 0.59 (p2g launches: mean 150-200 us, median 62); with 2 ms, 8 of 8 runs
+#: took 0.58-0.60. Idle cost: 2 ms of spinning after the last launch.
+DEFAULT_SPIN_NS = 2_000_000
 
 _SYMBOLS = [
     "simgrad_parallel_for",
