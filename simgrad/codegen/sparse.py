@@ -40,20 +40,46 @@ define internal void @sg_pool_unlock(ptr %row) {
 ; a fresh block is bumped off the pool and installed by compare-and-swap, with no lock (the common case:
 ; many threads activating at once); a block that lost the race goes to the free list. Freed blocks are
 ; reused under the pool's lock. A pool that has run out reports error `code` and hands out the discard block.
-define internal ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code) noinline {
+define internal ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code, i32 %tid) noinline {
 entry:
   %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
   %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
   %free0 = load atomic ptr, ptr %fp monotonic, align 8
   %has_free0 = icmp ne ptr %free0, null
-  br i1 %has_free0, label %locked, label %bump
-bump:
-  %np = getelementptr i64, ptr %row, i64 @POOL_NEXT@
-  %n = atomicrmw add ptr %np, i64 1 monotonic
   %cp = getelementptr i64, ptr %row, i64 @POOL_CAPACITY@
   %cap = load i64, ptr %cp
-  %full = icmp uge i64 %n, %cap
-  br i1 %full, label %exhausted, label %fresh
+  br i1 %has_free0, label %locked, label %bump
+bump:                      ; this thread's batch of fresh blocks: one shared atomic add per BATCH blocks
+  %tp = getelementptr i64, ptr %row, i64 @POOL_BATCHES@
+  %tbase = load ptr, ptr %tp
+  %t64 = zext i32 %tid to i64
+  %toff = mul i64 %t64, 8
+  %mine = getelementptr i64, ptr %tbase, i64 %toff          ; [next, end] of this thread, a cache line apart
+  %endp = getelementptr i64, ptr %mine, i64 1
+  %bn = load i64, ptr %mine
+  %be = load i64, ptr %endp
+  %have_b = icmp ult i64 %bn, %be
+  br i1 %have_b, label %from_batch, label %refill
+from_batch:
+  %bn1 = add i64 %bn, 1
+  store i64 %bn1, ptr %mine
+  br label %take_n
+refill:
+  %np = getelementptr i64, ptr %row, i64 @POOL_NEXT@
+  %r = atomicrmw add ptr %np, i64 @BATCH@ monotonic
+  %full = icmp uge i64 %r, %cap
+  br i1 %full, label %exhausted, label %refilled
+refilled:
+  %re0 = add i64 %r, @BATCH@
+  %over = icmp ugt i64 %re0, %cap
+  %re = select i1 %over, i64 %cap, i64 %re0
+  %r1 = add i64 %r, 1
+  store i64 %r1, ptr %mine
+  store i64 %re, ptr %endp
+  br label %take_n
+take_n:
+  %n = phi i64 [ %bn, %from_batch ], [ %r, %refilled ]
+  br label %fresh
 fresh:
   %bp = getelementptr i64, ptr %row, i64 @POOL_BASE@
   %base = load ptr, ptr %bp
@@ -142,7 +168,8 @@ define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
 for _name, _value in (("CTX_SPARSE", abi.CTX_SPARSE), ("POOL_WORDS", rt.POOL_WORDS), ("POOL_FREE", rt.POOL_FREE),
                       ("POOL_NEXT", rt.POOL_NEXT), ("POOL_CAPACITY", rt.POOL_CAPACITY),
                       ("POOL_BASE", rt.POOL_BASE), ("POOL_BLOCK", rt.POOL_BLOCK), ("POOL_FREECOUNT", rt.POOL_FREECOUNT),
-                      ("POOL_DISCARD", rt.POOL_DISCARD)):
+                      ("POOL_DISCARD", rt.POOL_DISCARD),
+                      ("POOL_BATCHES", rt.POOL_BATCHES), ("BATCH", rt.BATCH)):
     _HELPERS = _HELPERS.replace(f"@{_name}@", str(_value))
 
 
@@ -210,7 +237,8 @@ def _slot_block(g, f, s, slot: str, level, mode: str) -> str:
         f.emit(f"br i1 {null}, label %{t}, label %{d}, !prof !1")
         f.start_block(t)
         new = f.tmp("newblk")
-        f.emit(f"{new} = call ptr @sg_sparse_alloc(ptr %ctx, i64 {level.pool}, ptr {slot}, i64 {code})")
+        f.emit(f"{new} = call ptr @sg_sparse_alloc(ptr %ctx, i64 {level.pool}, ptr {slot}, i64 {code}, "
+               f"i32 {f.tid})")
         f.emit(f"br label %{d}")
         f.start_block(d)
         r = f.tmp("blkr")

@@ -432,6 +432,7 @@ class ThreadPool:
     def __init__(self, num_threads: int | None = None) -> None:
         global _active
         n = num_threads if num_threads is not None else (os.cpu_count() or 1)
+        n = min(n, 4096)  # per-thread state (sparse pools' batches: runtime/sparse.py MAX_THREADS) has this room
         if n < 1:
             raise ValueError(f"num_threads must be >= 1, got {n}")
         native = _get_native()
