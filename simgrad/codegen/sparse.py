@@ -103,6 +103,10 @@ lost:
   %c1 = load i64, ptr %cnp
   %c2 = add i64 %c1, 1
   store i64 %c2, ptr %cnp
+  %lsp = getelementptr i64, ptr %row, i64 @POOL_LOST@
+  %l1 = load i64, ptr %lsp
+  %l2 = add i64 %l1, 1
+  store i64 %l2, ptr %lsp
   call void @sg_pool_unlock(ptr %row)
   ret ptr %other
 locked:
@@ -169,7 +173,7 @@ for _name, _value in (("CTX_SPARSE", abi.CTX_SPARSE), ("POOL_WORDS", rt.POOL_WOR
                       ("POOL_NEXT", rt.POOL_NEXT), ("POOL_CAPACITY", rt.POOL_CAPACITY),
                       ("POOL_BASE", rt.POOL_BASE), ("POOL_BLOCK", rt.POOL_BLOCK), ("POOL_FREECOUNT", rt.POOL_FREECOUNT),
                       ("POOL_DISCARD", rt.POOL_DISCARD),
-                      ("POOL_BATCHES", rt.POOL_BATCHES), ("BATCH", rt.BATCH)):
+                      ("POOL_BATCHES", rt.POOL_BATCHES), ("BATCH", rt.BATCH), ("POOL_LOST", rt.POOL_LOST)):
     _HELPERS = _HELPERS.replace(f"@{_name}@", str(_value))
 
 

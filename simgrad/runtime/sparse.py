@@ -23,7 +23,7 @@ import numpy as np
 MAX_POOLS = 1024
 #: the words of one pool's entry in the table (i64 each)
 (POOL_LOCK, POOL_NEXT, POOL_CAPACITY, POOL_BASE, POOL_FREE, POOL_BLOCK, POOL_FREECOUNT, POOL_ZERO, POOL_DISCARD,
- POOL_LISTS, POOL_BATCHES) = range(11)
+ POOL_LISTS, POOL_BATCHES, POOL_LOST) = range(12)
 #: fresh blocks a thread takes from a pool at a time (one shared atomic add each: activation from many threads
 #: went 5.5 -> 1.5 ms for 79k blocks), and the pool threads that can; a pool capped by device_memory_GB can
 #: report running out while up to BATCH - 1 blocks per thread are still taken but unused
@@ -115,10 +115,11 @@ class SparseMemory:
         ctypes.memset(int(self.table[pid, POOL_BATCHES]), 0, MAX_THREADS * 64)
 
     def usage_of(self, pid: int) -> dict[str, int]:
-        """A pool's blocks in use, blocks ever handed out (bumped) and the bytes those hold."""
+        """A pool's blocks in use, blocks ever installed in a slot (bumped, less those still in a thread's
+        batch and those that lost a race to install and went to the free list), and the bytes those hold."""
         row = self.table[pid]
         bumped = min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) - self._unused_batches(pid)
-        self.touched[pid] = max(self.touched.get(pid, 0), bumped)
+        self.touched[pid] = max(self.touched.get(pid, 0), bumped - int(row[POOL_LOST]))
         return {"live_blocks": bumped - int(row[POOL_FREECOUNT]), "touched_blocks": self.touched[pid],
                 "block_bytes": int(row[POOL_BLOCK]), "touched_bytes": self.touched[pid] * int(row[POOL_BLOCK])}
 
@@ -128,8 +129,8 @@ class SparseMemory:
         row = self.table[pid]
         used = min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) - self._unused_batches(pid)
         if row[POOL_CAPACITY] and used == row[POOL_FREECOUNT]:
-            self.touched[pid] = max(self.touched.get(pid, 0), used)
-            row[POOL_NEXT] = row[POOL_FREE] = row[POOL_FREECOUNT] = 0
+            self.touched[pid] = max(self.touched.get(pid, 0), used - int(row[POOL_LOST]))
+            row[POOL_NEXT] = row[POOL_FREE] = row[POOL_FREECOUNT] = row[POOL_LOST] = 0
             self._clear_batches(pid)
 
     def release(self) -> None:
