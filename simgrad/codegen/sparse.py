@@ -95,19 +95,7 @@ done_fresh:
   ret ptr %blk
 lost:
   %other = extractvalue { ptr, i1 } %cas, 0
-  call void @sg_pool_lock(ptr %row)
-  %f1 = load ptr, ptr %fp
-  store ptr %f1, ptr %blk
-  store ptr %blk, ptr %fp
-  %cnp = getelementptr i64, ptr %row, i64 @POOL_FREECOUNT@
-  %c1 = load i64, ptr %cnp
-  %c2 = add i64 %c1, 1
-  store i64 %c2, ptr %cnp
-  %lsp = getelementptr i64, ptr %row, i64 @POOL_LOST@
-  %l1 = load i64, ptr %lsp
-  %l2 = add i64 %l1, 1
-  store i64 %l2, ptr %lsp
-  call void @sg_pool_unlock(ptr %row)
+  call void @sg_pool_push(ptr %row, ptr %blk, i64 1)
   ret ptr %other
 locked:
   call void @sg_pool_lock(ptr %row)
@@ -150,12 +138,8 @@ exhausted:
   ret ptr %discard
 }
 
-; zero a block and give it back to its pool
-define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
-  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
-  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
-  %sz = load i64, ptr %szp
-  call void @llvm.memset.p0.i64(ptr %blk, i8 0, i64 %sz, i1 false)
+; put a zeroed block on its pool's free list (%lost: 1 for a block that lost the race to install, counted)
+define internal void @sg_pool_push(ptr %row, ptr %blk, i64 %lost) {
   call void @sg_pool_lock(ptr %row)
   %fp = getelementptr i64, ptr %row, i64 @POOL_FREE@
   %free = load ptr, ptr %fp
@@ -165,7 +149,21 @@ define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
   %c1 = load i64, ptr %cnp
   %c2 = add i64 %c1, 1
   store i64 %c2, ptr %cnp
+  %lsp = getelementptr i64, ptr %row, i64 @POOL_LOST@
+  %l1 = load i64, ptr %lsp
+  %l2 = add i64 %l1, %lost
+  store i64 %l2, ptr %lsp
   call void @sg_pool_unlock(ptr %row)
+  ret void
+}
+
+; zero a block and give it back to its pool
+define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %szp = getelementptr i64, ptr %row, i64 @POOL_BLOCK@
+  %sz = load i64, ptr %szp
+  call void @llvm.memset.p0.i64(ptr %blk, i8 0, i64 %sz, i1 false)
+  call void @sg_pool_push(ptr %row, ptr %blk, i64 0)
   ret void
 }
 """
@@ -277,20 +275,27 @@ def _bit_set(f, word_ptr: str, bit: str) -> str:
     return r
 
 
+def _slot(f, container: str, cell: str, kind: str) -> str:
+    """Pointer to the block slot of a pointer node's cell, or to a dynamic node's list block (header + 8)."""
+    sa = f.tmp("sa")
+    if kind == "pointer":
+        so = f.tmp("so")
+        f.emit(f"{so} = mul i64 {cell}, 8")
+        f.emit(f"{sa} = add i64 {container}, {so}")
+    else:
+        f.emit(f"{sa} = add i64 {container}, 8")
+    return _as_ptr(f, sa)
+
+
 def lower_sparse_cell(g, f, s) -> None:
     container, cell = (f.v(o) for o in s.operands)
     level, mode = s.attrs["level"], s.attrs["mode"]
     kind = level.kind
     if kind == "pointer":
-        so, sa = f.tmp("so"), f.tmp("sa")
-        f.emit(f"{so} = mul i64 {cell}, 8")
-        f.emit(f"{sa} = add i64 {container}, {so}")
-        f.names[s] = _as_int(f, _slot_block(g, f, s, _as_ptr(f, sa), level, mode))
+        f.names[s] = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell, kind), level, mode))
         return
     if kind == "dynamic":
-        hp = f.tmp("hp")
-        f.emit(f"{hp} = add i64 {container}, 8")
-        blk = _as_int(f, _slot_block(g, f, s, _as_ptr(f, hp), level, mode))
+        blk = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell, kind), level, mode))
         if mode == "write":  # the list now reaches at least this element
             n1, n32 = f.tmp("dn"), f.tmp("dn32")
             f.emit(f"{n1} = add i64 {cell}, 1")
@@ -340,14 +345,7 @@ def lower_sparse_action(g, f, s) -> None:
     kind = level.kind
     r = f.tmp("act")
     if kind == "pointer" or (kind == "dynamic" and op in ("activate", "deactivate")):
-        if kind == "pointer":
-            so, sa = f.tmp("so"), f.tmp("sa")
-            f.emit(f"{so} = mul i64 {cell}, 8")
-            f.emit(f"{sa} = add i64 {container}, {so}")
-        else:
-            sa = f.tmp("hp")
-            f.emit(f"{sa} = add i64 {container}, 8")
-        slot = _as_ptr(f, sa)
+        slot = _slot(f, container, cell, kind)
         if op == "is_active":
             cur, c = f.tmp("cur"), f.tmp("c")
             f.emit(f"{cur} = load atomic ptr, ptr {slot} monotonic, align 8")

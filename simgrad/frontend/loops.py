@@ -126,8 +126,6 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
     active (a dynamic node's loop runs to its list's length). The outermost loop (the levels down to the
     first sparse node, flattened) is the parallel one; the indices are built digit by digit in `cells`'
     index space."""
-    from simgrad.lang import sparse
-
     axes = sorted({a for n in cells.path() for a in n.axes})
     groups: list[list[SNode]] = [[]]
     for n in cells.path()[1:]:
@@ -158,8 +156,7 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
             ax = dyn.axes[0]
             base = {a: ops.mul(v, dyn.sizes[0]) if a == ax else v for a, v in coords.items()}
             base.setdefault(ax, 0)
-            count = sparse._emit("length", dyn, [ops.cast_expr(ops.to_expr(base[a], dt.i32), dt.i32) for a in axes
-                                                 if a in base])
+            count = _node_op("length", dyn, base, axes)
 
             def inner(i):
                 level(k + 1, {**base, ax: ops.add(base[ax], i)})
@@ -193,15 +190,27 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
             if not last.is_sparse:
                 level(k + 1, new)
                 return
-            active = sparse._emit("is_active", last, [ops.cast_expr(ops.to_expr(new[a], dt.i32), dt.i32)
-                                                     for a in axes if a in new])
-            guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
-            with comp.dynamic(guard.blocks[0]):
+            with _if_active(comp, last, new, axes):
                 level(k + 1, new)
 
         _emit_loop(comp, 0, total, body)
 
     level(0, {})
+
+
+def _node_op(op: str, node: SNode, coords: dict, axes: list) -> Expr:
+    """ti.<op>(node, ...) at the struct-for's coordinates so far (those of node's axes), as i32."""
+    from simgrad.lang import sparse
+
+    return sparse._emit(op, node, [ops.cast_expr(ops.to_expr(coords[a], dt.i32), dt.i32) for a in axes
+                                   if a in coords])
+
+
+def _if_active(comp, node: SNode, coords: dict, axes: list):
+    """Emit `if ti.is_active(node, coords):` and return the context in which its body is emitted."""
+    active = _node_op("is_active", node, coords, axes)
+    guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
+    return comp.dynamic(guard.blocks[0])
 
 
 def _is_top(comp) -> bool:
@@ -231,11 +240,7 @@ def _listed_loop(comp, node: SNode, total: int, cell_coords, axes, inner) -> Non
     ref = sparse.snode_ref(node)
 
     def scan(flat):
-        new = cell_coords(flat)
-        here = [ops.cast_expr(ops.to_expr(new[a], dt.i32), dt.i32) for a in axes if a in new]
-        active = sparse._emit("is_active", node, here)
-        guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
-        with comp.dynamic(guard.blocks[0]):
+        with _if_active(comp, node, cell_coords(flat), axes):
             bb = comp.builder
             n = bb.emit(Op.LOCAL_LOAD, dt.i32, (count,))
             bb.emit(Op.SNODE_OP, dt.i32, (n, flat.stmt), {"op": "list_set", "snode": ref, "list": list_id})

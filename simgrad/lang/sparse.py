@@ -41,15 +41,17 @@ def _name(node: SNode) -> str:
     return f"{node.kind}({', '.join(fields[:3])}{', ...' if len(fields) > 3 else ''})"
 
 
-def _indices(node: SNode, indices, what: str, dims: int) -> list[Expr]:
+def _as_list(indices) -> list:
+    """Indices as given: a vector, a list/tuple, or one scalar."""
     from simgrad.lang.matrix import Matrix
 
     if isinstance(indices, Matrix):
-        indices = list(indices.entries)
-    elif isinstance(indices, (list, tuple)):
-        indices = list(indices)
-    else:
-        indices = [indices]
+        return list(indices.entries)
+    return list(indices) if isinstance(indices, (list, tuple)) else [indices]
+
+
+def _indices(node: SNode, indices, what: str, dims: int) -> list[Expr]:
+    indices = _as_list(indices)
     if len(indices) != dims:
         raise SimgradSyntaxError(f"ti.{what}: this {node.kind} node takes {dims} index(es), got {len(indices)}",
                                  context.current_loc())
@@ -84,8 +86,8 @@ def activate(node, indices) -> None:
 
 
 def deactivate(node, indices) -> None:
-    """Deactivate a cell: a pointer's block goes back to its pool zeroed, a bitmasked cell is zeroed, a
-    dynamic list becomes empty."""
+    """Deactivate a cell: a pointer's block goes back to its pool zeroed, a bitmasked cell's bit is cleared
+    (its data stays, as in Taichi), a dynamic list becomes empty."""
     _in_kernel("deactivate")
     n = _node(node, "deactivate")
     _emit("deactivate", n, _cell_indices(n, indices, "deactivate"))
@@ -99,17 +101,14 @@ def is_active(node, indices):
 
 def _cell_indices(n: SNode, indices, what: str) -> list[Expr]:
     """The indices of a cell of `n`; a dynamic node's list may be named by its parent's indices alone."""
-    if n.kind == "dynamic" and _count(indices) == len(n.shape) - 1:
+    if n.kind == "dynamic" and len(_as_list(indices)) == len(n.shape) - 1:
         return _list_indices(n, indices, what)
     return _indices(n, indices, what, len(n.shape))
 
 
-def _count(indices) -> int:
-    from simgrad.lang.matrix import Matrix
-
-    if isinstance(indices, Matrix):
-        return len(indices.entries)
-    return len(indices) if isinstance(indices, (list, tuple)) else 1
+def _list_axis(n: SNode) -> int:
+    """Where a dynamic node's own axis sits among its indices."""
+    return sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
 
 
 def _list_indices(n: SNode, indices, what: str) -> list[Expr]:
@@ -118,7 +117,7 @@ def _list_indices(n: SNode, indices, what: str) -> list[Expr]:
         raise SimgradSyntaxError(f"ti.{what} works on dynamic SNodes, not on a {n.kind} node",
                                  context.current_loc())
     idx = _indices(n, indices, what, len(n.shape) - 1)
-    ax = sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
+    ax = _list_axis(n)
     return idx[:ax] + [ops.to_expr(0, dt.i32)] + idx[ax:]
 
 
@@ -141,7 +140,7 @@ def append(node, indices, value):
     if len(values) != len(fields):
         raise SimgradSyntaxError(f"ti.append: this dynamic node holds {len(fields)} value(s) per element (the "
                                  f"fields placed under it), got {len(values)}", context.current_loc())
-    ax = sorted({a for m in n.path() for a in m.axes}).index(n.axes[0])
+    ax = _list_axis(n)
     full = idx[:ax] + [k] + idx[ax + 1:]
     b = context.builder()
     guard = b.emit(Op.IF, None, (ops.lt(k, n.sizes[0]).stmt,), nblocks=2)

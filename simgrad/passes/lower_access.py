@@ -83,11 +83,11 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
     return changed
 
 
-def _walk_levels(b: Builder, s: Stmt, tree_id: int, levels: tuple, idx: list, modes: list) -> Stmt:
-    """The u64 address of a cell of the last of `levels`, from the tree's root down: a dense level adds
-    its cell's offset, a sparse one looks the cell up (SPARSE_CELL, in that level's mode)."""
+def _walk_levels(b: Builder, tree_id: int, levels: tuple, idx: list, mode: str) -> Stmt:
+    """The u64 address of a cell of the last of `levels` (the tree's root when there are none), from the
+    root down: a dense level adds its cell's offset, a sparse one looks the cell up (SPARSE_CELL, `mode`)."""
     addr = b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": tree_id})
-    for level, mode in zip(levels, modes):
+    for level in levels:
         container = _add(b, addr, b.const(level.offset, dt.u64))
         cell = _cell_number(b, level, idx)
         if level.kind == "dense":
@@ -130,8 +130,7 @@ def _lower_sparse(s: Stmt, target: FieldRef, mode: str, debug: bool) -> list[Stm
     b = Builder(scratch)
     b.loc = s.loc
     idx = _indices(b, s, target.name, target.shape, debug)
-    levels = target.levels
-    addr = _walk_levels(b, s, target.layout[0], levels, idx, [mode] * len(levels))
+    addr = _walk_levels(b, target.layout[0], target.levels, idx, mode)
     addr = _add(b, addr, b.const(target.value_offset, dt.u64))
     s.operands = (*s.operands, addr)
     s.attrs["lowered"] = True
@@ -153,8 +152,7 @@ def _lower_snode_op(s: Stmt) -> list[Stmt]:
     idx = _indices(b, s, node.name, (), False)
     *above, last = node.levels
     mode = "write" if op in ("activate", "append_slot") else "read"
-    addr = _walk_levels(b, s, node.tree_id, tuple(above), idx, [mode] * len(above)) if above else \
-        b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": node.tree_id})
+    addr = _walk_levels(b, node.tree_id, tuple(above), idx, mode)
     container = _add(b, addr, b.const(last.offset, dt.u64))
     cell = _cell_number(b, last, idx)
     s.op, s.operands, s.attrs = Op.SPARSE_ACTION, (container, cell), {"level": last, "op": op}

@@ -114,11 +114,16 @@ class SparseMemory:
     def _clear_batches(self, pid: int) -> None:
         ctypes.memset(int(self.table[pid, POOL_BATCHES]), 0, MAX_THREADS * 64)
 
+    def _handed_out(self, pid: int) -> int:
+        """Blocks bumped off the pool and handed to a slot (installed, or freed, or lost to a race)."""
+        row = self.table[pid]
+        return min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) - self._unused_batches(pid)
+
     def usage_of(self, pid: int) -> dict[str, int]:
         """A pool's blocks in use, blocks ever installed in a slot (bumped, less those still in a thread's
         batch and those that lost a race to install and went to the free list), and the bytes those hold."""
         row = self.table[pid]
-        bumped = min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) - self._unused_batches(pid)
+        bumped = self._handed_out(pid)
         self.touched[pid] = max(self.touched.get(pid, 0), bumped - int(row[POOL_LOST]))
         return {"live_blocks": bumped - int(row[POOL_FREECOUNT]), "touched_blocks": self.touched[pid],
                 "block_bytes": int(row[POOL_BLOCK]), "touched_bytes": self.touched[pid] * int(row[POOL_BLOCK])}
@@ -127,7 +132,7 @@ class SparseMemory:
         """After a deactivate_all: when no block of the pool is in use, forget the free list and bump from
         the first block again (every freed block was zeroed), so activations take the lock-free path."""
         row = self.table[pid]
-        used = min(int(row[POOL_NEXT]), int(row[POOL_CAPACITY])) - self._unused_batches(pid)
+        used = self._handed_out(pid)
         if row[POOL_CAPACITY] and used == row[POOL_FREECOUNT]:
             self.touched[pid] = max(self.touched.get(pid, 0), used - int(row[POOL_LOST]))
             row[POOL_NEXT] = row[POOL_FREE] = row[POOL_FREECOUNT] = row[POOL_LOST] = 0
