@@ -54,14 +54,18 @@ def build(n: int = 512, block: int = 8, dt: float = 0.004, dense: bool = False):
         return (rho[i0, j0] * (1 - fi) * (1 - fj) + rho[i0 + 1, j0] * fi * (1 - fj)
                 + rho[i0, j0 + 1] * (1 - fi) * fj + rho[i0 + 1, j0 + 1] * fi * fj)
 
+    @ti.func
+    def block_density(bi, bj):
+        s = 0.0
+        for di, dj in ti.ndrange(block, block):
+            s += rho[bi * block + di, bj * block + dj]
+        return s
+
     @ti.kernel
     def grow():
-        """Activate the neighbours of every block that holds density (rho's writes do it)."""
+        """Activate the neighbours of every block that holds density."""
         for bi, bj in blocks:
-            s = 0.0
-            for di, dj in ti.ndrange(block, block):
-                s += rho[bi * block + di, bj * block + dj]
-            if s > eps:
+            if block_density(bi, bj) > eps:
                 for oi, oj in ti.static(ti.ndrange((-1, 2), (-1, 2))):
                     ni, nj = bi + oi, bj + oj
                     if 0 <= ni < nb and 0 <= nj < nb:
@@ -82,10 +86,7 @@ def build(n: int = 512, block: int = 8, dt: float = 0.004, dense: bool = False):
     def shrink():
         """Deactivate the blocks left without density."""
         for bi, bj in blocks:
-            s = 0.0
-            for di, dj in ti.ndrange(block, block):
-                s += rho[bi * block + di, bj * block + dj]
-            if s <= eps:
+            if block_density(bi, bj) <= eps:
                 ti.deactivate(blocks, [bi, bj])
 
     def step():
