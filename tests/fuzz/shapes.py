@@ -610,3 +610,144 @@ def run_forward(seed: int, size: int, path, mutant: str | None = None) -> None:
         nd, ndf = _nd_inputs(seed)
         raise AssertionError(f"seed={seed} size={size} layout={layout_of(seed)}\ninputs ai={ai.tolist()} "
                              f"af={af.tolist()} nd={nd.tolist()} ndf={ndf.tolist()}\n{text}\n{e}") from None
+
+
+# -- gradient programs ------------------------------------------------------------------------------
+GRAD_HEAD = """import simgrad as ti
+
+
+@ti.dataclass
+class Q:
+    w: ti.f64
+    z: ti.f64
+
+
+def make(x, y, loss, n):
+"""
+
+
+class _GradShapes:
+    """f64 statements of real shapes whose control flow depends on integers only (loop variables, i), so
+    the program is smooth in x and finite differences can judge its gradient."""
+
+    def __init__(self, r: random.Random):
+        self.r = r
+        self.counter = 0
+        self.funcs: list[str] = []
+        self.loop_vars: list[str] = []
+
+    def sm(self, d: int = 1, extra: tuple[str, ...] = ()) -> str:
+        return gen._smooth(self.r, d, ["p", "q", "acc", "st.w", "vec[1]", *extra])
+
+    def ivar(self) -> str:
+        return self.r.choice(["i", *self.loop_vars])
+
+    def func(self, name: str, real: bool) -> list[str]:
+        r = self.r
+        head = (["    @ti.real_func", f"    def {name}(u: ti.f64, c: ti.i32) -> ti.f64:"] if real else
+                ["    @ti.func", f"    def {name}(u, c) -> ti.f64:"])
+        body = ["        s = u"]
+        loop = [f"            s = s * 0.5 + {gen._smooth(r, 1, ['s', 'u'])}",
+                f"            if (k + c) % {r.randint(2, 4)} == {r.randint(0, 1)}:",
+                f"                return s * {r.uniform(-1, 1):.2f} + {gen._smooth(r, 1, ['u', 's'])}"]
+        if r.random() < 0.5:
+            loop += [f"            if k + c > {r.randint(2, 5)}:", "                break"]
+        loop.append(f"            s += {gen._smooth(r, 1, ['s', 'u'])} * 0.25")
+        r.shuffle(loop[1:])  # the guards land anywhere after the first update
+        loop = _regroup(loop)
+        body += [f"        for k in range({r.randint(1, 4)}):", *loop, f"        return s + {r.uniform(-1, 1):.2f}", ""]
+        return head + body
+
+    def stmts(self, n: int, ind: str, depth: int = 0) -> list[str]:
+        out: list[str] = []
+        for _ in range(n):
+            out += self.stmt(ind, depth)
+        return out
+
+    def stmt(self, ind: str, depth: int) -> list[str]:
+        r = self.r
+        k = r.randrange(13)
+        if k == 0 or (k <= 2 and depth >= 2):
+            return [f"{ind}acc = acc * 0.5 + {self.sm(2)}"]
+        if k in (1, 2):  # nested loops with integer break/continue
+            self.counter += 1
+            kv = f"k{self.counter}"
+            self.loop_vars.append(kv)
+            body = self.stmts(r.randint(1, 2), ind + "    ", depth + 1)
+            guard = f"if ({kv} + {self.ivar()}) % {r.randint(2, 3)} == {r.randint(0, 1)}:"
+            word = r.choice(["break", "continue"])
+            _at_boundary(r, body, ind + "    ", [guard, f"    {word}"])
+            body.append(f"{ind}    acc = acc * 0.5 + {self.sm(1)} * ti.cast({kv}, ti.f64)")
+            self.loop_vars.pop()
+            if r.random() < 0.5:
+                return [f"{ind}for {kv} in range({r.randint(1, 3)}):", *body]
+            return [f"{ind}{kv} = 0", f"{ind}while {kv} < {r.randint(1, 3)}:", f"{ind}    {kv} += 1", *body]
+        if k == 3:
+            return [f"{ind}vec[({self.ivar()} + {r.randint(0, 2)}) % 3] = {self.sm(1)}",
+                    f"{ind}acc += vec[({self.ivar()} + {r.randint(0, 2)}) % 3] * {r.uniform(-1, 1):.2f}"]
+        if k == 4:
+            return [f"{ind}mat[{self.ivar()} % 2, ({self.ivar()} + 1) % 2] += {self.sm(1)}",
+                    f"{ind}acc += (mat @ ti.Vector([p, q])).dot(ti.Vector([q, 0.5])) * 0.25"]
+        if k == 5:
+            return [f"{ind}st.w = {self.sm(1, ('st.z',))}", f"{ind}acc += st.z * st.w * 0.5"]
+        if k == 6 and self.funcs:
+            return [f"{ind}acc += {r.choice(self.funcs)}({self.sm(1)}, {self.ivar()} + {r.randint(0, 3)})"]
+        if k == 7:
+            return [f"{ind}y[n + ({self.ivar()} + {r.randint(0, 2)}) % n] += {self.sm(1)}"]
+        if k == 8:
+            return [f"{ind}ti.atomic_add(y[n + ({self.ivar()} + {r.randint(0, 2)}) % n], {self.sm(1)})"]
+        if k == 9:
+            return [f"{ind}ti.atomic_add(acc, {self.sm(1)})"]
+        if k == 10:
+            j = f"({self.ivar()} + {r.randint(0, 2)}) % n"
+            return [f"{ind}acc += ti.select(x[{j}] > {r.uniform(-1, 1):.2f}, x[{j}] * p, {self.sm(1)})"]
+        if k == 11:
+            j = f"({self.ivar()} + {r.randint(0, 2)}) % n"
+            return [f"{ind}acc += x[{j}] * q if x[{j}] < p else {self.sm(1)} * 0.5"]
+        return [f"{ind}acc += {self.sm(2)}"]
+
+
+def _regroup(lines: list[str]) -> list[str]:
+    """Keep each `if ...:` followed by its body line after a shuffle of (header, body) pairs."""
+    heads = [k for k, s in enumerate(lines) if s.rstrip().endswith(":")]
+    pairs, k = [], 0
+    while k < len(lines):
+        if k in heads:
+            pairs.append(lines[k:k + 2])
+            k += 2
+        elif lines[k].startswith(" " * 16):  # a body separated from its header by the shuffle
+            k += 1
+        else:
+            pairs.append([lines[k]])
+            k += 1
+    return [s for p in pairs for s in p]
+
+
+def gradient_case(seed: int, size: int) -> str:
+    """Two f64 kernels on a Tape (the make(x, y, loss, n) of gen.run_gradient; y has 2n cells)."""
+    r = random.Random(seed ^ 0x6AD)
+    g = _GradShapes(r)
+    lines: list[str] = []
+    for j in range(r.randint(1, 2)):
+        real = r.random() < 0.3
+        name = f"{'rh' if real else 'h'}{j}"
+        lines += g.func(name, real)
+        g.funcs.append(name)
+    ind = " " * 12
+    lines += ["    @ti.kernel", "    def first():", "        for i in range(n):", f"{ind}p = x[i]",
+              f"{ind}q = x[(i + 1) % n]", f"{ind}acc = 0.0", f"{ind}vec = ti.Vector([p, q, p * q])",
+              f"{ind}mat = ti.Matrix([[p, q], [q * 0.5, 1.0]])", f"{ind}st = Q(w=p, z=q)"]
+    lines += g.stmts(size, ind)
+    lines += [f"{ind}y[i] = acc + vec[2] * {r.uniform(-1, 1):.2f} + st.w * {r.uniform(-1, 1):.2f} + mat[1, 0]", "",
+              "    @ti.kernel", "    def second():", "        for i in range(n):",
+              f"            loss[None] += {gen._smooth(r, 2, ['y[i]', 'x[i]'])} + {gen._smooth(r, 1, ['y[n + i]'])}",
+              "", "    return first, second"]
+    return GRAD_HEAD + "\n".join(lines) + "\n"
+
+
+def run_gradient(seed: int, size: int, path) -> None:
+    gen.run_gradient(seed, size, path, case=gradient_case)
+
+
+def run_forward_mode(seed: int, size: int, path) -> None:
+    gen.run_forward_mode(seed, size, path, case=gradient_case)
