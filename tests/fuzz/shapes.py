@@ -330,14 +330,16 @@ GATHER = """
 """
 
 
-def forward_case(seed: int, size: int) -> tuple[str, str]:
-    """(module text for simgrad, the same for the reference with its `# REF:` lines) of one program."""
+def forward_case(seed: int, size: int, all_real: bool = False) -> tuple[str, str]:
+    """(module text for simgrad, the same for the reference with its `# REF:` lines) of one program.
+    `all_real`: every function a ti.real_func (Taichi 1.7 refuses a ti.func that returns inside a loop or
+    branch; taichi_check.py)."""
     r = random.Random(seed ^ 0x5EED)
     g = _Shapes(r, size)
     funcs: list[str] = []
     for j in range(r.randint(1, 3)):
         ret = r.choice(["i32", "f64"])
-        real = ret == "f64" and r.random() < 0.5
+        real = (ret == "f64" and r.random() < 0.5) or all_real
         name = f"{'rf' if real else 'f'}{j}"
         funcs += g.func(name, ret, real)
         (g.int_funcs if ret == "i32" else g.f64_funcs).append(name)
@@ -498,6 +500,9 @@ MUTANTS = {
     "break_to_continue": lambda s: re.sub(r"^(\s+)break$", r"\1continue", s, flags=re.M),
     "loop_bound_off_by_one": lambda s: re.sub(r"for (k\d+) in range\((\d+)\):", r"for \1 in range(\2 + 1):", s),
     "atomic_max_as_min": lambda s: s.replace("ti.op_('max'", "ti.op_('min'"),
+    "atomic_add_as_sub": lambda s: s.replace("ti.op_('add'", "ti.op_('sub'"),
+    "select_negated": lambda s: s.replace("ti.select(", "ti.select(not "),
+    "struct_for_visits_inactive": lambda s: s.replace("for i in sp:", f"for i in range({NSP}):"),
     "early_return_ignored": lambda s: re.sub(r"^( {12,})return .*$", r"\1pass", s, flags=re.M),
     "atomic_returns_new": lambda s: re.sub(r"(\w+), (\w+) = \2, (ti\.op_\([^\n]*)$", r"\1 = \2 = \3", s, flags=re.M),
 }
@@ -556,8 +561,10 @@ def _nd_inputs(seed: int):
     return rng.integers(-40, 40, size=T).astype(np.int32), rng.uniform(-2, 2, size=T)
 
 
-def simgrad_outputs(text: str, seed: int, path, name: str) -> dict:
-    import simgrad as ti
+def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
+    """The outputs of the program compiled by simgrad (or by `ti`, real Taichi in taichi_check.py)."""
+    if ti is None:
+        import simgrad as ti
 
     ai, af = gen.inputs(seed)
     nd_np, ndf_np = _nd_inputs(seed)
