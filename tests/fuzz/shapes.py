@@ -26,9 +26,8 @@ from __future__ import annotations
 import random
 import re
 
-import numpy as np
-
 import gen
+import numpy as np
 
 T = gen.T  # iterations of the outer (parallel) loop
 NSP = 16  # cells of the sparse field
@@ -185,7 +184,8 @@ class _Shapes(gen._Gen):
         if k == 18:
             return [f"{ind}sp[{self.idx(NSP)}] += {self.int_expr(d)}"]  # activates (a cell or a block)
         if k == 19:
-            return [f"{ind}if ti.length(dy.parent(), t) < {DYN}:", f"{ind}    ti.append(dy.parent(), t, {self.int_expr(d)})"]
+            return [f"{ind}if ti.length(dy.parent(), t) < {DYN}:",
+                    f"{ind}    ti.append(dy.parent(), t, {self.int_expr(d)})"]
         if k == 20:
             return [f"{ind}ndo[{r.choice(['t % 2', self.idx(2)])}] += {self.int_expr(d)}"]
         return [f"{ind}ndo[2 + t] = {self.int_expr(d)}"]
@@ -246,7 +246,8 @@ class _Shapes(gen._Gen):
             place, e = self._f64_var(), self.f64_expr(1)
             other = "s" if self.ctx == "func" else f"x{r.randrange(gen.N_F64)}"
         if other != place and r.random() < 0.5:
-            return f"{ind}{other} = ti.atomic_{op}({place}, {e})  # REF: {other}, {place} = {place}, ti.op_('{op}', {place}, {e})"
+            return (f"{ind}{other} = ti.atomic_{op}({place}, {e})"
+                    f"  # REF: {other}, {place} = {place}, ti.op_('{op}', {place}, {e})")
         return f"{ind}ti.atomic_{op}({place}, {e})  # REF: {place} = ti.op_('{op}', {place}, {e})"
 
     def _global_atomic(self, ind: str) -> str:

@@ -1,7 +1,7 @@
 """Checks the oracle, not simgrad: runs shapes.py's forward programs under real Taichi and compares them with
 the Python/numpy reference (the same comparison as the campaign), with every function a ti.real_func
-(Taichi 1.7.4 refuses `return` inside a non-static if/for of a ti.func; simgrad accepts both). Needs Taichi, so it is no part of the
-suite; run it with the interpreter that has Taichi:
+(Taichi 1.7.4 refuses `return` inside a non-static if/for of a ti.func; simgrad accepts both). Needs
+Taichi, so it is no part of the suite; run it with the interpreter that has Taichi:
 
     /work/tivenv/bin/python tests/fuzz/taichi_check.py [first_seed] [count]
 
