@@ -38,6 +38,7 @@ ATOMIC_F64 = ("add", "max", "min")  # totf[k]
 TOT_INIT = np.array([0, 0, 2**30, -(2**30), -1, 0, 0, 0, 0, 0, 0, 0], np.int32)
 TOTF_INIT = np.array([0.0, -1e300, 1e300])
 N_OI, N_OF = 8, 10
+CAP = 64  # slots of the compaction buffer
 
 
 class _Shapes(gen._Gen):
@@ -55,6 +56,7 @@ class _Shapes(gen._Gen):
         self.int_funcs: list[str] = []  # ti.func (u: i32, v: f64) -> i32
         self.f64_funcs: list[str] = []  # ti.func / ti.real_func (u: i32, v: f64) -> f64
         self.ret_type = "i32"
+        self.no_jump = False  # inside a ti.static loop
 
     # -- leaves ------------------------------------------------------------------------------------
     def idx(self, n: int) -> str:
@@ -133,7 +135,7 @@ class _Shapes(gen._Gen):
         r = self.r
         d = r.randint(1, 2)
         deep = self.depth >= 3
-        k = r.randrange(22)
+        k = r.randrange(25)
         if k <= 1:
             return [f"{ind}{self._int_var()} {r.choice(['=', '+=', '^='])} {self.int_expr(d)}"]
         if k <= 3:
@@ -154,13 +156,36 @@ class _Shapes(gen._Gen):
             body = self._block(ind, f"while {w} < {r.randint(1, 4)}:", r.randint(1, 3), loop=True, var=w,
                                first=f"{w} += 1")
             return head + body
-        if k in (8, 9) and self.loops:
+        if k in (8, 9) and self.loops and not self.no_jump:
             word = r.choice(["break", "continue"])
             return [f"{ind}if {self.cond(1)}:", f"{ind}    {word}"]
+        if k == 10 and self.no_jump:
+            k = 0
         if k == 10 and self.ctx == "kernel" and self.loops == 0 and r.random() < 0.3:
             return [f"{ind}if {self.cond(1)}:", f"{ind}    continue"]  # continue the parallel loop
         if k == 10 and self.ctx == "func" and (self.loops or self.depth):
             return [f"{ind}if {self.cond(1)}:", f"{ind}    return {self._ret()}"]
+        if k == 22 and not deep:  # unrolled: no break/continue/return inside (Taichi refuses them)
+            self.counter += 1
+            kv = f"k{self.counter}"
+            saved, self.no_jump = self.no_jump, True
+            body = self._block(ind, f"for {kv} in ti.static(range({r.randint(1, 3)})):", r.randint(1, 2),
+                               loop=False, var=kv, last=self._accum)
+            self.no_jump = saved
+            return body
+        if k == 23 and not deep:
+            self.counter += 1
+            kv, jv = f"k{self.counter}", f"j{self.counter}"
+            self.loop_vars.append(jv)
+            body = self._block(ind, f"for {kv}, {jv} in ti.ndrange({r.randint(1, 3)}, (1, {r.randint(1, 3)})):",
+                               r.randint(1, 2), loop=True, var=kv)
+            self.loop_vars.pop()
+            return body
+        if k == 24 and self.ctx == "kernel":  # a slot from a shared counter (stream compaction)
+            self.counter += 1
+            sv = f"c{self.counter}"
+            return [f"{ind}{sv} = ti.atomic_add(tot[11], 1)  # REF: {sv}, tot[11] = tot[11], tot[11] + 1",
+                    f"{ind}if {sv} < {CAP}:", f"{ind}    buf[{sv}] = {self.int_expr(1)}"]
         if k == 11:
             return [self._local_atomic(ind)]
         if k == 12 and self.ctx == "kernel":
@@ -191,9 +216,12 @@ class _Shapes(gen._Gen):
         return [f"{ind}ndo[2 + t] = {self.int_expr(d)}"]
 
     def _block(self, ind: str, head: str, n: int, loop: bool, var: str | None = None,
-               first: str | None = None) -> list[str]:
+               first: str | None = None, last=None) -> list[str]:
         self.depth += 1
         self.loops += loop
+        saved = self.no_jump
+        if loop:
+            self.no_jump = False
         if var is not None and var.startswith("k"):
             self.loop_vars.append(var)
         body = self.stmts(n, ind + "    ")
@@ -202,7 +230,10 @@ class _Shapes(gen._Gen):
                 word = self.r.choice(["break", "continue"])
                 _at_boundary(self.r, body, ind + "    ", [f"if {self._guard(var)}:", f"    {word}"])
             body.append(f"{ind}    {self._accum(var)}")
+        if last is not None:
+            body.append(f"{ind}    {last(var)}")
         body = ([f"{ind}    {first}"] if first else []) + body
+        self.no_jump = saved
         if var is not None and var.startswith("k"):
             self.loop_vars.pop()
         self.loops -= loop
@@ -360,7 +391,7 @@ def forward_case(seed: int, size: int, all_real: bool = False) -> tuple[str, str
     body += [f"{ind}of[t, 3] = vf[0]", f"{ind}of[t, 4] = vf[1]", f"{ind}of[t, 5] = m[0, 0]",
              f"{ind}of[t, 6] = m[0, 1]", f"{ind}of[t, 7] = m[1, 0]", f"{ind}of[t, 8] = m[1, 1]",
              f"{ind}of[t, 9] = p.x", f"{ind}ps[t].a = p.a", f"{ind}ps[t].x = p.x"]
-    text = (f"T = {T}\n\n\n" + DATACLASS + "\ndef make(ai, af, oi, of, tot, totf, sp, dy, og, ps):\n"
+    text = (f"T = {T}\n\n\n" + DATACLASS + "\ndef make(ai, af, oi, of, tot, totf, sp, dy, og, ps, buf):\n"
             + "\n".join(funcs) + "\n    @ti.kernel\n" + f"    def main({NDARRAYS}):\n        for t in range(T):\n"
             + "\n".join(body) + "\n" + GATHER)
     return text, reference_source(text)
@@ -445,6 +476,16 @@ class Ref(gen.RefNamespace):
         return fn
 
     @staticmethod
+    def static(v):
+        return v
+
+    @staticmethod
+    def ndrange(*dims):
+        import itertools
+
+        return itertools.product(*(range(*d) if isinstance(d, tuple) else range(d) for d in dims))
+
+    @staticmethod
     def Vector(xs, dt):
         return np.array([dt(x) for x in xs], dtype=dt)
 
@@ -502,6 +543,8 @@ MUTANTS = {
     "loop_bound_off_by_one": lambda s: re.sub(r"for (k\d+) in range\((\d+)\):", r"for \1 in range(\2 + 1):", s),
     "atomic_max_as_min": lambda s: s.replace("ti.op_('max'", "ti.op_('min'"),
     "atomic_add_as_sub": lambda s: s.replace("ti.op_('add'", "ti.op_('sub'"),
+    "static_loop_off_by_one": lambda s: re.sub(r"ti\.static\(range\((\d+)\)\)", r"ti.static(range(\1 + 1))", s),
+    "ndrange_lower_bound_0": lambda s: re.sub(r"ti\.ndrange\((\d+), \(1, ", r"ti.ndrange(\1, (0, ", s),
     "select_negated": lambda s: s.replace("ti.select(", "ti.select(not "),
     "struct_for_visits_inactive": lambda s: s.replace("for i in sp:", f"for i in range({NSP}):"),
     "early_return_ignored": lambda s: re.sub(r"^( {12,})return .*$", r"\1pass", s, flags=re.M),
@@ -542,12 +585,13 @@ def reference_outputs(ref_text: str, seed: int, path, name: str) -> dict:
     ai, af = gen.inputs(seed)
     nd, ndf = _nd_inputs(seed)
     o = {"oi": np.zeros((T, N_OI), np.int32), "of": np.zeros((T, N_OF)), "tot": TOT_INIT.copy(),
-         "totf": TOTF_INIT.copy(), "og": np.zeros(NSP, np.int32), "ndo": np.zeros(2 + T, np.int32)}
+         "totf": TOTF_INIT.copy(), "og": np.zeros(NSP, np.int32), "ndo": np.zeros(2 + T, np.int32),
+         "buf": np.zeros(CAP, np.int32)}
     block = 4 if layout_of(seed) == "pointer_dense" else 1
     sp, dy = _SparseRef(block), _DynRef()
     mod = _exec(path, name, ref_text, Ref)
     ps = mod.P.field(shape=T)
-    main, gather = mod.make(ai, af, o["oi"], o["of"], o["tot"], o["totf"], sp, dy, o["og"], ps)
+    main, gather = mod.make(ai, af, o["oi"], o["of"], o["tot"], o["totf"], sp, dy, o["og"], ps, o["buf"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # wrap-around and inf are part of the semantics
         main(nd.copy(), ndf.copy(), o["ndo"])
@@ -572,7 +616,7 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
     ti.init(arch=ti.cpu, default_fp=ti.f64, default_ip=ti.i32)
     f = {"ai": ti.field(ti.i32, T), "af": ti.field(ti.f64, T), "oi": ti.field(ti.i32, (T, N_OI)),
          "of": ti.field(ti.f64, (T, N_OF)), "tot": ti.field(ti.i32, len(TOT_INIT)),
-         "totf": ti.field(ti.f64, len(TOTF_INIT)), "og": ti.field(ti.i32, NSP)}
+         "totf": ti.field(ti.f64, len(TOTF_INIT)), "og": ti.field(ti.i32, NSP), "buf": ti.field(ti.i32, CAP)}
     f["ai"].from_numpy(ai)
     f["af"].from_numpy(af)
     f["tot"].from_numpy(TOT_INIT)
@@ -586,10 +630,11 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
     ndo.from_numpy(np.zeros(2 + T, np.int32))
     mod = _exec(path, name, text, ti)
     ps = mod.P.field(shape=T)
-    main, gather = mod.make(f["ai"], f["af"], f["oi"], f["of"], f["tot"], f["totf"], sp, dy, f["og"], ps)
+    main, gather = mod.make(f["ai"], f["af"], f["oi"], f["of"], f["tot"], f["totf"], sp, dy, f["og"], ps,
+                            f["buf"])
     main(nd, ndf, ndo)
     gather()
-    out = {k: f[k].to_numpy() for k in ("oi", "of", "tot", "totf", "og")}
+    out = {k: f[k].to_numpy() for k in ("oi", "of", "tot", "totf", "og", "buf")}
     out["ndo"] = ndo.to_numpy()
     out["ps_a"] = ps.a.to_numpy()
     out["ps_x"] = ps.x.to_numpy()
@@ -599,6 +644,8 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
 def compare(got: dict, want: dict) -> None:
     for k in ("oi", "tot", "og", "ndo", "ps_a"):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    if want["tot"][11] <= CAP:  # slots are handed out in any order: the same values, in some order
+        np.testing.assert_array_equal(np.sort(got["buf"]), np.sort(want["buf"]), err_msg="buf (sorted)")
     for k in ("of", "totf", "ps_x"):
         np.testing.assert_allclose(got[k], want[k], rtol=1e-6, atol=1e-9, equal_nan=True, err_msg=k)
 
@@ -674,7 +721,18 @@ class _GradShapes:
 
     def stmt(self, ind: str, depth: int) -> list[str]:
         r = self.r
-        k = r.randrange(13)
+        k = r.randrange(15)
+        if k == 13:
+            self.counter += 1
+            kv = f"k{self.counter}"
+            return [f"{ind}for {kv} in ti.static(range({r.randint(1, 3)})):",
+                    f"{ind}    vec[{kv}] = vec[{kv}] * 0.5 + {self.sm(1)}", f"{ind}    acc += vec[{kv}] * 0.3"]
+        if k == 14:
+            self.counter += 1
+            kv, jv = f"k{self.counter}", f"j{self.counter}"
+            return [f"{ind}for {kv}, {jv} in ti.ndrange(2, ({r.randint(0, 1)}, 2)):",
+                    f"{ind}    if ({kv} + {jv} + i) % 3 == {r.randint(0, 2)}:", f"{ind}        continue",
+                    f"{ind}    acc = acc * 0.5 + mat[{kv}, {jv}] * {self.sm(1)}"]
         if k == 0 or (k <= 2 and depth >= 2):
             return [f"{ind}acc = acc * 0.5 + {self.sm(2)}"]
         if k in (1, 2):  # nested loops with integer break/continue
