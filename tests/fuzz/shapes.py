@@ -77,7 +77,8 @@ class _Shapes(gen._Gen):
         r = self.r
         if self.ctx == "func":
             return f"ai[{self.idx(T)}]"
-        return r.choice([f"ai[{self.idx(T)}]", f"nd[{self.idx(T)}]", f"v[{self.idx(3)}]", "p.a"])
+        return r.choice([f"ai[{self.idx(T)}]", f"nd[{self.idx(T)}]", f"v[{self.idx(3)}]", "p.a",
+                         f"gv[t][{self.idx(3)}]", f"ti.cast(h >> {r.randint(18, 28)}, ti.i32)"])
 
     def _f64_load(self) -> str:
         r = self.r
@@ -135,7 +136,22 @@ class _Shapes(gen._Gen):
         r = self.r
         d = r.randint(1, 2)
         deep = self.depth >= 3
-        k = r.randrange(25)
+        k = r.randrange(28)
+        if k in (25, 26, 27) and self.ctx == "func":
+            k = 0
+        if k == 25:  # a vector field: own row at a run-time component, atomic vector adds anywhere
+            return [f"{ind}" + r.choice([f"gv[t][{self.idx(3)}] = {self.int_expr(d)}",
+                                         f"ga[{self.idx(T)}] += ti.Vector([{self.int_expr(0)}, {self.int_expr(0)}, "
+                                         f"{self.int_expr(0)}], dt=ti.i32)",
+                                         f"ga[{self.idx(T)}][{self.idx(3)}] += {self.int_expr(1)}",
+                                         "gv[t] = gv[t] * 2 + v"])]
+        if k == 26:  # unsigned hashing
+            s1 = r.randint(1, 31)
+            return [f"{ind}" + r.choice([f"h = (h ^ (h >> {r.randint(1, 24)})) * ti.u32({r.randrange(1, 2**32)})",
+                                         f"h += ti.cast({self.int_expr(1)}, ti.u32)",
+                                         f"h = (h << {s1}) | (h >> {32 - s1})",
+                                         f"a{r.randrange(gen.N_INT)} = "
+                                         f"ti.cast(h % ti.u32({r.randint(1, 999)}), ti.i32)"])]
         if k <= 1:
             return [f"{ind}{self._int_var()} {r.choice(['=', '+=', '^='])} {self.int_expr(d)}"]
         if k <= 3:
@@ -379,7 +395,8 @@ def forward_case(seed: int, size: int, all_real: bool = False) -> tuple[str, str
     body = [f"{ind}a{k} = ai[(t + {k}) % {T}]" for k in range(gen.N_INT)]
     body += [f"{ind}x{k} = af[(t + {k}) % {T}]" for k in range(gen.N_F64)]
     body += [f"{ind}v = ti.Vector([a0, nd[t], t], dt=ti.i32)", f"{ind}vf = ti.Vector([x0, ndf[t]], dt=ti.f64)",
-             f"{ind}m = ti.Matrix([[x1, 0.5], [-0.25, x2]], dt=ti.f64)", f"{ind}p = P(a=a2, x=x0)"]
+             f"{ind}m = ti.Matrix([[x1, 0.5], [-0.25, x2]], dt=ti.f64)", f"{ind}p = P(a=a2, x=x0)",
+             f"{ind}h = ti.cast(a1, ti.u32)"]
     body += g.stmts(size, ind)
     for name in g.int_funcs:  # every function's result is seen
         body.append(f"{ind}tot[10] += {name}({g.int_expr(1)}, {g.f64_expr(1)})")
@@ -390,8 +407,8 @@ def forward_case(seed: int, size: int, all_real: bool = False) -> tuple[str, str
     body += [f"{ind}of[t, {k}] = x{k}" for k in range(gen.N_F64)]
     body += [f"{ind}of[t, 3] = vf[0]", f"{ind}of[t, 4] = vf[1]", f"{ind}of[t, 5] = m[0, 0]",
              f"{ind}of[t, 6] = m[0, 1]", f"{ind}of[t, 7] = m[1, 0]", f"{ind}of[t, 8] = m[1, 1]",
-             f"{ind}of[t, 9] = p.x", f"{ind}ps[t].a = p.a", f"{ind}ps[t].x = p.x"]
-    text = (f"T = {T}\n\n\n" + DATACLASS + "\ndef make(ai, af, oi, of, tot, totf, sp, dy, og, ps, buf):\n"
+             f"{ind}of[t, 9] = p.x", f"{ind}ps[t].a = p.a", f"{ind}ps[t].x = p.x", f"{ind}ou[t] = h"]
+    text = (f"T = {T}\n\n\n" + DATACLASS + "\ndef make(ai, af, oi, of, tot, totf, sp, dy, og, ps, buf, gv, ga, ou):\n"
             + "\n".join(funcs) + "\n    @ti.kernel\n" + f"    def main({NDARRAYS}):\n        for t in range(T):\n"
             + "\n".join(body) + "\n" + GATHER)
     return text, reference_source(text)
@@ -468,6 +485,14 @@ class Ref(gen.RefNamespace):
     """`ti` for the reference run (gen.RefNamespace's scalar semantics plus the program-level constructs)."""
 
     types = _Types
+    u32 = np.uint32
+
+    @staticmethod
+    def cast(v, t):
+        """gen's casts, and integer -> integer keeping the low bits (C's conversion, as LLVM's trunc/zext)."""
+        if isinstance(v, (int, np.integer)) and t in (np.int32, np.uint32):
+            return np.array(v).astype(t)[()]
+        return gen.RefNamespace.cast(v, t)
     func = staticmethod(_typed)
     real_func = staticmethod(_typed)
 
@@ -586,12 +611,14 @@ def reference_outputs(ref_text: str, seed: int, path, name: str) -> dict:
     nd, ndf = _nd_inputs(seed)
     o = {"oi": np.zeros((T, N_OI), np.int32), "of": np.zeros((T, N_OF)), "tot": TOT_INIT.copy(),
          "totf": TOTF_INIT.copy(), "og": np.zeros(NSP, np.int32), "ndo": np.zeros(2 + T, np.int32),
-         "buf": np.zeros(CAP, np.int32)}
+         "buf": np.zeros(CAP, np.int32), "gv": np.zeros((T, 3), np.int32), "ga": np.zeros((T, 3), np.int32),
+         "ou": np.zeros(T, np.uint32)}
     block = 4 if layout_of(seed) == "pointer_dense" else 1
     sp, dy = _SparseRef(block), _DynRef()
     mod = _exec(path, name, ref_text, Ref)
     ps = mod.P.field(shape=T)
-    main, gather = mod.make(ai, af, o["oi"], o["of"], o["tot"], o["totf"], sp, dy, o["og"], ps, o["buf"])
+    main, gather = mod.make(ai, af, o["oi"], o["of"], o["tot"], o["totf"], sp, dy, o["og"], ps, o["buf"],
+                            o["gv"], o["ga"], o["ou"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # wrap-around and inf are part of the semantics
         main(nd.copy(), ndf.copy(), o["ndo"])
@@ -616,7 +643,8 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
     ti.init(arch=ti.cpu, default_fp=ti.f64, default_ip=ti.i32)
     f = {"ai": ti.field(ti.i32, T), "af": ti.field(ti.f64, T), "oi": ti.field(ti.i32, (T, N_OI)),
          "of": ti.field(ti.f64, (T, N_OF)), "tot": ti.field(ti.i32, len(TOT_INIT)),
-         "totf": ti.field(ti.f64, len(TOTF_INIT)), "og": ti.field(ti.i32, NSP), "buf": ti.field(ti.i32, CAP)}
+         "totf": ti.field(ti.f64, len(TOTF_INIT)), "og": ti.field(ti.i32, NSP), "buf": ti.field(ti.i32, CAP),
+         "gv": ti.Vector.field(3, ti.i32, T), "ga": ti.Vector.field(3, ti.i32, T), "ou": ti.field(ti.u32, T)}
     f["ai"].from_numpy(ai)
     f["af"].from_numpy(af)
     f["tot"].from_numpy(TOT_INIT)
@@ -631,10 +659,10 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
     mod = _exec(path, name, text, ti)
     ps = mod.P.field(shape=T)
     main, gather = mod.make(f["ai"], f["af"], f["oi"], f["of"], f["tot"], f["totf"], sp, dy, f["og"], ps,
-                            f["buf"])
+                            f["buf"], f["gv"], f["ga"], f["ou"])
     main(nd, ndf, ndo)
     gather()
-    out = {k: f[k].to_numpy() for k in ("oi", "of", "tot", "totf", "og", "buf")}
+    out = {k: f[k].to_numpy() for k in ("oi", "of", "tot", "totf", "og", "buf", "gv", "ga", "ou")}
     out["ndo"] = ndo.to_numpy()
     out["ps_a"] = ps.a.to_numpy()
     out["ps_x"] = ps.x.to_numpy()
@@ -642,7 +670,7 @@ def simgrad_outputs(text: str, seed: int, path, name: str, ti=None) -> dict:
 
 
 def compare(got: dict, want: dict) -> None:
-    for k in ("oi", "tot", "og", "ndo", "ps_a"):
+    for k in ("oi", "tot", "og", "ndo", "ps_a", "gv", "ga", "ou"):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
     if want["tot"][11] <= CAP:  # slots are handed out in any order: the same values, in some order
         np.testing.assert_array_equal(np.sort(got["buf"]), np.sort(want["buf"]), err_msg="buf (sorted)")
