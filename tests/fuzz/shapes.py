@@ -3,22 +3,23 @@
 Forward programs (`forward_case`): one module text, executed twice with a different `ti` put in its
 globals: simgrad compiles it, and `Ref` (a small Python/numpy stand-in for `ti`) runs it as plain Python.
 The text has a @ti.dataclass with a ti.func method, ti.funcs and ti.real_funcs that `return` from inside
-loops and branches, a kernel taking ndarrays whose parallel loop nests while/for/if with break/continue at
-several depths, local vectors and matrices indexed at run time, struct values, atomics (ti.atomic_* and
-`+=`) on locals, fields and ndarrays, selects and ternaries whose operands are loads, writes that activate
-a sparse field (bitmasked, pointer over dense, pointer over bitmasked) and appends to a dynamic list; a
-second kernel reads them back with struct-fors. The few lines whose Python meaning differs from the
-kernel's (an atomic on a local returns the old value and updates the local) carry their reference form in
-a `# REF:` comment (`reference_source`). Both runs start from the same inputs; every output must agree
-(integers exactly, f64 to rtol 1e-6, float atomic sums are order-dependent: rtol 1e-9 of the sum of
-magnitudes is not tracked, so f64 add-atomics only go to one cell checked at rtol 1e-6).
+loops and branches, a kernel taking ndarrays whose parallel loop nests while/for/if, ti.static and
+ti.ndrange loops with break/continue at several depths, local vectors and matrices indexed at run time,
+struct values, vector fields, u32 hashing, atomics (ti.atomic_* and `+=`) on locals, fields and ndarrays,
+slots taken from a shared counter, selects and ternaries whose operands are loads, writes that activate a
+sparse field (bitmasked, pointer over dense, pointer over bitmasked) and appends to a dynamic list; a
+second kernel reads them back with struct-fors. Lines whose Python meaning differs from the kernel's (an
+atomic returns the old value and updates its place) carry their reference form in a `# REF:` comment
+(`reference_source`). Every output must agree: integers exactly, f64 to rtol 1e-6 (the f64 add-atomic
+sums in a different order), compaction slots as a multiset.
 
 Gradient programs (`gradient_case`): f64 kernels of the same shapes (early-returning ti.funcs, break and
-continue under integer conditions, run-time indexed local vectors/matrices, struct values, atomics into a
-global, selects of loads) checked by gen.run_gradient (central finite differences) and gen.run_forward_mode
-(FwdMode against reverse).
+continue under integer conditions, static/ndrange loops, run-time indexed local vectors/matrices, struct
+values, atomics into a global and a local, selects of loads) checked by gen.run_gradient (central finite
+differences) and gen.run_forward_mode (FwdMode against reverse).
 
-`MUTANTS` plant bugs in the reference (tests/fuzz/test_shapes.py shows the campaign catches each).
+`MUTANTS` plant bugs in the reference (tests/fuzz/test_shapes.py shows the campaign catches each);
+taichi_check.py runs the forward programs under real Taichi against the reference (the oracle's check).
 """
 
 from __future__ import annotations
