@@ -63,6 +63,7 @@ def specs(start: int, cases: int, generator: str = "flat") -> list[str]:
 def run_batch(batch: list[str]) -> list[dict]:
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env.setdefault("SIMGRAD_VERIFY", "1")  # the IR verifier after every pass, as in the tests (LLVM's always runs)
     with tempfile.TemporaryDirectory() as cache:
         env["SIMGRAD_CACHE_DIR"] = cache
         proc = subprocess.run([sys.executable, "-c", CHILD, FUZZ, *batch], capture_output=True, text=True,
