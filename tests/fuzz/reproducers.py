@@ -21,6 +21,7 @@ import tempfile
 # passes); the optimised module crashes the backend only with loop unrolling on (runtime/jit.py's
 # pipeline: speed 3 + unrolling crashes, speed 3 without unrolling or vectorisation emits fine; speed
 # 3 + vectorisation without unrolling is fine too). Any cpu (host znver5 or generic).
+# tests/fuzz/llvm_isel_memsdnode.ll is the backend's input reduced to 87 lines (no simgrad needed).
 # Expected: prints the ndarray `ndo` (6 integers) and exits 0.
 LLVM_ISEL_MEMSDNODE = '''
 import simgrad as ti
