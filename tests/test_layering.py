@@ -22,12 +22,11 @@ LOWER = ("ir", "passes", "autodiff", "codegen")
 UPPER = ("simgrad.lang", "simgrad.frontend")
 PUBLIC = "simgrad"  # the public namespace, simgrad/__init__.py
 
-# lang's operator-overloading core: a field's element is an Expr or a Matrix of them, operators on Exprs
-# give Matrices for vector operands and Matrices are built from scalar ops, types construct Matrix and
-# Struct values and fields of them (factories), fields are placed in SNodes, which the program's trees own;
-# each of these needs the others at run time. Why each module is here: docs/ARCHITECTURE.md "Layers".
+# lang's operator-overloading core, the only modules allowed to import each other round: operators on Exprs
+# give Matrices for vector operands and Matrices are built from scalar ops; fields, SNodes, structs, types
+# and ndarrays construct and return those values and each other. Why each one: docs/ARCHITECTURE.md "Layers".
 CORE = frozenset(f"simgrad.lang.{m}" for m in (
-    "expr", "ops", "matrix", "field", "snode", "factories", "types", "struct", "sparse", "ndarray", "program"))
+    "expr", "ops", "matrix", "field", "snode", "factories", "types", "struct", "sparse", "ndarray"))
 
 
 def _modules() -> dict[str, Path]:
@@ -193,8 +192,10 @@ def stage_drawing() -> str:
         ready = sorted(s for s in graph if s not in done and graph[s] <= set(done))
         assert ready, f"stage cycle among {sorted(set(graph) - set(done))}"
         done += ready
+    public = {stage_of(m) for m in MODULES if m != PUBLIC and any(_resolve(n) == PUBLIC for _, n in _imports(m))}
     width = max(len(s) for s in graph)
-    return "\n".join(f"{s:<{width}} -> {', '.join(sorted(graph[s])) or '(nothing)'}" for s in done)
+    return "\n".join(f"{s:<{width}} -> {', '.join(sorted(graph[s])) or '(nothing)'}"
+                     + (" + the public namespace" if s in public else "") for s in done)
 
 
 def test_no_import_cycles_outside_the_lang_core():
