@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from ad_util import fd_grad
 from conftest import normalise_ir
 
 import simgrad as ti
@@ -166,23 +167,10 @@ def _setup(case):
     return kernel, inputs, outputs, coeffs, forward, loss
 
 
-def _fd(loss, f, eps=1e-6) -> np.ndarray:
-    base = f.to_numpy()
-    g = np.zeros(base.size)
-    for k in range(base.size):
-        for sign in (1.0, -1.0):
-            p = base.copy().reshape(-1)
-            p[k] += sign * eps
-            f.from_numpy(p.reshape(base.shape))
-            g[k] += sign * loss() / (2 * eps)
-    f.from_numpy(base)
-    return g.reshape(base.shape)
-
-
 @pytest.mark.parametrize("name", sorted(REVERSE))
 def test_adjoint_golden_and_finite_differences(name, golden, monkeypatch, capsys):
     kernel, inputs, outputs, coeffs, forward, loss = _setup(REVERSE[name])
-    expected = [_fd(loss, f) for f in inputs]
+    expected = [fd_grad(loss, f) for f in inputs]
     forward()
     for c, f in zip(coeffs, outputs):
         f.grad.from_numpy(c)
