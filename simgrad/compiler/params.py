@@ -13,8 +13,11 @@ builder). A kind owns everything that depends on it, so a new kind of argument i
   (`slot_values`).
 
 A kind whose argument travels as words the built-in packings already write reuses them (a member path picks
-the value out of the argument: struct leaves do); one that needs another layout (a device pointer, a
-tensor's data pointer and shape) subclasses Packing, whose `launch_code` writes the launcher's lines."""
+the value out of the argument: struct leaves do); one that needs another layout subclasses Packing, whose
+`launch_code` writes the launcher's lines. A new argument *type* under an existing annotation (a torch tensor
+or a device array under ti.types.ndarray()) is a registered subclass of that kind: its `key` and `bind` handle
+the new type (a key of its own, so the instantiation and its packing are the new type's) and defer to
+`super()` for every other value (tests/compiler/test_params.py does this for a raw pointer)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,10 @@
 """Kernel parameters are one typed family (compiler/params.py): a new kind of argument is one class and a
 `register`, with no edit to the driver, the @ti.kernel object, the launcher or the Tape. Two toy kinds show it:
-a boxed scalar (an object whose `.value` travels as a scalar: built-in packing, a member path) and a raw
-pointer array (an object with `.ptr` and `.n`, read as a 1-d ndarray: its own Packing, the shape of a device
-array's). Also: the Tape's slice watching reads each parameter's slots through its packing, so struct
-arguments no longer shift the scalar arguments after them."""
+a boxed scalar under a new annotation (an object whose `.value` travels as a scalar: the built-in packing with
+a member path), and a new argument type under ti.types.ndarray() (an object with a pointer `.ptr` and a length
+`.n`, as a torch tensor or a device array would be: a subclass of the ndarray kind with its own Packing).
+Also: the Tape's slice watching reads each parameter's slots through its packing, so struct arguments no
+longer shift the scalar arguments after them."""
 
 import pickle
 
@@ -40,15 +41,10 @@ class BoxedParam(params.Param):
         return value, ScalarPacking(self.name, slot, self.ann.dtype, path=("value",))
 
 
-class RawArray:
-    """The second toy annotation: an object with a base address `.ptr` and a length `.n`, read as a 1-d array
-    of `dtype` (what a device array passes: a pointer the Python side cannot check)."""
-
-    def __init__(self, dtype):
-        self.dtype = dtype
-
-
 class Raw:
+    """A raw array: a base address `.ptr` and a length `.n`, what a device array would pass (a pointer the
+    Python side cannot look into)."""
+
     def __init__(self, arr: np.ndarray):
         self.arr, self.ptr, self.n = arr, arr.ctypes.data, arr.shape[0]
 
@@ -62,20 +58,19 @@ class RawPacking(Packing):
         return [f"_buf[{gen.word(self.slot)}] = {src}.ptr", f"_buf[{gen.word(self.slot + 1)}] = {src}.n"]
 
 
-class RawParam(params.Param):
-    keyed = True  # one instantiation per element type of the annotation: the key is constant here
-
-    @classmethod
-    def accepts(cls, ann) -> bool:
-        return isinstance(ann, RawArray)
+class RawOrNdarrayParam(params.NdarrayParam):
+    """A kind for a new argument type under an existing annotation (as torch tensors or device arrays are
+    under ti.types.ndarray()): it takes over the annotation and defers to the ndarray kind for other values."""
 
     def key(self, a, keep):
-        if not hasattr(a, "ptr"):
-            raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects a Raw")
-        return ("raw", self.ann.dtype.name)
+        if isinstance(a, Raw):
+            return ("raw", self.ann.dtype)
+        return super().key(a, keep)
 
     def bind(self, a, slots):
-        arg = ArrayArg(self.name, slots.count, self.ann.dtype, 1)
+        if not isinstance(a, Raw):
+            return super().bind(a, slots)
+        arg = ArrayArg(self.name, slots.count, dt.from_any(self.ann.dtype), 1)
         slots.take(arg.num_slots)
         return arg, RawPacking(self.name, arg.slot)
 
@@ -83,10 +78,10 @@ class RawParam(params.Param):
 @pytest.fixture
 def toy_kinds():
     params.register(BoxedParam)
-    params.register(RawParam)
+    params.register(RawOrNdarrayParam)
     yield
     params.KINDS.remove(BoxedParam)
-    params.KINDS.remove(RawParam)
+    params.KINDS.remove(RawOrNdarrayParam)
 
 
 def test_a_boxed_scalar_kind_is_one_registered_class(toy_kinds):
@@ -130,20 +125,25 @@ def test_a_boxed_scalar_is_differentiable_and_its_slot_is_watched(toy_kinds):
     np.testing.assert_allclose(x.grad.to_numpy()[0], [9.0, 9.0])
 
 
-def test_a_raw_pointer_kind_brings_its_own_packing(toy_kinds):
+def test_a_new_argument_type_of_the_ndarray_annotation_brings_its_own_packing(toy_kinds):
     data = np.zeros(5, np.float32)
 
     @ti.kernel
-    def fill(a: RawArray(ti.f32), s: ti.f32):
+    def fill(a: ti.types.ndarray(dtype=ti.f32, ndim=1), s: ti.f32):
         for i in range(a.shape[0]):
             a[i] = s * i
 
     fill(Raw(data), 2.0)
     np.testing.assert_array_equal(data, [0, 2, 4, 6, 8])
-    fill(Raw(data[:3].copy()), 1.0)  # the extent is a run-time value: same instantiation
+    short = np.zeros(3, np.float32)
+    fill(Raw(short), 1.0)  # the extent is a run-time value: same instantiation
+    np.testing.assert_array_equal(short, [0, 1, 2])
     assert len(fill._caches[""]) == 1
-    with pytest.raises(SimgradTypeError, match="expects a Raw"):
-        fill(data, 1.0)
+    fill(data, 3.0)  # a numpy array still goes the ndarray kind's way: its own instantiation
+    np.testing.assert_array_equal(data, [0, 3, 6, 9, 12])
+    assert len(fill._caches[""]) == 2
+    with pytest.raises(SimgradTypeError, match="expects an ndarray, got Box"):
+        fill(Box(1), 1.0)
 
 
 def test_an_unregistered_annotation_is_refused():
