@@ -21,12 +21,16 @@ import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from simgrad.codegen.llvm import LOWERING, FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
 from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
 from simgrad.runtime import abi
+
+if TYPE_CHECKING:
+    from simgrad.errors import Loc
 
 TRIPLE = "nvptx64-nvidia-cuda"
 DEFAULT_BLOCK = 128
@@ -48,7 +52,7 @@ PURE = {Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.ADD, Op.SUB, Op.MUL, Op.DIV, O
 SREGS = ("tid.x", "ntid.x", "ctaid.x", "nctaid.x")
 
 
-def unsupported(kernel: Kernel) -> tuple[str, object] | None:
+def unsupported(kernel: Kernel) -> tuple[str, Loc | None] | None:
     """(construct, loc) of the first statement arch=cuda cannot lower yet, or None."""
     for s in walk(kernel.body):
         if s.op in UNSUPPORTED:

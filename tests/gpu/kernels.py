@@ -19,12 +19,14 @@ def arith_math():
     def k(a: ti.f32):
         for i in x:
             v = i * a
-            x[i] = ti.sin(v) + ti.cos(v) * ti.exp(-v) + ti.sqrt(v + 1.0) + ti.tanh(v) + ti.atan2(v, 2.0) + ti.tan(v * 0.1)
+            x[i] = (ti.sin(v) + ti.cos(v) * ti.exp(-v) + ti.sqrt(v + 1.0) + ti.tanh(v) + ti.atan2(v, 2.0)
+                    + ti.tan(v * 0.1))
             y[i] = (i * 7) // 3 - i % 5 + (i << 2) ^ 9
 
     k(0.01)
     v = np.arange(N, dtype=np.float32) * np.float32(0.01)
-    ref = np.sin(v) + np.cos(v) * np.exp(-v) + np.sqrt(v + 1) + np.tanh(v) + np.arctan2(v, 2) + np.tan(v * np.float32(0.1))
+    ref = (np.sin(v) + np.cos(v) * np.exp(-v) + np.sqrt(v + 1) + np.tanh(v) + np.arctan2(v, 2)
+           + np.tan(v * np.float32(0.1)))
     i = np.arange(N)
     return [(x.to_numpy(), ref, 1e-5), (y.to_numpy(), ((i * 7) // 3 - i % 5 + (i << 2)) ^ 9, 0)]
 
