@@ -51,6 +51,10 @@ PURE = {Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.ADD, Op.SUB, Op.MUL, Op.DIV, O
 
 SREGS = ("tid.x", "ntid.x", "ctaid.x", "nctaid.x")
 
+# Tape entries a thread keeps in local memory at most (8 KB; Taichi's CUDA adstack is small too): a deeper tape
+# reports the located adstack overflow, never a wrong gradient. A global-memory tape is a later stage.
+GPU_TAPE_LIMIT = 1024
+
 
 def unsupported(kernel: Kernel) -> tuple[str, Loc | None] | None:
     """(construct, loc) of the first statement arch=cuda cannot lower yet, or None."""
@@ -114,10 +118,16 @@ class GpuCodegen(KernelCodegen):
                  fast_math: bool = True):
         super().__init__(kernel, symbol, debug=debug, fast_math=fast_math)
         self.sim = sim
-        self.tape_entries = max(int(tape_entries), 1)
+        self.tape_entries = min(max(int(tape_entries), 1), GPU_TAPE_LIMIT)
         self.launches: list[Launch] = []
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
         self.scratch_slots = 0
+
+    def error_code(self, kind: str, loc, detail) -> int:
+        if kind == "adstack":
+            detail = (f"{detail} (arch=cuda keeps at most {GPU_TAPE_LIMIT} entries per thread in local memory; "
+                      f"this kernel's tape has {self.tape_entries})")
+        return super().error_code(kind, loc, detail)
 
     # -- segments ----------------------------------------------------------------------------------------
     def _segments(self) -> list[tuple[bool, list[Stmt]]]:

@@ -95,3 +95,29 @@ def _ir_of(kernel, *args):
         return compile_kernel(kernel, prog, args).ir
     finally:
         prog.jit.cache_enabled = old
+
+
+def test_deep_tape_is_a_located_overflow(sim):
+    """The per-thread tape is local memory (at most GPU_TAPE_LIMIT entries): a deeper one is reported, never a
+    wrong gradient."""
+    from simgrad.errors import SimgradRuntimeError
+
+    x = ti.field(ti.f64, shape=2, needs_grad=True)
+    y = ti.field(ti.f64, shape=2, needs_grad=True)
+
+    @ti.kernel
+    def f(n: ti.i32):
+        for i in x:
+            v = x[i]
+            for _ in range(n):
+                v = ti.sin(v)
+            y[i] = v
+
+    f(3000)
+    y.grad.fill(1)
+    with pytest.raises(SimgradRuntimeError, match="arch=cuda keeps at most 1024 entries") as e:
+        f.grad(3000)
+    assert "test_gpu_sim.py" in str(e.value)
+    f(10)
+    f.grad(10)  # a shallow one still works
+    assert x.grad[0] != 0
