@@ -228,6 +228,10 @@ class Reverse:
             for x in walk(loop.blocks[0]):
                 for o in x.operands:
                     if id(o) not in inside and o.op is not Op.CONST:
+                        if o.op is Op.GLOBAL_PTR:  # rebuilt from its indices, never taped (not a value)
+                            for i in o.operands:
+                                if i.op is not Op.CONST:
+                                    values.setdefault(id(i), i)
                         (local if o.op is Op.ALLOCA else values).setdefault(id(o), o)
             got = self._free_cache[id(loop)] = (list(values.values()), list(local.values()))
         return got
@@ -252,7 +256,10 @@ class Reverse:
         saved_held = dict(self.held)
         # outer values not in scope here come through the tape, pushed where the replay passed the loop
         taped = [(o, self.fmap[id(o)], self.bmap) for o in values
-                 if id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
+                 if id(o) not in self.bmap and self.depth.get(id(o), 0) > 0 and o.op is not Op.GLOBAL_PTR]
+        # an element pointer from a nested block (CSE shared it with the loop) is rebuilt from its indices
+        rebuilt = [o for o in values if o.op is Op.GLOBAL_PTR and id(o) not in self.bmap
+                   and self.depth.get(id(o), 0) > 0]
         nested = self.depth.get(id(s), 0) > 0
         for a, value, held in self.snap[id(s)]:
             if nested and not held:
@@ -261,6 +268,9 @@ class Reverse:
                 self.held[id(a)] = value
         for o, value, into in reversed(taped):
             into[id(o)] = self.b.emit(Op.TAPE_POP, value.type, (), {"message": self._overflow_text(s)})
+        for o in rebuilt:
+            self.bmap[id(o)] = self.b.emit(Op.GLOBAL_PTR, o.type, tuple(self.v(i) for i in o.operands),
+                                           dict(o.attrs))
         begin, end = (o if o.op is Op.CONST else self.v(o) for o in s.operands)
         n = _trip(self.b, begin, end)
         t = n.vtype
