@@ -81,7 +81,8 @@ class Reverse:
         for s in walk(kernel.body):
             for o in s.operands:
                 self.uses[id(o)] = self.uses.get(id(o), 0) + 1
-        self.active = _active(kernel.body)
+        # adjoints only for values that depend on a gradient field and can reach a write of one
+        self.active = _active(kernel.body) & _reaching(kernel.body)
         self.task = _Task(self.body)
         self.used_tape = False
         self.in_task = False  # inside a parallel loop's body (only there are serial loops recomputed)
@@ -606,6 +607,33 @@ def _active(body: Block) -> set[int]:
                 active.add(id(s))
                 changed = True
     return active
+
+
+def _reaching(body: Block) -> set[int]:
+    """Ids of the values (and locals) from which a write of an element with a gradient can be reached: the
+    adjoint of any other value is exactly zero, so none is computed. Besides saving work, this keeps a dead
+    value's infinite derivative out of the gradient (`v = v * v * v` overflowing to inf in a loop whose
+    result is never used gave `0 * inf = NaN` in x.grad, as in taichi)."""
+    live: set[int] = set()
+    stmts = list(walk(body))
+    changed = True
+    while changed:  # a loop-carried local becomes live on a later pass
+        changed = False
+        for s in reversed(stmts):
+            op = s.op
+            if op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+                feeds = s.operands[1:] if _grad_of(s.operands[0]) is not None or id(s) in live else ()
+            elif op in (Op.LOCAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.ALLOCA:
+                feeds = s.operands[1:] if id(s.operands[0]) in live else ()
+            elif id(s) not in live or op is Op.GLOBAL_LOAD:
+                continue
+            else:  # every operand, integers too (a float rebuilt from one must still meet its missing rule)
+                feeds = s.operands
+            for o in feeds:
+                if id(o) not in live and o.op is not Op.CONST:
+                    live.add(id(o))
+                    changed = True
+    return live
 
 
 def _trip(b: Builder, begin: Stmt, end: Stmt) -> Stmt:
