@@ -29,7 +29,7 @@ def test_dead_value_that_overflows_gives_no_nan():
     def f():
         for i in range(n):
             v = x[i]
-            for k in range(10):
+            for _k in range(10):
                 v = v * v * v
             dead = ti.exp(ti.sin(v))  # noqa: F841
             loss[None] += x[i]

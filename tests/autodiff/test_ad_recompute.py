@@ -554,7 +554,7 @@ def test_dynamic_for_inside_while_reads_an_element_pointer_shared_with_its_bound
             w = 0
             while w < 2:
                 w += 1
-                for k in range(p[i]):
+                for _k in range(p[i]):
                     loss[None] += x[i] * x[i] if p[i] > 1 else 0.0
 
     @ti.kernel
