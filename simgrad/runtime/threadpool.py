@@ -52,8 +52,52 @@ _SYMBOLS = [
 ]
 
 
-def pool_ir(futex_nr: int, machine: str) -> str:
-    """LLVM IR of the pool for one futex syscall number and machine (which picks the spin hint)."""
+#: SIMGRAD_POOL_STATS=1: the pool counts what it does in `@simgrad_pool_stats` (pool_stats()). Off, the IR
+#: has none of the counting code (the only change: sg_run_chunks returns how many chunks it ran).
+STAT_NAMES = (
+    "launches",          # jobs published to the workers
+    "direct",            # launches run on the calling thread alone (one thread, small range, pool busy)
+    "chunks_caller",     # chunks run by the calling thread (tid 0) in published jobs
+    "chunks_workers",    # chunks run by workers
+    "caller_spun",       # the caller ran out of chunks with workers still inside and waited spinning
+    "caller_slept",      # ... and the spin ran out: it slept on a futex (a worker inside was stalled)
+    "caller_wait_ns",    # total time the caller waited for workers after its last chunk
+    "caller_wait_max_ns",
+    "worker_spin_hits",  # a worker saw the next job while spinning
+    "worker_sleeps",     # a worker's spin ran out and it slept on a futex
+    "wakes",             # publishes that had to wake sleeping workers (futex wake)
+    "joins",             # workers that joined a job
+    "late",              # workers that came after the job was closed (they ran nothing)
+    "launch_ns",         # total time inside published launches
+    "spare14", "spare15",
+    # caller's share of a published job's chunks: < 1/4, < 1/2, < 3/4, < 1, all of them
+    "share_q1", "share_q2", "share_q3", "share_q4", "share_all",
+    # published launch durations: < 8 us, < 16, ..., < 4096 us, longer
+    "t_lt8us", "t_lt16us", "t_lt32us", "t_lt64us", "t_lt128us", "t_lt256us", "t_lt512us", "t_lt1ms",
+    "t_lt2ms", "t_lt4ms", "t_ge4ms",
+)
+N_STATS = 32
+
+
+def _stats_enabled() -> bool:
+    return os.environ.get("SIMGRAD_POOL_STATS", "0") not in ("", "0")
+
+
+def pool_ir(futex_nr: int, machine: str, stats: bool = False) -> str:
+    """LLVM IR of the pool for one futex syscall number and machine (which picks the spin hint); `stats`
+    adds the counters of SIMGRAD_POOL_STATS (each `{st(...)}` below is empty without it)."""
+
+    def st(name: str, slot: int | str, value: str = "1", op: str = "add") -> str:
+        if not stats:
+            return ""
+        k = STAT_NAMES.index(slot) if isinstance(slot, str) else slot
+        slot_ptr = f"%stp.{name}"
+        return (f"{slot_ptr} = getelementptr [{N_STATS} x i64], ptr @simgrad_pool_stats, i64 0, i64 {k}\n  "
+                f"%st.{name} = atomicrmw {op} ptr {slot_ptr}, i64 {value} monotonic, align 8")
+
+    def now(name: str) -> str:
+        return f"%{name} = call i64 @sg_now()" if stats else ""
+
     if machine in ("x86_64", "amd64"):
         pause_decl, pause = "declare void @llvm.x86.sse2.pause()", "call void @llvm.x86.sse2.pause()"
     elif machine in ("aarch64", "arm64"):
@@ -77,11 +121,13 @@ def pool_ir(futex_nr: int, machine: str) -> str:
 @sg_sleepers = internal global i32 0
 @sg_state = internal global i32 {_CLOSED}, align 64
 @sg_caller_waiting = internal global i32 0
+@simgrad_pool_stats = global [{N_STATS} x i64] zeroinitializer, align 64   ; SIMGRAD_POOL_STATS counters
 
 declare i64 @syscall(i64, ...)
 declare i32 @clock_gettime(i32, ptr)
 declare i32 @sched_yield()
 declare ptr @signal(i32, ptr)
+declare i64 @llvm.ctlz.i64(i64, i1)
 {pause_decl}
 
 define internal i64 @sg_now() {{
@@ -126,7 +172,8 @@ out:
   ret i32 %cur
 }}
 
-define internal void @sg_run_chunks(i32 %tid) {{
+; Runs chunks of the current job until none is left; returns how many it ran.
+define internal i64 @sg_run_chunks(i32 %tid) {{
 entry:
   %task = load atomic ptr, ptr @sg_task monotonic, {a8}
   %clo = load atomic ptr, ptr @sg_closure monotonic, {a8}
@@ -134,6 +181,7 @@ entry:
   %chunk = load atomic i64, ptr @sg_chunk monotonic, {a8}
   br label %loop
 loop:
+  %ran = phi i64 [0, %entry], [%ran1, %body]
   %stop = load atomic i32, ptr @simgrad_cancel monotonic, {a4}
   %stopped = icmp ne i32 %stop, 0
   br i1 %stopped, label %done, label %take
@@ -146,9 +194,10 @@ body:
   %lt = icmp slt i64 %hi0, %end
   %hi = select i1 %lt, i64 %hi0, i64 %end
   call void %task(ptr %clo, i64 %lo, i64 %hi, i32 %tid)
+  %ran1 = add i64 %ran, 1
   br label %loop
 done:
-  ret void
+  ret i64 %ran
 }}
 
 define void @simgrad_parallel_for(ptr %task, ptr %clo, i64 %begin, i64 %end, i64 %grain) {{
@@ -166,6 +215,7 @@ check:
   %serial = or i1 %single, %small
   br i1 %serial, label %direct, label %lock
 direct:                    ; on this thread, in chunks of at most CHUNK_CAP so Ctrl-C is seen
+  {st("direct", "direct")}
   br label %dloop
 dloop:
   %dlo = phi i64 [%begin, %direct], [%dhi, %dnext]
@@ -190,6 +240,7 @@ unlock_direct:
   store atomic i32 0, ptr @sg_busy release, {a4}
   br label %direct
 publish:
+  {now("t0")}
   %nt64 = sext i32 %nt to i64
   %parts = mul i64 %nt64, 4
   %c0 = sdiv i64 %n, %parts
@@ -211,19 +262,25 @@ publish:
   br i1 %anysl, label %wake, label %work
 wake:
   call void @sg_futex(ptr @sg_gen, i64 {_FUTEX_WAKE}, i32 {_INT_MAX})
+  {st("wakes", "wakes")}
   br label %work
 work:
-  call void @sg_run_chunks(i32 0)
+  %mine = call i64 @sg_run_chunks(i32 0)
+  {st("mine", "chunks_caller", "%mine")}
+  {_share_stats("%n", "%chunk", "%mine") if stats else ""}
+  {now("tc")}
   %st = atomicrmw or ptr @sg_state, i32 {_CLOSED} seq_cst, {a4}   ; late wakers now skip this job
   %in0 = and i32 %st, {_JOINED}
   %none = icmp eq i32 %in0, 0
   br i1 %none, label %finish, label %spin
 spin:
+  {st("spun", "caller_spun")}
   %s1 = call i32 @sg_spin_until(ptr @sg_state, i32 {_JOINED}, i32 0, i1 true)
   %in1 = and i32 %s1, {_JOINED}
   %d1 = icmp eq i32 %in1, 0
-  br i1 %d1, label %finish, label %sleep
+  br i1 %d1, label %waited, label %sleep
 sleep:
+  {st("slept", "caller_slept")}
   store atomic i32 1, ptr @sg_caller_waiting seq_cst, {a4}
   br label %sleep_loop
 sleep_loop:
@@ -236,8 +293,12 @@ do_wait:
   br label %sleep_loop
 woke:
   store atomic i32 0, ptr @sg_caller_waiting monotonic, {a4}
+  br label %waited
+waited:
+  {_wait_stats(st) if stats else ""}
   br label %finish
 finish:
+  {_launch_stats(st) if stats else ""}
   store atomic i32 0, ptr @sg_busy release, {a4}
   br label %ret
 ret:
@@ -251,8 +312,12 @@ wait:
   %seen = phi i32 [ %seen0, %entry ], [ %g, %next_job ]
   %g0 = call i32 @sg_spin_until(ptr @sg_gen, i32 -1, i32 %seen, i1 false)
   %new0 = icmp ne i32 %g0, %seen
-  br i1 %new0, label %got, label %sleep
+  br i1 %new0, label %spin_hit, label %sleep
+spin_hit:
+  {st("hit", "worker_spin_hits")}
+  br label %got
 sleep:
+  {st("wsleep", "worker_sleeps")}
   atomicrmw add ptr @sg_sleepers, i32 1 seq_cst, {a4}
   br label %sleep_loop
 sleep_loop:
@@ -266,7 +331,7 @@ woke:
   atomicrmw sub ptr @sg_sleepers, i32 1 seq_cst, {a4}
   br label %got
 got:
-  %g = phi i32 [ %g0, %wait ], [ %g1, %woke ]
+  %g = phi i32 [ %g0, %spin_hit ], [ %g1, %woke ]
   %sd = load atomic i32, ptr @sg_shutdown acquire, {a4}
   %stop = icmp ne i32 %sd, 0
   br i1 %stop, label %exit, label %try_join
@@ -276,7 +341,10 @@ try_join:                  ; join the current job unless the caller already clos
 join_loop:
   %s = phi i32 [ %st, %try_join ], [ %s_cur, %join_retry ]
   %closed = icmp uge i32 %s, {_CLOSED}
-  br i1 %closed, label %next_job, label %join_cas
+  br i1 %closed, label %late, label %join_cas
+late:
+  {st("late", "late")}
+  br label %next_job
 join_cas:
   %s1 = add i32 %s, 1
   %pair = cmpxchg ptr @sg_state, i32 %s, i32 %s1 acquire monotonic, {a4}
@@ -286,7 +354,9 @@ join_retry:
   %s_cur = extractvalue {{ i32, i1 }} %pair, 0
   br label %join_loop
 job:
-  call void @sg_run_chunks(i32 %tid)
+  {st("join", "joins")}
+  %ran = call i64 @sg_run_chunks(i32 %tid)
+  {st("wchunks", "chunks_workers", "%ran")}
   %old = atomicrmw sub ptr @sg_state, i32 1 seq_cst, {a4}
   %last = icmp eq i32 %old, {_CLOSED + 1}          ; closed, and we were the last one inside
   br i1 %last, label %check_caller, label %next_job
@@ -373,6 +443,53 @@ define void @simgrad_pool_set_spin_ns(i64 %ns) {{
 """
 
 
+def _slot(name: str, index: str) -> str:
+    """`%name` = the address of counter `index` (an i64 value or constant)."""
+    return f"%{name} = getelementptr [{N_STATS} x i64], ptr @simgrad_pool_stats, i64 0, i64 {index}"
+
+
+def _share_stats(n: str, chunk: str, mine: str) -> str:
+    """Count the caller's share of the job's chunks in quarters (slots share_q1..share_all)."""
+    q = STAT_NAMES.index("share_q1")
+    return "\n  ".join([
+        f"%sh.c1 = sub i64 {chunk}, 1", f"%sh.n1 = add i64 {n}, %sh.c1", f"%sh.total = sdiv i64 %sh.n1, {chunk}",
+        f"%sh.m4 = mul i64 {mine}, 4", "%sh.q = sdiv i64 %sh.m4, %sh.total",
+        f"%sh.all = icmp sge i64 {mine}, %sh.total", "%sh.b = select i1 %sh.all, i64 4, i64 %sh.q",
+        f"%sh.k = add i64 %sh.b, {q}", _slot("sh.p", "%sh.k"),
+        "%sh.r = atomicrmw add ptr %sh.p, i64 1 monotonic, align 8"])
+
+
+def _wait_stats(st) -> str:
+    """The caller's wait for the workers still inside after its last chunk (from %tc on)."""
+    return "\n  ".join(["%tw = call i64 @sg_now()", "%dw = sub i64 %tw, %tc",
+                        st("wns", "caller_wait_ns", "%dw"), st("wmax", "caller_wait_max_ns", "%dw", "umax")])
+
+
+def _launch_stats(st) -> str:
+    """Count a published launch, its time (from %t0 on) and its log2 duration bucket."""
+    b0 = STAT_NAMES.index("t_lt8us")
+    return "\n  ".join([
+        "%te = call i64 @sg_now()", "%dl = sub i64 %te, %t0", st("launch", "launches"),
+        st("lns", "launch_ns", "%dl"), "%us = udiv i64 %dl, 1000", "%us1 = or i64 %us, 1",
+        "%lz = call i64 @llvm.ctlz.i64(i64 %us1, i1 true)", "%lg = sub i64 63, %lz",  # floor(log2(us))
+        "%lb0 = sub i64 %lg, 2", "%lneg = icmp slt i64 %lb0, 0", "%lb1 = select i1 %lneg, i64 0, i64 %lb0",
+        "%lbig = icmp sgt i64 %lb1, 10", "%lb = select i1 %lbig, i64 10, i64 %lb1",
+        f"%lk = add i64 %lb, {b0}", _slot("lp", "%lk"), "%lr = atomicrmw add ptr %lp, i64 1 monotonic, align 8"])
+
+
+def pool_stats() -> dict:
+    """The pool's counters since the last reset_pool_stats() (all zero unless SIMGRAD_POOL_STATS=1 was set
+    when the pool was first used in this process)."""
+    native = _get_native()
+    return {k: int(native.stats[i]) for i, k in enumerate(STAT_NAMES) if not k.startswith("spare")}
+
+
+def reset_pool_stats() -> None:
+    native = _get_native()
+    for i in range(N_STATS):
+        native.stats[i] = 0
+
+
 _PARALLEL_FOR_T = ctypes.CFUNCTYPE(
     None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64
 )
@@ -384,7 +501,8 @@ class _Native:
     def __init__(self) -> None:
         machine = platform.machine().lower()
         self.supported = machine in _FUTEX_NR
-        addrs = get_jit().load(pool_ir(_FUTEX_NR.get(machine, -1), machine), _SYMBOLS)
+        self.stats_enabled = _stats_enabled()
+        addrs = get_jit().load(pool_ir(_FUTEX_NR.get(machine, -1), machine, self.stats_enabled), _SYMBOLS)
         self.parallel_for_address = addrs["simgrad_parallel_for"]
         self.parallel_for = _PARALLEL_FOR_T(self.parallel_for_address)
         self.worker_loop = ctypes.CFUNCTYPE(None, ctypes.c_int32, ctypes.c_int32)(
@@ -397,6 +515,7 @@ class _Native:
         self.install_sigint = ctypes.CFUNCTYPE(None)(addrs["simgrad_install_sigint"])
         #: the cancel flag every kernel reads (context slot CTX_CANCEL): 1 after Ctrl-C
         self.cancel_address = get_jit().code.global_address("simgrad_cancel")
+        self.stats = (ctypes.c_int64 * N_STATS).from_address(get_jit().code.global_address("simgrad_pool_stats"))
         self._sigint_installed = False
 
     def watch_sigint(self) -> None:
