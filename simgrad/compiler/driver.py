@@ -19,7 +19,7 @@ from simgrad.debug import debug_level
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.frontend.arrays import ArrayArg, BuilderArg
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
-from simgrad.frontend.lower import Compiler
+from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.refs import tensor_text
 from simgrad.frontend.source import get_source
 from simgrad.ir import context
@@ -224,7 +224,7 @@ def _param_fingerprint(kernel: KernelSource, kb: KeyBuilder, p: Param, a):
 def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
     """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
     ir = IRKernel(kernel.name + name_suffix)
-    comp = Compiler(ir, get_source(kernel.func), debug=prog.config.debug)
+    comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug)
     comp.guard = guard
     trees = len(prog.trees)
     slots, ret_matrix = _bind_params(kernel, comp, args)
@@ -252,7 +252,7 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     return ir, stable, meta
 
 
-def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list[SlotParam], int],
+def _bind_params(kernel: KernelSource, comp: KernelLowering, args) -> tuple[tuple[list[SlotParam], int],
                                                                       tuple[int, int] | StructType | None]:
     """Each parameter becomes what the body sees (an ARG value, a Matrix of them, an ndarray view, the
     template value itself) and its place in the context buffer."""

@@ -8,7 +8,8 @@ import inspect
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
-from simgrad.frontend.refs import MatrixRef, VarRef
+from simgrad.frontend.frames import Frame, RangeSpec
+from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -42,8 +43,6 @@ def _builtin_bool(x=False):
 
 
 def _builtin_range(*args):
-    from simgrad.frontend.lower import RangeSpec
-
     return RangeSpec(*args)
 
 
@@ -169,8 +168,6 @@ def _template_params(fn) -> set:
 
 def _by_reference(comp, node: ast.expr):
     """A local variable itself when `node` names one, else its value."""
-    from simgrad.frontend.lower import LOCAL_REFS
-
     if isinstance(node, ast.Name):
         v = comp.lookup(node.id, node)
         if isinstance(v, LOCAL_REFS):
@@ -191,7 +188,6 @@ def _atomic(comp, node: ast.Call, kind: str):
 
 def inline(comp, fn, args, kwargs, node):
     """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
-    from simgrad.frontend.lower import Frame
     from simgrad.frontend.source import get_source
     from simgrad.lang.types import MatrixType, by_reference
 

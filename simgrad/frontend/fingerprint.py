@@ -283,6 +283,16 @@ def _names(src) -> list[str]:
 _environment: tuple | None = None
 
 
+def source_files(root: str) -> list[str]:
+    """simgrad's sources under `root`, in a fixed order: Python modules and the LLVM IR of runtime/ll, which
+    generated code contains too."""
+    out = []
+    for d, dirs, files in os.walk(root):
+        dirs[:] = sorted(x for x in dirs if x != "__pycache__")
+        out += [os.path.join(d, name) for name in sorted(files) if name.endswith((".py", ".ll"))]
+    return out
+
+
 def environment() -> tuple:
     """The versions the generated code depends on: simgrad's own sources, Python, numpy, llvmlite."""
     global _environment
@@ -291,15 +301,11 @@ def environment() -> tuple:
 
         h = hashlib.sha256()
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        for d, dirs, files in os.walk(root):
-            dirs[:] = sorted(x for x in dirs if x != "__pycache__")
-            for name in sorted(files):
-                if name.endswith(".py"):
-                    path = os.path.join(d, name)
-                    h.update(os.path.relpath(path, root).encode() + b"\0")
-                    with open(path, "rb") as fh:
-                        h.update(fh.read())
-                    h.update(b"\0")
+        for path in source_files(root):
+            h.update(os.path.relpath(path, root).encode() + b"\0")
+            with open(path, "rb") as fh:
+                h.update(fh.read())
+            h.update(b"\0")
         _environment = (h.hexdigest(), sys.version, np.__version__, llvmlite.__version__)
     return _environment
 

@@ -9,6 +9,7 @@ import ast
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradSyntaxError
+from simgrad.frontend.frames import RangeSpec
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
@@ -33,8 +34,6 @@ def lower_for(comp, node: ast.For) -> None:
         _unroll(comp, node)
         return
     it = comp.eval(node.iter)
-    from simgrad.frontend.lower import RangeSpec
-
     if isinstance(it, RangeSpec):
         _range_for(comp, node, it)
     elif isinstance(it, ndrange):

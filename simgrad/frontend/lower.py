@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import ast
 import builtins
-import inspect
 import operator
 
 from simgrad import dtypes as dt
@@ -20,18 +19,18 @@ from simgrad.errors import (
     SimgradSyntaxError,
     SimgradTypeError,
 )
+from simgrad.frontend.frames import Frame
 from simgrad.frontend.refs import LOCAL_REFS, DynamicElementRef, GlobalRef, MatrixRef, StructRef, VarRef
-from simgrad.frontend.source import FunctionSource, get_source
+from simgrad.frontend.source import FunctionSource
 from simgrad.ir import context
 from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
-from simgrad.ir.nodes import Block, Kernel, walk
+from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.kernel import BoundFunc
-from simgrad.lang.loops import grouped, ndrange, static
 from simgrad.lang.matrix import Matrix, dtype_of
 from simgrad.lang.struct import Struct, StructField
 from simgrad.lang.types import MatrixType
@@ -54,51 +53,7 @@ _PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b
            ast.NotIn: lambda a, b: a not in b}
 
 
-class RangeSpec:
-    """`range(...)` seen inside a kernel: a run-time loop unless wrapped in ti.static."""
-
-    def __init__(self, *args):
-        if len(args) == 1:
-            self.start, self.stop, self.step = 0, args[0], 1
-        elif len(args) == 2:
-            self.start, self.stop, self.step = args[0], args[1], 1
-        else:
-            self.start, self.stop, self.step = args
-        if isinstance(self.step, Expr):
-            raise SimgradSyntaxError("range() step must be a compile-time constant", context.current_loc())
-
-    def __iter__(self):
-        return iter(builtins.range(self.start, self.stop, self.step))
-
-    def __len__(self):
-        return len(builtins.range(self.start, self.stop, self.step))
-
-
-class _Return(Exception):
-    pass
-
-
-class Frame:
-    def __init__(self, src: FunctionSource, is_kernel: bool):
-        self.src = src
-        self.is_kernel = is_kernel
-        self.scopes: list[dict] = [{}]
-        self.return_value = None
-        self.has_returned = False
-        self.dynamic_depth = 0  # run-time control flow nesting inside this frame
-        # early returns from run-time control flow in a ti.func: the value and a flag live in locals declared
-        # at the function's entry (entry_block/entry_index); the rest of the body is guarded by the flag
-        self.entry_block: Block | None = None
-        self.entry_index = 0
-        self.loop_base = 0  # run-time loops open when the function was entered
-        self.ret_var: VarRef | MatrixRef | None = None
-        self.ret_flag: VarRef | None = None
-        self.dynamic_returns = 0
-        self.returned_here = False
-        self.real = False  # a ti.real_func: its loops are serial (it is a function the kernel calls)
-
-
-class Compiler:
+class KernelLowering:
     """Compiles one kernel instantiation. `bind` the parameters, then `compile_body`."""
 
     MAX_INLINE_DEPTH = 64
@@ -329,7 +284,7 @@ class Compiler:
                         f"assigned here (arguments are immutable in Taichi); copy it into a local first "
                         f"({name}_ = {name})", self.loc(target))
                 self.bind(name, self.new_var(value))
-            elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)) and not _is_py_matrix_const(value):
+            elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)):
                 self.bind(name, self.new_var(value))
             else:
                 self.bind(name, value)
@@ -828,16 +783,12 @@ def _is_static_call(node: ast.expr) -> bool:
     return (isinstance(f, ast.Attribute) and f.attr == "static") or (isinstance(f, ast.Name) and f.id == "static")
 
 
-def _is_py_matrix_const(v) -> bool:
-    return False
-
-
 class _Starred:
     def __init__(self, value):
         self.value = value
 
 
-def global_ref(comp: Compiler, base, index, node):
+def global_ref(comp: KernelLowering, base, index, node):
     """Ref of `field[index]` / `array[index]`, with indices cast to i32 and shifted by field offsets."""
     from simgrad.frontend.arrays import ArrayArg
 
@@ -906,12 +857,4 @@ def _member_dtype(value: Struct, name: str):
     return t.dtype if isinstance(t, MatrixType) else t if isinstance(t, dt.DataType) else None
 
 
-def make_frame(func, is_kernel: bool) -> Frame:
-    return Frame(get_source(func), is_kernel)
-
-
-def signature(func):
-    return inspect.signature(func)
-
-
-__all__ = ["Compiler", "RangeSpec", "global_ref", "static", "ndrange", "grouped"]
+__all__ = ["KernelLowering", "global_ref"]

@@ -475,3 +475,6 @@ def global_thread_idx():
     """The index of the thread running this iteration (the pool's thread id on the CPU; 0 outside a
     parallel loop)."""
     return Expr(context.builder().emit(Op.THREAD_INDEX, dt.i32))
+
+
+dt.cast_hook = cast  # `ti.f32(x)` (dtypes.DataType.__call__) casts through lang

@@ -401,3 +401,17 @@ class SNodeTree:
 def check_placed(field) -> None:
     if field.snode is None:
         raise SimgradError(f"field {field.name} is not placed in any SNode tree (call ti.root...place())")
+
+
+def new_tree(program) -> SNodeTree:
+    """A new SNode tree of `program` (lang/program.py holds the trees and imports no SNode code)."""
+    tree = SNodeTree(program, len(program.trees))
+    program.trees.append(tree)
+    return tree
+
+
+def root_tree(program) -> SNodeTree:
+    """The tree `ti.root` builds into; a fresh one once the previous was materialised."""
+    if program._open_tree is None or program._open_tree.materialized:
+        program._open_tree = new_tree(program)
+    return program._open_tree

@@ -17,11 +17,10 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.autodiff.validate import differentiable, user_name, written_targets
 from simgrad.errors import AccessRuleError, GradientError, SimgradError
-from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
-from simgrad.passes.lower_access import indices_of
 
 
 class Tape:

@@ -252,7 +252,8 @@ def _access_kernel():
 
 
 def test_lower_access_expands_fields_into_offsets(golden):
-    from simgrad.passes.lower_access import indices_of, lower_access
+    from simgrad.ir.nodes import indices_of
+    from simgrad.passes.lower_access import lower_access
 
     k, loop = _access_kernel()
     parallel_strategy(k)
