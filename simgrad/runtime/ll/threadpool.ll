@@ -2,7 +2,7 @@
 ; Parameters (substituted by runtime/ll/__init__.py `load`): futex_nr and the futex operations _FUTEX_WAIT /
 ; _FUTEX_WAKE, the machine's spin hint (pause, pause_decl: empty where there is none), the job state word's
 ; bits (_CLOSED, _JOINED; _CLOSED_LAST = _CLOSED + 1), _INT_MAX, CHUNK_CAP, DEFAULT_SPIN_NS, and a4 / a8
-; (the atomics' alignments); N_STATS and the ${st_*} places, empty unless SIMGRAD_POOL_STATS=1 (then
+; (the atomics' alignments); N_STATS and the st_... places, empty unless SIMGRAD_POOL_STATS=1 (then
 ; threadpool.py `_stat_code` fills them with counter updates of @simgrad_pool_stats).
 
 @simgrad_cancel = global i32 0, align 64   ; set by SIGINT: tasks stop taking chunks, while loops exit
