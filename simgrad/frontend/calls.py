@@ -15,6 +15,7 @@ from simgrad.lang import ops
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
+from simgrad.lang.struct import Struct
 
 
 def _builtin_int(x=0, *rest):
@@ -208,8 +209,10 @@ def inline(comp, fn, args, kwargs, node):
     frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
-        if by_reference(ann) or not isinstance(value, (Expr, Matrix, int, float)) or isinstance(value, bool):
+        if by_reference(ann) or not isinstance(value, (Expr, Matrix, Struct, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
+        elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
+            frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):

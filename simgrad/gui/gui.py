@@ -346,7 +346,12 @@ class GUI:
     # -- state ------------------------------------------------------------------------------
     @property
     def running(self):
-        """False once the window was closed, ``close()`` was called, or ``running = False``."""
+        """False once the window was closed, ``close()`` was called, or ``running = False``; also after
+        ``SIMGRAD_UI_MAX_FRAMES`` shown frames (as ``ti.ui.Window``), so a headless ``while gui.running``
+        loop ends (oit_renderer.py's ran until a harness killed it)."""
+        limit = os.environ.get("SIMGRAD_UI_MAX_FRAMES")
+        if limit and self.frame >= int(limit):
+            return False
         return not (self._should_close or self._closed)
 
     @running.setter

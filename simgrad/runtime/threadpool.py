@@ -53,8 +53,82 @@ _SYMBOLS = [
 ]
 
 
-def pool_ir(futex_nr: int, machine: str) -> str:
-    """LLVM IR of the pool for one futex syscall number and machine (which picks the spin hint)."""
+#: SIMGRAD_POOL_STATS=1: the pool counts what it does in `@simgrad_pool_stats` (pool_stats()). Off, the IR
+#: has none of the counting code (the only change: sg_run_chunks returns how many chunks it ran).
+STAT_NAMES = (
+    "launches",          # jobs published to the workers
+    "direct",            # launches run on the calling thread alone (one thread, small range, pool busy)
+    "chunks_caller",     # chunks run by the calling thread (tid 0) in published jobs
+    "chunks_workers",    # chunks run by workers
+    "caller_spun",       # the caller ran out of chunks with workers still inside and waited spinning
+    "caller_slept",      # ... and the spin ran out: it slept on a futex (a worker inside was stalled)
+    "caller_wait_ns",    # total time the caller waited for workers after its last chunk
+    "caller_wait_max_ns",
+    "worker_spin_hits",  # a worker saw the next job while spinning
+    "worker_sleeps",     # a worker's spin ran out and it slept on a futex
+    "wakes",             # publishes that had to wake sleeping workers (futex wake)
+    "joins",             # workers that joined a job
+    "late",              # workers that came after the job was closed (they ran nothing)
+    "launch_ns",         # total time inside published launches
+    "spare14", "spare15",
+    # caller's share of a published job's chunks: < 1/4, < 1/2, < 3/4, < 1, all of them
+    "share_q1", "share_q2", "share_q3", "share_q4", "share_all",
+    # published launch durations: < 8 us, < 16, ..., < 4096 us, longer
+    "t_lt8us", "t_lt16us", "t_lt32us", "t_lt64us", "t_lt128us", "t_lt256us", "t_lt512us", "t_lt1ms",
+    "t_lt2ms", "t_lt4ms", "t_ge4ms",
+)
+N_STATS = 32
+
+
+def _stats_enabled() -> bool:
+    return os.environ.get("SIMGRAD_POOL_STATS", "0") not in ("", "0")
+
+
+def _slot(name: str, index: str) -> str:
+    """`%name` = the address of counter `index` (an i64 value or constant)."""
+    return f"%{name} = getelementptr [{N_STATS} x i64], ptr @simgrad_pool_stats, i64 0, i64 {index}"
+
+
+def _count(name: str, stat: str, value: str = "1", op: str = "add") -> str:
+    return "\n  ".join([_slot(f"stp.{name}", str(STAT_NAMES.index(stat))),
+                        f"%st.{name} = atomicrmw {op} ptr %stp.{name}, i64 {value} monotonic, align 8"])
+
+
+def _stat_code() -> dict[str, str]:
+    """What each `${st_*}` of threadpool.ll becomes with SIMGRAD_POOL_STATS (the names of the values it
+    reads, %mine, %n, %chunk, %ran, are the .ll file's)."""
+    q, b0 = STAT_NAMES.index("share_q1"), STAT_NAMES.index("t_lt8us")
+    share = [  # the caller's share of the job's chunks, in quarters
+        "%sh.c1 = sub i64 %chunk, 1", "%sh.n1 = add i64 %n, %sh.c1", "%sh.total = sdiv i64 %sh.n1, %chunk",
+        "%sh.m4 = mul i64 %mine, 4", "%sh.q = sdiv i64 %sh.m4, %sh.total", "%sh.all = icmp sge i64 %mine, %sh.total",
+        "%sh.b = select i1 %sh.all, i64 4, i64 %sh.q", f"%sh.k = add i64 %sh.b, {q}", _slot("sh.p", "%sh.k"),
+        "%sh.r = atomicrmw add ptr %sh.p, i64 1 monotonic, align 8"]
+    launch = [  # the launch, its time from %t0 on and its log2 duration bucket
+        "%te = call i64 @sg_now()", "%dl = sub i64 %te, %t0", _count("launch", "launches"),
+        _count("lns", "launch_ns", "%dl"), "%us = udiv i64 %dl, 1000", "%us1 = or i64 %us, 1",
+        "%lz = call i64 @llvm.ctlz.i64(i64 %us1, i1 true)", "%lg = sub i64 63, %lz",  # floor(log2(us))
+        "%lb0 = sub i64 %lg, 2", "%lneg = icmp slt i64 %lb0, 0", "%lb1 = select i1 %lneg, i64 0, i64 %lb0",
+        "%lbig = icmp sgt i64 %lb1, 10", "%lb = select i1 %lbig, i64 10, i64 %lb1",
+        f"%lk = add i64 %lb, {b0}", _slot("lp", "%lk"), "%lr = atomicrmw add ptr %lp, i64 1 monotonic, align 8"]
+    # %tc (after the caller's last chunk) is read in `waited`, which `work` dominates
+    waited = ["%tw = call i64 @sg_now()", "%dw = sub i64 %tw, %tc", _count("wns", "caller_wait_ns", "%dw"),
+              _count("wmax", "caller_wait_max_ns", "%dw", "umax")]
+    code = {
+        "st_direct": _count("direct", "direct"), "st_t0": "%t0 = call i64 @sg_now()",
+        "st_wakes": _count("wakes", "wakes"),
+        "st_mine": "\n  ".join([_count("mine", "chunks_caller", "%mine"), *share, "%tc = call i64 @sg_now()"]),
+        "st_spun": _count("spun", "caller_spun"), "st_slept": _count("slept", "caller_slept"),
+        "st_waited": "\n  ".join(waited), "st_launch": "\n  ".join(launch),
+        "st_hit": _count("hit", "worker_spin_hits"), "st_wsleep": _count("wsleep", "worker_sleeps"),
+        "st_late": _count("late", "late"), "st_join": _count("join", "joins"),
+        "st_wchunks": _count("wchunks", "chunks_workers", "%ran"),
+    }
+    return code
+
+
+def pool_ir(futex_nr: int, machine: str, stats: bool = False) -> str:
+    """LLVM IR of the pool for one futex syscall number and machine (which picks the spin hint); `stats`
+    fills the `${st_*}` places of threadpool.ll with the SIMGRAD_POOL_STATS counters (else they are empty)."""
     if machine in ("x86_64", "amd64"):
         pause_decl, pause = "declare void @llvm.x86.sse2.pause()", "call void @llvm.x86.sse2.pause()"
     elif machine in ("aarch64", "arm64"):
@@ -62,9 +136,25 @@ def pool_ir(futex_nr: int, machine: str) -> str:
     else:
         pause_decl, pause = "", ""
     a8, a4 = "align 8", "align 4"
+    counters = {k: (v if stats else "") for k, v in _stat_code().items()}
     return ll.load("threadpool", futex_nr=futex_nr, pause_decl=pause_decl, pause=pause, a8=a8, a4=a4,
                    DEFAULT_SPIN_NS=DEFAULT_SPIN_NS, CHUNK_CAP=CHUNK_CAP, _CLOSED=_CLOSED, _JOINED=_JOINED,
-                   _CLOSED_LAST=_CLOSED + 1, _INT_MAX=_INT_MAX, _FUTEX_WAIT=_FUTEX_WAIT, _FUTEX_WAKE=_FUTEX_WAKE)
+                   _CLOSED_LAST=_CLOSED + 1, _INT_MAX=_INT_MAX, _FUTEX_WAIT=_FUTEX_WAIT, _FUTEX_WAKE=_FUTEX_WAKE,
+                   N_STATS=N_STATS, **counters)
+
+
+def pool_stats() -> dict:
+    """The pool's counters since the last reset_pool_stats() (all zero unless SIMGRAD_POOL_STATS=1 was set
+    when the pool was first used in this process)."""
+    native = _get_native()
+    return {k: int(native.stats[i]) for i, k in enumerate(STAT_NAMES) if not k.startswith("spare")}
+
+
+def reset_pool_stats() -> None:
+    native = _get_native()
+    for i in range(N_STATS):
+        native.stats[i] = 0
+
 
 _PARALLEL_FOR_T = ctypes.CFUNCTYPE(
     None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64
@@ -77,7 +167,8 @@ class _Native:
     def __init__(self) -> None:
         machine = platform.machine().lower()
         self.supported = machine in _FUTEX_NR
-        addrs = get_jit().load(pool_ir(_FUTEX_NR.get(machine, -1), machine), _SYMBOLS)
+        self.stats_enabled = _stats_enabled()
+        addrs = get_jit().load(pool_ir(_FUTEX_NR.get(machine, -1), machine, self.stats_enabled), _SYMBOLS)
         self.parallel_for_address = addrs["simgrad_parallel_for"]
         self.parallel_for = _PARALLEL_FOR_T(self.parallel_for_address)
         self.worker_loop = ctypes.CFUNCTYPE(None, ctypes.c_int32, ctypes.c_int32)(
@@ -90,6 +181,7 @@ class _Native:
         self.install_sigint = ctypes.CFUNCTYPE(None)(addrs["simgrad_install_sigint"])
         #: the cancel flag every kernel reads (context slot CTX_CANCEL): 1 after Ctrl-C
         self.cancel_address = get_jit().code.global_address("simgrad_cancel")
+        self.stats = (ctypes.c_int64 * N_STATS).from_address(get_jit().code.global_address("simgrad_pool_stats"))
         self._sigint_installed = False
 
     def watch_sigint(self) -> None:

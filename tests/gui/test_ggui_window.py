@@ -192,3 +192,16 @@ def test_canvas_circles_per_vertex_radius():
     img = window.get_image_buffer_as_numpy()[..., 0]
     left, right = img[:50].sum(), img[50:].sum()
     assert abs(left - np.pi * 5 ** 2) < 2 * np.pi * 5 and abs(right - np.pi * 15 ** 2) < 2 * np.pi * 15
+
+
+def test_max_frames_ends_a_ti_gui_loop_too(monkeypatch):
+    """Issue 21: oit_renderer.py's `while gui.running: gui.show()` ran headless until a harness killed it."""
+    monkeypatch.setenv("SIMGRAD_UI_MAX_FRAMES", "4")
+    gui = ti.GUI("g", (16, 16), show_gui=False)
+    frames = 0
+    while gui.running and frames < 100:
+        gui.show()
+        frames += 1
+    assert frames == 4
+    monkeypatch.delenv("SIMGRAD_UI_MAX_FRAMES")
+    assert gui.running

@@ -107,6 +107,32 @@ def test_verify_reports_scope_and_type_errors():
         verify(k)
 
 
+def test_verify_runs_without_SIMGRAD_VERIFY_and_sees_sibling_blocks(monkeypatch):
+    """The pipeline verifies the frontend's output even outside tests (issue 21: a value computed in a loop
+    used after it reached LLVM's verifier, or folded into a silently wrong constant). A value of one
+    branch is not visible in the next branch either."""
+    from simgrad.passes.manager import run_pipeline
+
+    monkeypatch.setenv("SIMGRAD_VERIFY", "0")
+    k, b = new_kernel("bad_scope")
+    loop = serial_for(b, b.const(0, dt.i32), b.const(4, dt.i32))
+    with b.inside(loop.blocks[0]):
+        inner = b.binary(Op.MUL, b.const(3, dt.i32), b.const(2, dt.i32))
+    b.emit(Op.RET_STORE, None, (inner,), {"slot": 0})
+    with pytest.raises(IRVerifyError, match="outside its scope"):
+        run_pipeline(k)
+
+    k, b = new_kernel("sibling")
+    cond = b.binary(Op.LT, b.const(0, dt.i32), b.const(1, dt.i32))
+    branch = b.emit(Op.IF, None, (cond,), {}, nblocks=2)
+    with b.inside(branch.blocks[0]):
+        then = b.binary(Op.MUL, cond, cond)
+    with b.inside(branch.blocks[1]):
+        b.emit(Op.RET_STORE, None, (then,), {"slot": 0})
+    with pytest.raises(IRVerifyError, match="outside its scope"):
+        verify(k)
+
+
 def test_verify_checks_constants_are_placed_nowhere():
     """A constant is a value usable anywhere only because it sits in no block: the verifier holds that."""
     k, b = new_kernel("const_ok")

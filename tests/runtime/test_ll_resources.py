@@ -30,10 +30,12 @@ def _pool_variants():
     return [(m, threadpool._FUTEX_NR.get(m, -1)) for m in machines]
 
 
+@pytest.mark.parametrize("stats", [False, True])  # SIMGRAD_POOL_STATS's counters in the ${st_*} places
 @pytest.mark.parametrize("machine, futex_nr", _pool_variants())
-def test_threadpool_ll_verifies(machine, futex_nr):
-    text = threadpool.pool_ir(futex_nr, machine)
+def test_threadpool_ll_verifies(machine, futex_nr, stats):
+    text = threadpool.pool_ir(futex_nr, machine, stats)
     _verify(text)
+    assert ("atomicrmw add ptr %stp." in text) == stats
     assert f"@syscall(i64 {futex_nr}," in text
     assert ("sse2.pause" in text) == (machine in ("x86_64", "amd64"))
     assert ("aarch64.hint" in text) == (machine in ("aarch64", "arm64"))

@@ -2,7 +2,8 @@
 ; Parameters (substituted by runtime/ll/__init__.py `load`): futex_nr and the futex operations _FUTEX_WAIT /
 ; _FUTEX_WAKE, the machine's spin hint (pause, pause_decl: empty where there is none), the job state word's
 ; bits (_CLOSED, _JOINED; _CLOSED_LAST = _CLOSED + 1), _INT_MAX, CHUNK_CAP, DEFAULT_SPIN_NS, and a4 / a8
-; (the atomics' alignments).
+; (the atomics' alignments); N_STATS and the st_... places, empty unless SIMGRAD_POOL_STATS=1 (then
+; threadpool.py `_stat_code` fills them with counter updates of @simgrad_pool_stats).
 
 @simgrad_cancel = global i32 0, align 64   ; set by SIGINT: tasks stop taking chunks, while loops exit
 @sg_prev_sigint = internal global ptr null
@@ -19,11 +20,13 @@
 @sg_sleepers = internal global i32 0
 @sg_state = internal global i32 ${_CLOSED}, align 64
 @sg_caller_waiting = internal global i32 0
+@simgrad_pool_stats = global [${N_STATS} x i64] zeroinitializer, align 64   ; SIMGRAD_POOL_STATS counters
 
 declare i64 @syscall(i64, ...)
 declare i32 @clock_gettime(i32, ptr)
 declare i32 @sched_yield()
 declare ptr @signal(i32, ptr)
+declare i64 @llvm.ctlz.i64(i64, i1)
 ${pause_decl}
 
 define internal i64 @sg_now() {
@@ -68,7 +71,8 @@ out:
   ret i32 %cur
 }
 
-define internal void @sg_run_chunks(i32 %tid) {
+; Runs chunks of the current job until none is left; returns how many it ran.
+define internal i64 @sg_run_chunks(i32 %tid) {
 entry:
   %task = load atomic ptr, ptr @sg_task monotonic, ${a8}
   %clo = load atomic ptr, ptr @sg_closure monotonic, ${a8}
@@ -76,6 +80,7 @@ entry:
   %chunk = load atomic i64, ptr @sg_chunk monotonic, ${a8}
   br label %loop
 loop:
+  %ran = phi i64 [0, %entry], [%ran1, %body]
   %stop = load atomic i32, ptr @simgrad_cancel monotonic, ${a4}
   %stopped = icmp ne i32 %stop, 0
   br i1 %stopped, label %done, label %take
@@ -88,9 +93,10 @@ body:
   %lt = icmp slt i64 %hi0, %end
   %hi = select i1 %lt, i64 %hi0, i64 %end
   call void %task(ptr %clo, i64 %lo, i64 %hi, i32 %tid)
+  %ran1 = add i64 %ran, 1
   br label %loop
 done:
-  ret void
+  ret i64 %ran
 }
 
 define void @simgrad_parallel_for(ptr %task, ptr %clo, i64 %begin, i64 %end, i64 %grain) {
@@ -108,6 +114,7 @@ check:
   %serial = or i1 %single, %small
   br i1 %serial, label %direct, label %lock
 direct:                    ; on this thread, in chunks of at most CHUNK_CAP so Ctrl-C is seen
+  ${st_direct}
   br label %dloop
 dloop:
   %dlo = phi i64 [%begin, %direct], [%dhi, %dnext]
@@ -132,6 +139,7 @@ unlock_direct:
   store atomic i32 0, ptr @sg_busy release, ${a4}
   br label %direct
 publish:
+  ${st_t0}
   %nt64 = sext i32 %nt to i64
   %parts = mul i64 %nt64, 4
   %c0 = sdiv i64 %n, %parts
@@ -153,19 +161,23 @@ publish:
   br i1 %anysl, label %wake, label %work
 wake:
   call void @sg_futex(ptr @sg_gen, i64 ${_FUTEX_WAKE}, i32 ${_INT_MAX})
+  ${st_wakes}
   br label %work
 work:
-  call void @sg_run_chunks(i32 0)
+  %mine = call i64 @sg_run_chunks(i32 0)
+  ${st_mine}
   %st = atomicrmw or ptr @sg_state, i32 ${_CLOSED} seq_cst, ${a4}   ; late wakers now skip this job
   %in0 = and i32 %st, ${_JOINED}
   %none = icmp eq i32 %in0, 0
   br i1 %none, label %finish, label %spin
 spin:
+  ${st_spun}
   %s1 = call i32 @sg_spin_until(ptr @sg_state, i32 ${_JOINED}, i32 0, i1 true)
   %in1 = and i32 %s1, ${_JOINED}
   %d1 = icmp eq i32 %in1, 0
-  br i1 %d1, label %finish, label %sleep
+  br i1 %d1, label %waited, label %sleep
 sleep:
+  ${st_slept}
   store atomic i32 1, ptr @sg_caller_waiting seq_cst, ${a4}
   br label %sleep_loop
 sleep_loop:
@@ -178,8 +190,12 @@ do_wait:
   br label %sleep_loop
 woke:
   store atomic i32 0, ptr @sg_caller_waiting monotonic, ${a4}
+  br label %waited
+waited:                    ; the caller waited for workers still inside after its last chunk
+  ${st_waited}
   br label %finish
 finish:
+  ${st_launch}
   store atomic i32 0, ptr @sg_busy release, ${a4}
   br label %ret
 ret:
@@ -193,8 +209,12 @@ wait:
   %seen = phi i32 [ %seen0, %entry ], [ %g, %next_job ]
   %g0 = call i32 @sg_spin_until(ptr @sg_gen, i32 -1, i32 %seen, i1 false)
   %new0 = icmp ne i32 %g0, %seen
-  br i1 %new0, label %got, label %sleep
+  br i1 %new0, label %spin_hit, label %sleep
+spin_hit:
+  ${st_hit}
+  br label %got
 sleep:
+  ${st_wsleep}
   atomicrmw add ptr @sg_sleepers, i32 1 seq_cst, ${a4}
   br label %sleep_loop
 sleep_loop:
@@ -208,7 +228,7 @@ woke:
   atomicrmw sub ptr @sg_sleepers, i32 1 seq_cst, ${a4}
   br label %got
 got:
-  %g = phi i32 [ %g0, %wait ], [ %g1, %woke ]
+  %g = phi i32 [ %g0, %spin_hit ], [ %g1, %woke ]
   %sd = load atomic i32, ptr @sg_shutdown acquire, ${a4}
   %stop = icmp ne i32 %sd, 0
   br i1 %stop, label %exit, label %try_join
@@ -218,7 +238,10 @@ try_join:                  ; join the current job unless the caller already clos
 join_loop:
   %s = phi i32 [ %st, %try_join ], [ %s_cur, %join_retry ]
   %closed = icmp uge i32 %s, ${_CLOSED}
-  br i1 %closed, label %next_job, label %join_cas
+  br i1 %closed, label %late, label %join_cas
+late:                      ; the caller had closed the job already
+  ${st_late}
+  br label %next_job
 join_cas:
   %s1 = add i32 %s, 1
   %pair = cmpxchg ptr @sg_state, i32 %s, i32 %s1 acquire monotonic, ${a4}
@@ -228,7 +251,9 @@ join_retry:
   %s_cur = extractvalue { i32, i1 } %pair, 0
   br label %join_loop
 job:
-  call void @sg_run_chunks(i32 %tid)
+  ${st_join}
+  %ran = call i64 @sg_run_chunks(i32 %tid)
+  ${st_wchunks}
   %old = atomicrmw sub ptr @sg_state, i32 1 seq_cst, ${a4}
   %last = icmp eq i32 %old, ${_CLOSED_LAST}       ; closed, and we were the last one inside
   br i1 %last, label %check_caller, label %next_job
