@@ -98,6 +98,13 @@ class GpuFunction(FunctionText):
         return self._sregs[name]
 
     def tape(self) -> tuple[str, str, str]:
+        if self._tape is None and not self.in_task:
+            # the serial code's one tape spans its kernels (pushed before a loop, popped after the next one):
+            # the context's serial tape, its top in a scratch word that each launch starts at 0
+            base, cap = self.ctx_slot(abi.CTX_TAPE_SERIAL, "ptr"), self.ctx_slot(abi.CTX_TAPE_CAP, "i64")
+            top = self.tmp("ttop")
+            self.prologue.append(f"  {top} = getelementptr i64, ptr %ctx, i64 {self.gpu.serial_tape_top()}")
+            self._tape = (base, top, cap)
         if self._tape is None:
             n = self.gpu.tape_entries
             base, top = self.tmp("tbase"), self.tmp("ttop")
@@ -122,9 +129,21 @@ class GpuCodegen(KernelCodegen):
         self.launches: list[Launch] = []
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
         self.scratch_slots = 0
+        self.tape_top_slot: int | None = None  # the runtime zeroes this word before each launch
+        self._serial = False  # emitting a one-thread kernel
+
+    def serial_tape_top(self) -> int:
+        """The scratch word holding the serial tape's top (allocated on first use)."""
+        if self.tape_top_slot is None:
+            self.tape_top_slot = self.scratch_base() + self.scratch_slots
+            self.scratch_slots += 1
+        return self.tape_top_slot
+
+    def scratch_base(self) -> int:
+        return abi.CTX_ARGS + self.kernel.ret_slot + len(self.kernel.returns) + 1
 
     def error_code(self, kind: str, loc, detail) -> int:
-        if kind == "adstack":
+        if kind == "adstack" and not self._serial:  # the serial tape is the context's, as on the CPU
             detail = (f"{detail} (arch=cuda keeps at most {GPU_TAPE_LIMIT} entries per thread in local memory; "
                       f"this kernel's tape has {self.tape_entries})")
         return super().error_code(kind, loc, detail)
@@ -151,7 +170,7 @@ class GpuCodegen(KernelCodegen):
                 for b in s.blocks:
                     for x in walk(b):
                         seg_of[id(x)] = k
-        base = abi.CTX_ARGS + self.kernel.ret_slot + len(self.kernel.returns) + 1
+        base = self.scratch_base()
 
         def need(o: Stmt) -> None:
             if o.op is Op.CONST or id(o) in self.spills:
@@ -219,6 +238,7 @@ class GpuCodegen(KernelCodegen):
     def _serial_kernel(self, name: str, stmts: list[Stmt]) -> None:
         f = GpuFunction(self, name, self._params(name), in_task=False)
         self._inputs(f, stmts)
+        self._serial = True
         for s in stmts:
             LOWERING[s.op](self, f, s)
             slot = self.spills.get(id(s))
@@ -231,6 +251,7 @@ class GpuCodegen(KernelCodegen):
                 f.names[s] = p
             else:
                 f.emit(f"store {llvm_type(s.vtype)} {f.v(s)}, ptr {p}")
+        self._serial = False
         f.emit("ret void")
         self.module.functions.append(f.text())
         self.launches.append(Launch(name, 1, 1))
@@ -307,6 +328,8 @@ class GpuCodegen(KernelCodegen):
         lines = [f"define void @{self.symbol}(ptr %ctx) {{", "entry:",
                  f"  %pfp = getelementptr i64, ptr %ctx, i64 {abi.CTX_PFOR}", "  %pfor = load ptr, ptr %pfp",
                  "  %clo = alloca [4 x i64], align 8", "  store ptr %ctx, ptr %clo"]
+        if self.tape_top_slot is not None:
+            lines += [f"  %ttp = getelementptr i64, ptr %ctx, i64 {self.tape_top_slot}", "  store i64 0, ptr %ttp"]
         for k, ln in enumerate(self.launches):
             grid = ln.grid if ln.grid is not None else SIM_GRID
             lines += [f"  %fp{k} = getelementptr i64, ptr %clo, i64 1", f"  store ptr @{ln.symbol}, ptr %fp{k}",

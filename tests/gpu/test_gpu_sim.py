@@ -121,3 +121,34 @@ def test_deep_tape_is_a_located_overflow(sim):
     f(10)
     f.grad(10)  # a shallow one still works
     assert x.grad[0] != 0
+
+
+def test_serial_tape_spans_kernels(sim):
+    """Serial code pushes before a loop and its adjoint pops after the next: the serial tape is the context's,
+    its top a scratch word (a per-kernel tape gave NaN gradients)."""
+    from simgrad.testing import check_grads
+
+    ti.init(arch=ti.cuda, default_fp=ti.f64)
+    n = 20
+    x = ti.field(ti.f64, shape=n, needs_grad=True)
+    a = ti.field(ti.f64, shape=(), needs_grad=True)
+    y = ti.field(ti.f64, shape=n, needs_grad=True)
+    total = ti.field(ti.f64, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def f():
+        s = a[None] * 2.0
+        if s > 1.0:
+            s = ti.sqrt(s)
+        k = 0
+        while k < 3:
+            s = s * a[None] + 0.1
+            k += 1
+        for i in x:
+            y[i] = x[i] * s
+        total[None] = y[3] * y[5] + s
+
+    x.from_numpy(np.linspace(-1, 1, n))
+    for av in (0.8, 0.3):
+        a[None] = av
+        check_grads(f, [x, a], [y, total], rtol=1e-6, atol=1e-10)
