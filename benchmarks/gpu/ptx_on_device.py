@@ -35,6 +35,7 @@ def run_on_gpu(dev, kernel, args):
     fns = dev.load_module(ptx, [ln.symbol for ln in launches])
     ck.launch(*args)  # the CPU result, and the context buffer filled for these arguments
     buf = np.array([dptr[int(w)][0] if int(w) in dptr else w for w in ck.launcher.buf], dtype=np.int64)
+    buf = np.concatenate([buf, np.zeros(64, np.int64)])  # the GPU kernels' scratch words (the CPU has none)
     err = dev.alloc(8 * abi.ERR_WORDS)
     dev.to_device(err, np.zeros(abi.ERR_WORDS, np.int64))
     buf[abi.CTX_ERR] = err

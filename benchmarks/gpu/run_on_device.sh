@@ -33,6 +33,10 @@ log "$(nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,nohe
 log "python $($PY -c 'import sys, llvmlite, numpy; print(sys.version.split()[0], "llvmlite", llvmlite.__version__, "numpy", numpy.__version__)')"
 log "cuda available: $($PY -c 'from simgrad.runtime import device; print(device.cuda_available())' 2>&1)"
 export PATH=$PATH:/usr/local/cuda/bin
+if [ ! -f /usr/local/cuda/nvvm/libdevice/libdevice.10.bc ]; then  # else codegen/nvptx.py finds it
+  export SIMGRAD_LIBDEVICE=$(find /usr/local /opt -name libdevice.10.bc 2>/dev/null | head -1)
+fi
+log "libdevice: ${SIMGRAD_LIBDEVICE:-/usr/local/cuda/nvvm/libdevice/libdevice.10.bc}; ptxas: $(command -v ptxas)"
 
 # 1. simgrad's PTX on the GPU through CudaDriver, against the CPU (correctness + kernel ms)
 timeout 120 $PY benchmarks/gpu/ptx_on_device.py 2>&1 | tee "$OUT/ptx_on_device.txt"
