@@ -122,9 +122,10 @@ class GpuCodegen(KernelCodegen):
     with an entry `void symbol(ptr ctx)` that the CPU launcher calls unchanged)."""
 
     def __init__(self, kernel: Kernel, symbol: str, *, sim: bool, tape_entries: int = 256, debug: bool = False,
-                 fast_math: bool = True):
+                 fast_math: bool = True, export: bool = False):
         super().__init__(kernel, symbol, debug=debug, fast_math=fast_math)
         self.sim = sim
+        self.export = export  # sim: the segment functions visible, for runtime/device.py HostDriver launches
         self.tape_entries = min(max(int(tape_entries), 1), GPU_TAPE_LIMIT)
         self.launches: list[Launch] = []
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
@@ -218,7 +219,7 @@ class GpuCodegen(KernelCodegen):
 
     def _params(self, name: str) -> str:
         if self.sim:
-            return f"internal void @{name}(ptr %ctx, ptr %sreg)"
+            return f"{'' if self.export else 'internal '}void @{name}(ptr %ctx, ptr %sreg)"
         return f"ptx_kernel void @{name}(ptr %ctx)"
 
     def generate(self) -> str:
