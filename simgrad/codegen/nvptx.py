@@ -398,8 +398,27 @@ def _to_libdevice(text: str) -> str:
         name, sfx = m.group(1), m.group(2)
         return f"@__nv_{name}{'f' if sfx == 'f32' else ''}("
 
+    text = _widen_f16(text)
     text = re.sub(r"@llvm\.(" + "|".join(_NV_INTRINSIC) + r")\.(f32|f64)\(", intr, text)
     return re.sub(r"@(" + "|".join(_NV_LIBM) + r")(f?)\(", lambda m: f"@__nv_{m.group(1)}{m.group(2)}(", text)
+
+
+def _widen_f16(text: str) -> str:
+    """f16 math intrinsics (`@llvm.sin.f16`) become internal wrappers computing at f32: NVPTX selects none of
+    them (LLVM aborts the process), and f16 is a storage type here anyway (loads widen to f32)."""
+    decls = re.findall(r"^declare half @llvm\.(\w+)\.f16\(((?:half)(?:, half)*)\)$", text, flags=re.M)
+    for name, params in decls:
+        n = params.count("half")
+        args = ", ".join(f"half %a{k}" for k in range(n))
+        wide = [f"  %w{k} = fpext half %a{k} to float" for k in range(n)]
+        fn = f"@llvm.{name}.f32"
+        call = f"  %r = call float {fn}({', '.join(f'float %w{k}' for k in range(n))})"
+        body = "\n".join([f"define internal half @sg_h_{name}({args}) alwaysinline {{", "entry:", *wide, call,
+                          "  %h = fptrunc float %r to half", "  ret half %h", "}"])
+        decl = f"declare float {fn}({', '.join(['float'] * n)})"
+        text = text.replace(f"declare half @llvm.{name}.f16({params})", body if decl in text else f"{decl}\n{body}")
+        text = text.replace(f"@llvm.{name}.f16(", f"@sg_h_{name}(")
+    return text
 
 
 def libdevice_path() -> str | None:

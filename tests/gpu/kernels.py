@@ -141,17 +141,23 @@ def tape_adjoint():
 
 def half_and_ndarray():
     h = ti.field(ti.f16, shape=N)
+    m = ti.field(ti.f16, shape=N)
 
     @ti.kernel
     def k(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1)):
         for i in range(a.shape[0]):
             b[i] = a[i] * 2.0 + 1.0
             h[i] = ti.cast(a[i], ti.f16)
+            x16 = ti.cast(a[i], ti.f16)
+            m[i] = ti.sqrt(x16) + ti.sin(x16) + ti.sin(a[i]) * 0.0  # f16 and f32 math in one kernel
 
     a = np.linspace(0, 3, N).astype(np.float32)
     b = np.zeros(N, np.float32)
     k(a, b)
-    return [(b, a * 2 + 1, 1e-6), (h.to_numpy().astype(np.float32), a.astype(np.float16).astype(np.float32), 0)]
+    x16 = a.astype(np.float16).astype(np.float32)
+    m_ref = (np.sqrt(x16).astype(np.float16).astype(np.float32) + np.sin(x16).astype(np.float16).astype(np.float32))
+    return [(b, a * 2 + 1, 1e-6), (h.to_numpy().astype(np.float32), x16, 0),
+            (m.to_numpy().astype(np.float32), m_ref, 4e-3)]
 
 
 def serial_and_return():
