@@ -64,14 +64,12 @@ def resolve(arch) -> Arch:
     arch = requested(arch)
     if arch is None:
         return cpu
-    if isinstance(arch, (list, tuple)):
-        for a in arch:
-            if a.name in ("cuda", "gpu") and gpu_mode() is not None:
-                return cuda
-    if isinstance(arch, (list, tuple)):
+    if isinstance(arch, (list, tuple)):  # the first that is available, in order
         for a in arch:
             if a.name in _CPU:
                 return cpu
+            if a.name in ("cuda", "gpu") and gpu_mode() is not None:
+                return cuda
         arch = arch[0] if arch else cpu
     if arch.name in _CPU:
         return cpu

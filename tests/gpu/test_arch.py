@@ -54,3 +54,13 @@ def test_real_gpu_waits_for_the_runtime(no_gpu, monkeypatch):
     ti.init(arch=ti.cuda)
     assert ti.lang.impl.current_cfg().arch is ti.cuda
     ti.init(arch=ti.cpu)
+
+
+def test_arch_list_takes_the_first_available(no_gpu, monkeypatch):
+    ti.init(arch=[ti.cpu, ti.cuda])
+    assert ti.lang.impl.current_cfg().arch is ti.cpu
+    monkeypatch.setenv("SIMGRAD_GPU_SIM", "1")
+    ti.init(arch=[ti.cuda, ti.cpu])
+    assert ti.lang.impl.current_cfg().arch is ti.cuda
+    ti.init(arch=[ti.vulkan, ti.cpu])
+    assert ti.lang.impl.current_cfg().arch is ti.cpu
