@@ -440,7 +440,8 @@ def compile_ptx(text: str, kernels: set[str], cc: str = "sm_80") -> str:
     llvm.initialize_all_asmprinters()
     tm = llvm.Target.from_triple(TRIPLE).create_target_machine(cpu=cc, opt=3)
     text = _to_libdevice(text)
-    mod = llvm.parse_assembly(text)
+    context = llvm.create_context()  # what LLVM interns (libdevice's constants too) dies with it
+    mod = llvm.parse_assembly(text, context=context)
     mod.triple = TRIPLE
     mod.data_layout = str(tm.target_data)
     mod.verify()
@@ -449,7 +450,7 @@ def compile_ptx(text: str, kernels: set[str], cc: str = "sm_80") -> str:
         if path is None:
             raise RuntimeError("arch=cuda math needs libdevice.10.bc (set SIMGRAD_LIBDEVICE or CUDA_HOME)")
         with open(path, "rb") as fh:
-            lib = llvm.parse_bitcode(fh.read())
+            lib = llvm.parse_bitcode(fh.read(), context=context)
         lib.triple = TRIPLE
         lib.data_layout = mod.data_layout
         mod.link_in(lib)
@@ -459,7 +460,10 @@ def compile_ptx(text: str, kernels: set[str], cc: str = "sm_80") -> str:
     pto = llvm.create_pipeline_tuning_options(speed_level=3)
     pb = llvm.create_pass_builder(tm, pto)
     pb.getModulePassManager().run(mod, pb)
-    return tm.emit_assembly(mod)
+    ptx = tm.emit_assembly(mod)
+    mod.close()
+    del mod, context
+    return ptx
 
 
 def ptxas_path() -> str | None:
