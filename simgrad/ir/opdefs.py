@@ -241,7 +241,8 @@ def _abs(t: DataType, a):
 
 
 def _rsqrt(t: DataType, a: float) -> float:
-    return N.ieee(lambda x: x.dtype.type(1) / np.sqrt(x), t, a)  # 1 / sqrt: two roundings, as emitted
+    """1 / sqrt(a) as emitted: two instructions, each rounded to `t` (f16: each promoted and rounded back)."""
+    return N.ieee(lambda one, s: one / s, t, 1.0, N.ieee(np.sqrt, t, a))
 
 
 # -- reverse rules ---------------------------------------------------------------------------------------

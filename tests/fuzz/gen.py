@@ -17,8 +17,23 @@ import random
 
 import numpy as np
 
+from simgrad import dtypes as dt
+from simgrad.ir.ops import OPS
+
 T = 4  # iterations of the outer (parallel) loop
 N_INT, N_F64, N_F32 = 3, 3, 2
+
+
+# the registry's math functions (ir/opdefs.py), every one generated: a new entry needs nothing here
+MATH = [d for d in OPS.values() if d.export]
+SMOOTH_MATH = [d for d in MATH if d.vjp is not None and not d.zero_gradient]
+
+
+def math_call(d, args: list[str]) -> str:
+    """A call of the math function `d` on `args`, each mapped into the entry's sample range (where it is
+    defined and smooth) by a tanh, so any value may come in."""
+    inner = [f"({(lo + hi) / 2!r} + {(hi - lo) / 2!r} * ti.tanh({a}))" for (lo, hi), a in zip(d.sample, args)]
+    return f"{'ti' if 'ti' in d.export else 'ti.math'}.{d.name}({', '.join(inner)})"
 
 
 class _Gen:
@@ -62,8 +77,10 @@ class _Gen:
         if d <= 0 or r.random() < 0.25:
             return r.choice([f"x{r.randrange(N_F64)}", f"{r.uniform(-3, 3):.3f}", f"af[{r.randrange(T)}]",
                              "ti.cast(t, ti.f64)"])
-        k = r.randrange(12)
+        k = r.randrange(13)
         a, b = self.f64_expr(d - 1), self.f64_expr(d - 1)
+        if k == 12:
+            return math_call(r.choice(MATH), [a, b])
         if k == 0:
             return f"({a} + {b})"
         if k == 1:
@@ -222,6 +239,16 @@ class RefNamespace:
         raise NotImplementedError  # replaced by the rewrite in reference_source
 
 
+def _reference_math(d):
+    """The registry function on f64 values: the same libm call the kernel makes."""
+    return staticmethod(lambda *v: np.float64(d.fold(dt.f64, *(float(x) for x in v))))
+
+
+for _d in MATH:
+    setattr(RefNamespace, _d.name, _reference_math(_d))
+RefNamespace.math = RefNamespace  # type: ignore[attr-defined]  # ti.math.<name> in the reference
+
+
 def _minmax(fn, a, b):
     """min/max as compiled: integers stay i32 (a Python literal does not widen them), floats drop a NaN."""
     if isinstance(a, (float, np.floating)) or isinstance(b, (float, np.floating)):
@@ -256,7 +283,8 @@ def _smooth(r: random.Random, d: int, names: list[str]) -> str:
     a, b = _smooth(r, d - 1, names), _smooth(r, d - 1, names)
     return r.choice([f"({a} + {b})", f"({a} - {b})", f"({a} * {b})", f"({a} / ({b} * {b} + 1.0))",
                      f"ti.sin({a})", f"ti.cos({a})", f"ti.exp(ti.sin({a}))", f"ti.tanh({a})",
-                     f"ti.sqrt({a} * {a} + 0.5)", f"({a}) ** 2", f"ti.atan2({a}, {b} * {b} + 1.0)"])
+                     f"ti.sqrt({a} * {a} + 0.5)", f"({a}) ** 2", f"ti.atan2({a}, {b} * {b} + 1.0)",
+                     math_call(r.choice(SMOOTH_MATH), [a, b])])
 
 
 GRAD_HEAD = """import simgrad as ti
