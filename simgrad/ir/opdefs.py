@@ -88,6 +88,7 @@ class Op(Enum):
     EXP = auto()
     LOG = auto()
     TANH = auto()
+    LOG1P = auto()
     FLOOR = auto()
     CEIL = auto()
     ROUND = auto()
@@ -359,6 +360,8 @@ _DEFS = [
     _math(Op.EXP, Intrinsic("exp"), math.exp, lambda b, g, x: (b.mul(g, b.exp(x)),)),
     _math(Op.LOG, Intrinsic("log"), math.log, lambda b, g, x: (b.div(g, x),), ((0.1, 9.0),)),
     _math(Op.TANH, Libm("tanh"), math.tanh, _tanh),
+    _math(Op.LOG1P, Libm("log1p"), math.log1p, lambda b, g, x: (b.div(g, b.add(x, 1.0)),), ((-0.9, 4.0),),
+          ("math",)),  # not in Taichi 1.7.4
 ]
 
 OPS: dict[Op, OpDef] = {d.op: d for d in _DEFS}
