@@ -89,6 +89,7 @@ class Op(Enum):
     LOG = auto()
     TANH = auto()
     LOG1P = auto()
+    EXPM1 = auto()
     FLOOR = auto()
     CEIL = auto()
     ROUND = auto()
@@ -362,6 +363,7 @@ _DEFS = [
     _math(Op.TANH, Libm("tanh"), math.tanh, _tanh),
     _math(Op.LOG1P, Libm("log1p"), math.log1p, lambda b, g, x: (b.div(g, b.add(x, 1.0)),), ((-0.9, 4.0),),
           ("math",)),  # not in Taichi 1.7.4
+    _math(Op.EXPM1, Libm("expm1"), math.expm1, lambda b, g, x: (b.mul(g, b.exp(x)),), export=("math",)),
 ]
 
 OPS: dict[Op, OpDef] = {d.op: d for d in _DEFS}
