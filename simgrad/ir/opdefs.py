@@ -90,6 +90,7 @@ class Op(Enum):
     TANH = auto()
     LOG1P = auto()
     EXPM1 = auto()
+    CBRT = auto()
     FLOOR = auto()
     CEIL = auto()
     ROUND = auto()
@@ -289,6 +290,11 @@ def _tanh(b, g, x):
     return (b.mul(g, b.sub(1.0, b.mul(t, t))),)
 
 
+def _cbrt(b, g, x):
+    c = b.cbrt(x)
+    return (b.div(g, b.mul(b.mul(c, c), 3.0)),)
+
+
 def _python_rsqrt(x):
     return 1.0 / math.sqrt(x)
 
@@ -364,6 +370,7 @@ _DEFS = [
     _math(Op.LOG1P, Libm("log1p"), math.log1p, lambda b, g, x: (b.div(g, b.add(x, 1.0)),), ((-0.9, 4.0),),
           ("math",)),  # not in Taichi 1.7.4
     _math(Op.EXPM1, Libm("expm1"), math.expm1, lambda b, g, x: (b.mul(g, b.exp(x)),), export=("math",)),
+    _math(Op.CBRT, Libm("cbrt"), math.cbrt, _cbrt, ((0.1, 8.0),), ("math",)),  # not differentiable at 0
 ]
 
 OPS: dict[Op, OpDef] = {d.op: d for d in _DEFS}
