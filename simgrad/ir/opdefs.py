@@ -91,6 +91,7 @@ class Op(Enum):
     LOG1P = auto()
     EXPM1 = auto()
     CBRT = auto()
+    HYPOT = auto()
     FLOOR = auto()
     CEIL = auto()
     ROUND = auto()
@@ -295,6 +296,11 @@ def _cbrt(b, g, x):
     return (b.div(g, b.mul(b.mul(c, c), 3.0)),)
 
 
+def _hypot(b, g, x, y):
+    h = b.hypot(x, y)
+    return b.div(b.mul(g, x), h), b.div(b.mul(g, y), h)
+
+
 def _python_rsqrt(x):
     return 1.0 / math.sqrt(x)
 
@@ -371,6 +377,7 @@ _DEFS = [
           ("math",)),  # not in Taichi 1.7.4
     _math(Op.EXPM1, Libm("expm1"), math.expm1, lambda b, g, x: (b.mul(g, b.exp(x)),), export=("math",)),
     _math(Op.CBRT, Libm("cbrt"), math.cbrt, _cbrt, ((0.1, 8.0),), ("math",)),  # not differentiable at 0
+    _math(Op.HYPOT, Libm("hypot"), math.hypot, _hypot, ((-3.0, 3.0), (0.2, 3.0)), ("math",)),  # kink at (0, 0)
 ]
 
 OPS: dict[Op, OpDef] = {d.op: d for d in _DEFS}

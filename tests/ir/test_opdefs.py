@@ -83,6 +83,7 @@ ROWS: dict[Op, tuple[tuple[float, ...], ...] | None] = {
     Op.LOG1P: ((0.3,), (-0.5,)),  # ti.math.log1p: simgrad's own, Taichi 1.7.4 has none
     Op.EXPM1: ((0.3,), (-2.5,)),  # ti.math.expm1: simgrad's own, Taichi 1.7.4 has none
     Op.CBRT: ((0.3,), (-2.5,)),  # ti.math.cbrt: simgrad's own, Taichi 1.7.4 has none
+    Op.HYPOT: ((0.3, -1.2), (-2.5, 0.7)),  # ti.math.hypot: simgrad's own, Taichi 1.7.4 has none
 }
 
 INT_TYPES = [dt.i8, dt.i16, dt.i32, dt.i64, dt.u8, dt.u16, dt.u32, dt.u64]
