@@ -296,3 +296,12 @@ def test_fuzz_generator_generates_every_math_function(op, tmp_path):
         mod.make(o)(a, b)
         want = eval(call, {"ti": gen.RefNamespace, "a": np.float64(a), "b": np.float64(b)})
         assert o[None] == pytest.approx(float(want), rel=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(ti.lang.ops.MATH), ids=str)
+def test_math_functions_are_named_for_the_kernel_cache(name):
+    """The kernel cache describes a library function by module and qualified name: each generated math
+    function must be findable under its own (they were all `_math.<locals>.f`, so a kernel calling a global
+    `fn = ti.cos` got the cached kernel of `fn = ti.sin`)."""
+    fn = ti.lang.ops.MATH[name]
+    assert getattr(sys.modules[fn.__module__], fn.__qualname__) is fn
