@@ -6,7 +6,7 @@
     is not compared where LLVM may choose it: `nsz` instructions and min/max of equal zeros);
 (b) its VJP (kernel.grad) and JVP (FwdMode) agree with central differences in f64 at the points of its row;
 (c) it lowers: (a) compiles a kernel using it for every type, and codegen reaches it through LOWERING;
-(d) the fuzz generator (tests/fuzz/gen.py) generates every math function from the registry.
+(d) the fuzz generator (tests/fuzz/gen.py) draws every op from the registry and writes it correctly.
 
 `ROWS` is the parameter table: one row per registry op; an entry without a row fails
 test_every_registry_op_has_a_row. A row holds the f64 points of (b) (None: the op is not differentiable,
@@ -278,24 +278,35 @@ def test_vjp_and_jvp_match_central_differences(op):
             assert forward[j, i] == pytest.approx(fd, rel=1e-6, abs=1e-8), f"JVP {op.name}{point} d/dx{i}"
 
 
-@pytest.mark.parametrize("op", [op for op in OPS if OPS[op].export], ids=lambda op: op.name)
-def test_fuzz_generator_generates_every_math_function(op, tmp_path):
-    """(d) tests/fuzz/gen.py takes its math functions from the registry: each appears in generated programs,
-    and the call it writes compiles and matches the reference namespace's value."""
+@pytest.mark.parametrize("op", list(OPS), ids=lambda op: op.name)
+def test_fuzz_generator_generates_every_op(op, tmp_path):
+    """(d) tests/fuzz/gen.py draws its ops from the registry (math functions by name, the rest as it spells
+    them, comparisons as conditions): each appears in generated programs, and what it writes compiles and
+    matches the reference namespace (numpy scalars, the registry's libm) on i32 and f64 operands."""
+    if op in gen.COMPARISON:
+        texts = "".join(gen.forward_case(seed, 8)[0] for seed in range(40))
+        assert f" {gen.COMPARISON[op]} " in texts
+        return
+    assert op in gen.INT_OPS or op in gen.FLOAT_OPS, f"the fuzz generator cannot write {op.name}"
     d = OPS[op]
-    assert d in gen.MATH
-    call = gen.math_call(d, ["a", "b"][: d.arity])
-    texts = "".join(gen.forward_case(seed, 8)[0] for seed in range(150))
-    assert f".{d.name}((" in texts, f"the generator never wrote {d.name}"
-    src = f"import simgrad as ti\n\n\ndef make(o):\n    @ti.kernel\n    def k(a: ti.f64, b: ti.f64):\n" \
-          f"        o[None] = {call}\n\n    return k\n"
+    texts = "".join(gen.forward_case(seed, 8)[0] for seed in range(300))
+    if d.export:
+        assert f".{d.name}((" in texts, f"the generator never wrote {d.name}"
     ti.init(arch=ti.cpu, default_fp=ti.f64)
-    o = ti.field(ti.f64, ())
-    mod = gen._load(tmp_path, f"opdefs_{d.name}", src)
-    for a, b in ((0.3, -1.7), (-2.0, 0.6)):
-        mod.make(o)(a, b)
-        want = eval(call, {"ti": gen.RefNamespace, "a": np.float64(a), "b": np.float64(b)})
-        assert o[None] == pytest.approx(float(want), rel=1e-12)
+    for ty, pairs in (("i32", ((7, -3), (-12345, 9), (2**31 - 1, 2))), ("f64", ((0.3, -1.7), (-2.0, 0.6)))):
+        if op not in (gen.INT_OPS if ty == "i32" else gen.FLOAT_OPS):
+            continue
+        call = gen.op_expr(op, "a", "b")
+        src = f"import simgrad as ti\n\n\ndef make(o):\n    @ti.kernel\n    def k(a: ti.{ty}, b: ti.{ty}):\n" \
+              f"        o[None] = {call}\n\n    return k\n"
+        o = ti.field(getattr(ti, ty), ())
+        mod = gen._load(tmp_path, f"opdefs_{op.name}_{ty}", src)
+        for a, b in pairs:
+            mod.make(o)(a, b)
+            scalar = np.int32 if ty == "i32" else np.float64
+            with np.errstate(all="ignore"):
+                want = eval(call, {"ti": gen.RefNamespace, "a": scalar(a), "b": scalar(b)})
+            assert o[None] == pytest.approx(float(want), rel=1e-12), f"{call} at {a}, {b}"
 
 
 @pytest.mark.parametrize("name", sorted(ti.lang.ops.MATH), ids=str)
