@@ -135,7 +135,7 @@ def ieee(fn, t: DataType, *vals: float) -> float:
 
 
 def c_div(a: int, b: int) -> int:
-    """C division (toward zero), exact for any Python ints."""
+    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
     q = abs(a) // abs(b)
     return q if (a < 0) == (b < 0) else -q
 

@@ -127,12 +127,6 @@ def _binary(pyfn, irfn):
     return op
 
 
-def _c_div(a: int, b: int) -> int:
-    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
-    q = builtins.abs(a) // builtins.abs(b)
-    return q if (a < 0) == (b < 0) else -q
-
-
 def _py_div(a, b):
     return a / b
 
@@ -217,7 +211,7 @@ mul = _binary(lambda a, b: a * b, lambda a, b: _emit2(Op.MUL, a, b))
 truediv = _binary(_py_div, _ir_truediv)
 floordiv = _binary(lambda a, b: a // b, _ir_floordiv)
 mod = _binary(lambda a, b: a % b, _ir_mod)
-raw_div = _binary(lambda a, b: _c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
+raw_div = _binary(lambda a, b: numeric.c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
                   lambda a, b: _emit2(Op.RAW_DIV if not a.dtype.is_float else Op.DIV, a, b))
 raw_mod = _binary(lambda a, b: math.fmod(a, b) if isinstance(a, float) or isinstance(b, float)
                   else int(math.fmod(a, b)), lambda a, b: _emit2(Op.RAW_MOD, a, b))

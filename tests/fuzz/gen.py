@@ -27,7 +27,8 @@ N_INT, N_F64, N_F32 = 3, 3, 2
 # the registry's math functions (ir/opdefs.py), every one generated: a new entry needs nothing here
 MATH = [d for d in OPS.values() if d.export]
 # how kernels (and the reference, on numpy scalars) write the registry's other ops, operands kept where both
-# agree (divisors in [8, 14], shift amounts in [0, 3] so literal-only chains stay in i32, a positive base); comparisons are written by cond()
+# agree (divisors in [8, 14], shift amounts in [0, 3] so literal-only chains stay in i32, a positive
+# base); comparisons are written by cond()
 SPELLING = {
     Op.ADD: "({a} + {b})", Op.SUB: "({a} - {b})", Op.MUL: "({a} * {b})", Op.DIV: "({a} / ({b} * {b} + 1.0))",
     Op.FLOORDIV: "({a} // ({b} % 7 + 8))", Op.MOD: "({a} % ({b} % 7 + 8))",
