@@ -93,7 +93,7 @@ def lower_elementwise(f, s) -> str:
     if isinstance(how, Compare):
         c, r = f.tmp("cmp"), f.tmp("v")
         if t.is_float:
-            f.emit(f"{c} = fcmp {how.ordered} {t.llvm} {args[0]}, {args[1]}")
+            f.emit(f"{c} = fcmp {how.fcmp} {t.llvm} {args[0]}, {args[1]}")
         else:
             f.emit(f"{c} = icmp {how.signed if t.is_signed else how.unsigned} {t.llvm} {args[0]}, {args[1]}")
         f.emit(f"{r} = zext i1 {c} to i32")

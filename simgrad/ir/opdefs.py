@@ -146,7 +146,7 @@ class Compare:
     """icmp (signed / unsigned predicate) or fcmp, widened to an i32 0 or 1."""
     signed: str
     unsigned: str
-    ordered: str
+    fcmp: str
 
 
 @dataclass(frozen=True)
@@ -163,6 +163,7 @@ SAME, I32 = "same", "i32"  # result types: the operands' type, or i32 (0 or 1)
 
 @dataclass(frozen=True)
 class OpDef:
+    """Everything about one elementwise primitive; the compiler's per-op tables are read off these."""
     op: Op
     arity: int
     domain: str  # ANY, FLOAT or INT
@@ -317,8 +318,8 @@ def _math(op: Op, lowering: Lowering, python: Callable, vjp: Callable | None, sa
                  python=python, sample=sample)
 
 
-def _cmp(op: Op, fn: Callable, signed: str, unsigned: str, ordered: str) -> OpDef:
-    low = Compare(signed, unsigned, ordered)
+def _cmp(op: Op, fn: Callable, signed: str, unsigned: str, fcmp: str) -> OpDef:
+    low = Compare(signed, unsigned, fcmp)
     return OpDef(op, 2, ANY, _compare(fn), low, low, result=I32, zero_gradient=True)
 
 
