@@ -71,19 +71,13 @@ from simgrad.lang.struct import Struct, StructField, dataclass
 from simgrad.lang.ndarray import MatrixNdarray, Ndarray, ScalarNdarray, VectorNdarray, ndarray
 from simgrad.lang.ops import (
     abs,
-    acos,
-    asin,
-    atan2,
     bit_cast,
     bit_shr,
     cast,
     ceil,
-    cos,
-    exp,
     floor,
     frexp,
     global_thread_idx,
-    log,
     logical_and,
     logical_not,
     logical_or,
@@ -96,14 +90,12 @@ from simgrad.lang.ops import (
     raw_div,
     raw_mod,
     round,
-    rsqrt,
     select,
-    sin,
-    sqrt,
-    tan,
-    tanh,
     zero,
 )
+from simgrad.lang.ops import math_functions as _math_functions
+
+globals().update(_math_functions("ti"))  # the registry's math functions (ir/opdefs.py): ti.sin, ti.atan2, ...
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import Layout, ref, sparse_matrix_builder, template, types
 from simgrad.lang.atomics import (

@@ -19,7 +19,7 @@ from simgrad.codegen.access import lower_check_index as check_index
 from simgrad.codegen.access import lower_global_ptr as global_address
 from simgrad.codegen.sparse import lower_sparse_action, lower_sparse_cell, lower_tree_root
 from simgrad.ir.nodes import Block, Kernel, Stmt
-from simgrad.ir.ops import Op
+from simgrad.ir.ops import OPS, Op
 from simgrad.passes.parallel_strategy import PAIR, PLAIN, PRIVATE, REDUCE
 from simgrad.passes.privatize import access_key
 from simgrad.runtime import abi
@@ -573,12 +573,8 @@ def lower_ret_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 
 # -- arithmetic --------------------------------------------------------------------------------------
-def lower_binary_op(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.lower_binary(f, s)
-
-
-def lower_unary_op(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.lower_unary(f, s)
+def lower_elementwise(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    f.names[s] = arith.lower_elementwise(f, s)
 
 
 def lower_cast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -714,12 +710,7 @@ LOWERING: dict[Op, Lowering] = {
     Op.GLOBAL_LOAD: lower_global_load,
     Op.GLOBAL_STORE: lower_global_store, Op.ATOMIC: lower_atomic, Op.ARRAY_SHAPE: lower_array_shape,
     Op.RET_STORE: lower_ret_store,
-    **{op: lower_binary_op for op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.RAW_MOD,
-                                      Op.POW, Op.MIN, Op.MAX, Op.BIT_AND, Op.BIT_OR, Op.BIT_XOR, Op.SHL, Op.SHR,
-                                      Op.ATAN2, Op.LT, Op.LE, Op.GT, Op.GE, Op.EQ, Op.NE)},
-    **{op: lower_unary_op for op in (Op.NEG, Op.BIT_NOT, Op.LOGICAL_NOT, Op.SQRT, Op.RSQRT, Op.SIN, Op.COS, Op.TAN,
-                                     Op.ASIN, Op.ACOS, Op.EXP, Op.LOG, Op.TANH, Op.FLOOR, Op.CEIL, Op.ROUND,
-                                     Op.ABS)},
+    **{op: lower_elementwise for op in OPS},  # every registry op (ir/opdefs.py), as its entry says
     Op.CAST: lower_cast, Op.BITCAST: lower_bitcast, Op.SELECT: lower_select,
     Op.IF: lower_if, Op.RANGE_FOR: lower_range_for, Op.WHILE: lower_while, Op.BREAK: lower_break,
     Op.CONTINUE: lower_continue,

@@ -7,6 +7,8 @@ they also work in Python scope. Results keep the precision of their inputs."""
 from __future__ import annotations
 
 import math as _m
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from simgrad import dtypes as _dt
 from simgrad.lang import ops
@@ -25,9 +27,13 @@ ivec2, ivec3, ivec4 = _vector(2, int), _vector(3, int), _vector(4, int)
 uvec2, uvec3, uvec4 = _vector(2, _dt.u32), _vector(3, _dt.u32), _vector(4, _dt.u32)
 mat2, mat3, mat4 = _matrix(2, 2), _matrix(3, 3), _matrix(4, 4)
 
-sqrt, sin, cos, tan, asin, acos, atan2 = ops.sqrt, ops.sin, ops.cos, ops.tan, ops.asin, ops.acos, ops.atan2
-exp, log, tanh, floor, ceil, round = ops.exp, ops.log, ops.tanh, ops.floor, ops.ceil, ops.round  # noqa: A001
+# the registry's math functions exported under ti.math (ir/opdefs.py: sqrt, sin, ..., atan2, ...)
+globals().update(ops.math_functions("math"))
+floor, ceil, round = ops.floor, ops.ceil, ops.round  # noqa: A001
 min, max, abs, pow = ops.min, ops.max, ops.abs, ops.pow  # noqa: A001
+if TYPE_CHECKING:
+    def __getattr__(name: str) -> Callable[..., Any]:
+        """The registry's functions set above, for the type checker."""
 
 
 def dot(a, b):
