@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 from simgrad.codegen.llvm import LOWERING, FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
 from simgrad.ir.nodes import Kernel, Stmt, walk
+from simgrad.ir.opdefs import OPS, Libm
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
 from simgrad.runtime import abi
@@ -43,11 +44,8 @@ UNSUPPORTED = {Op.PRINT: "print", Op.RANDOM: "ti.random", Op.SNODE_OP: "sparse S
                Op.SPARSE_CELL: "sparse SNodes", Op.SPARSE_ACTION: "sparse SNodes", Op.TREE_ROOT: "sparse SNodes"}
 
 # statements without effects or memory reads: a later segment recomputes them instead of spilling them
-PURE = {Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV,
-        Op.RAW_MOD, Op.NEG, Op.POW, Op.MIN, Op.MAX, Op.BIT_AND, Op.BIT_OR, Op.BIT_XOR, Op.BIT_NOT, Op.SHL, Op.SHR,
-        Op.LOGICAL_NOT, Op.CAST, Op.BITCAST, Op.SELECT, Op.SQRT, Op.RSQRT, Op.SIN, Op.COS, Op.TAN, Op.ASIN,
-        Op.ACOS, Op.ATAN2, Op.EXP, Op.LOG, Op.TANH, Op.FLOOR, Op.CEIL, Op.ROUND, Op.ABS, Op.LT, Op.LE, Op.GT,
-        Op.GE, Op.EQ, Op.NE}
+# (every elementwise op of the registry, ir/opdefs.py, is one)
+PURE = {Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.CAST, Op.BITCAST, Op.SELECT, *OPS}
 
 SREGS = ("tid.x", "ntid.x", "ctaid.x", "nctaid.x")
 
@@ -386,9 +384,10 @@ exit:
 
 
 # -- PTX -----------------------------------------------------------------------------------------------
-# LLVM math the NVPTX backend cannot select, and libm calls the host would resolve: libdevice's names
+# LLVM math intrinsics the NVPTX backend cannot select (it does sqrt, fabs, floor, ceil, minnum, ...), and every
+# C math call of the registry (ir/opdefs.py `Libm`): libdevice has each as `__nv_<name>` / `__nv_<name>f`
 _NV_INTRINSIC = ("sin", "cos", "exp", "log", "pow", "round", "tan", "exp2", "log2", "log10")
-_NV_LIBM = ("tan", "asin", "acos", "atan", "atan2", "tanh", "sinh", "cosh", "pow", "fmod", "exp", "log")
+_NV_LIBM = tuple(sorted({d.lower_float.name for d in OPS.values() if isinstance(d.lower_float, Libm)}))
 
 
 def _to_libdevice(text: str) -> str:

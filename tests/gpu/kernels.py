@@ -31,6 +31,27 @@ def arith_math():
     return [(x.to_numpy(), ref, 1e-5), (y.to_numpy(), ((i * 7) // 3 - i % 5 + (i << 2)) ^ 9, 0)]
 
 
+def registry_math():
+    """The registry's C math calls (ir/opdefs.py Libm) map to libdevice on the GPU: f32 and f64."""
+    x = ti.field(ti.f32, shape=N)
+    y = ti.field(ti.f64, shape=N)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            v = i * 0.01 + 0.1
+            x[i] = ti.math.log1p(v) + ti.math.expm1(v) + ti.math.cbrt(v) + ti.math.hypot(v, 2.0) + ti.asin(v * 0.2)
+            w = ti.cast(v, ti.f64)
+            y[i] = ti.math.log1p(w) + ti.math.cbrt(w) + ti.acos(w * 0.2) + ti.tanh(w)
+
+    k()
+    v = np.arange(N, dtype=np.float32) * np.float32(0.01) + np.float32(0.1)
+    w = v.astype(np.float64)  # v is computed at f32 in the kernel, then widened
+    rx = np.log1p(v) + np.expm1(v) + np.cbrt(v) + np.hypot(v, 2) + np.arcsin(v * np.float32(0.2))
+    ry = np.log1p(w) + np.cbrt(w) + np.arccos(w * 0.2) + np.tanh(w)
+    return [(x.to_numpy(), rx, 1e-5), (y.to_numpy(), ry, 1e-12)]
+
+
 def atomics():
     s = ti.field(ti.f32, shape=())
     m = ti.field(ti.f32, shape=())
@@ -179,4 +200,5 @@ def serial_and_return():
     return [(r, 12.0, 0), (x.to_numpy(), np.arange(N, dtype=np.float32) + 12.0, 0)]
 
 
-CASES = [arith_math, atomics, loops_while, local_matrix, tape_adjoint, half_and_ndarray, serial_and_return]
+CASES = [arith_math, registry_math, atomics, loops_while, local_matrix, tape_adjoint, half_and_ndarray,
+         serial_and_return]
