@@ -7,9 +7,10 @@ frontend (parameters bound to context slots, body lowered) -> passes (and the au
 from __future__ import annotations
 
 import inspect
+import os
 import pickle
 import threading
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from simgrad import dtypes as dt
 from simgrad.autodiff.validate import in_place_targets
 from simgrad.compiler.params import Param, Slots
 from simgrad.debug import debug_level
+from simgrad.errors import SimgradNotSupportedError
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.source import get_source
@@ -29,6 +31,9 @@ from simgrad.lang.types import MatrixType
 from simgrad.passes.manager import run_pipeline
 from simgrad.runtime.args import Packing
 from simgrad.runtime.launch import Launcher
+
+if TYPE_CHECKING:
+    from simgrad.codegen.llvm import KernelCodegen
 
 # Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
 # a second thread asking for the same instantiation waits and then finds it in the cache.
@@ -99,9 +104,41 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
     return CompiledKernel(launcher, ir, text, meta["ret_matrix"], in_place=meta["in_place"])
 
 
+def _on_gpu(prog: Program) -> bool:
+    arch = prog.config.arch
+    return arch is not None and arch.name == "cuda"
+
+
+def ptx_check_enabled() -> bool:
+    return os.environ.get("SIMGRAD_PTX_CHECK", "") not in ("", "0")
+
+
+def _refuse_on_gpu(ir: IRKernel) -> None:
+    """What arch=cuda cannot lower yet is a located error naming the construct, never a wrong result."""
+    from simgrad.codegen import nvptx
+
+    bad = nvptx.unsupported(ir)
+    if bad is not None:
+        what, loc = bad
+        raise SimgradNotSupportedError(f"{what} is not supported with arch=cuda yet (issue 22)", loc)
+
+
+def _ptx_check(ir: IRKernel, symbol: str, tape_entries: int, prog: Program) -> None:
+    """SIMGRAD_PTX_CHECK=1: lower the kernel to PTX and assemble it with ptxas (sm_80, sm_90); an error raises.
+    A kernel with constructs arch=cuda refuses is checked only when arch=cuda (where it raised above)."""
+    from simgrad.codegen import nvptx
+
+    if nvptx.unsupported(ir) is not None:
+        return
+    ptx, _ = nvptx.kernel_ptx(ir, symbol, tape_entries=tape_entries, debug=prog.config.debug,
+                              fast_math=prog.config.fast_math)
+    nvptx.ptxas_check(ptx)
+
+
 def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix):
     """(key, guard) of the kernel cache for this instantiation, or (None, None) when it is not cached."""
-    if not prog.jit.cache_enabled or debug_level() > 0:  # debug levels print what the compile does
+    # debug levels print what the compile does; SIMGRAD_PTX_CHECK checks every kernel as it compiles
+    if not prog.jit.cache_enabled or debug_level() > 0 or ptx_check_enabled():
         return None, None
     kb = KeyBuilder()
     config = tuple(sorted((k, repr(v)) for k, v in vars(prog.config).items()
@@ -131,16 +168,28 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     ir.ret_slot = slots[1]
     run_pipeline(ir, transform, debug=prog.config.debug)
     symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
-    from simgrad.codegen.cpu import CpuCodegen  # the one target today; loaded when first needed
+    tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
+        else 1
+    cg: KernelCodegen
+    if _on_gpu(prog):  # arch=cuda: today the simulated GPU (codegen/nvptx.py with sim=True)
+        from simgrad.codegen import nvptx
 
-    cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+        _refuse_on_gpu(ir)
+        cg = nvptx.GpuCodegen(ir, symbol, sim=True, tape_entries=tape_entries, debug=prog.config.debug,
+                              fast_math=prog.config.fast_math)
+    else:
+        from simgrad.codegen.cpu import CpuCodegen  # loaded when first needed
+
+        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
     text = cg.generate()
+    if ptx_check_enabled():
+        _ptx_check(ir, symbol, tape_entries, prog)
     # the disk cache is keyed by the IR text with the symbol name made stable
     stable = text.replace(symbol, "sg_kernel")
     uses_tape = ir.uses_tape
     meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
             "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
-            "private_slots": cg.private_slots,
+            "private_slots": cg.private_slots, "scratch_slots": getattr(cg, "scratch_slots", 0),
             # the forward reads fields it overwrites: a Tape keeps their values from before each launch
             "in_place": transform is None and bool(in_place_targets(ir)),
             "tape_bound": ir.tape_bound if uses_tape else None}
@@ -182,7 +231,8 @@ def _bind_params(kernel: KernelSource, comp: KernelLowering, args) -> tuple[tupl
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
     """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
     launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0))
+                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),
+                        meta.get("scratch_slots", 0))
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]

@@ -44,15 +44,18 @@ class Launcher:
     """Holds the context buffer of one kernel instantiation and the generated `launch` function."""
 
     def __init__(self, kernel_name: str, params: list, entry_address: int, nslots: int, returns: list,
-                 error_table: list, program, ret_matrix: object = None, private_slots: int = 0):
+                 error_table: list, program, ret_matrix: object = None, private_slots: int = 0,
+                 scratch_slots: int = 0):
         self.kernel_name = kernel_name
         self.params = params  # each parameter's Packing (runtime/args.py); the Tape reads ARG slots' values
         self.ret_matrix = ret_matrix  # (n, m) for a matrix, a StructType for a struct: the values come back as a tuple
         self.error_table = error_table
         self.program = program
-        self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1 + private_slots, dtype=np.int64)
-        # the slots past the returns hold the privatised loops' per-thread copies, kept between launches
-        self._private = slice(CTX_ARGS + nslots + len(returns) + 1, len(self.buf))
+        self.buf = np.zeros(CTX_ARGS + nslots + len(returns) + 1 + private_slots + scratch_slots, dtype=np.int64)
+        # the slots past the returns hold the privatised loops' per-thread copies, kept between launches;
+        # then the GPU target's scratch words (values that cross its kernels: codegen/nvptx.py)
+        start = CTX_ARGS + nslots + len(returns) + 1
+        self._private = slice(start, start + private_slots)
         self.buf[list(HEADER_SLOTS)] = program.context_header()
         self.buf[CTX_NTHREADS] = program.pool.num_threads
         self.tape: np.ndarray | None = None
