@@ -99,6 +99,10 @@ def _alias_simgrad(examples):
     for name, mod in list(sys.modules.items()):
         if name == "simgrad" or name.startswith("simgrad."):
             sys.modules["taichi" + name[len("simgrad"):]] = mod
+    for sub in ("math", "ui", "tools", "ad", "linalg", "types"):  # namespaces that are attributes, not files
+        mod = getattr(simgrad, sub, None)
+        if isinstance(mod, types.ModuleType):
+            sys.modules.setdefault("taichi." + sub, mod)
     pkg = types.ModuleType("taichi.examples")
     pkg.__path__ = [examples]
     sys.modules["taichi.examples"] = pkg
@@ -150,6 +154,7 @@ def _headless(ti, cache_dir):
                 raise FrameLimit()
 
     HeadlessGUI.__name__ = HeadlessGUI.__qualname__ = "GUI"
+    HeadlessGUI.__module__ = gui_cls.__module__  # not one of the program's classes (see dump_state)
     ti.GUI = HeadlessGUI
     win_cls = getattr(getattr(ti, "ui", None), "Window", None)
     if win_cls is None:
@@ -179,6 +184,7 @@ def _headless(ti, cache_dir):
                 raise FrameLimit()
 
     HeadlessWindow.__name__ = HeadlessWindow.__qualname__ = "Window"
+    HeadlessWindow.__module__ = win_cls.__module__
     ti.ui.Window = HeadlessWindow
 
 
@@ -222,7 +228,8 @@ def dump_state(glb, path):
     def visit(name, value, depth):
         if id(value) in seen or name.startswith("__"):
             return
-        seen.add(id(value))
+        if not isinstance(value, (int, float)):  # small ints are shared objects
+            seen.add(id(value))
         try:
             for suffix, arr in _arrays(value, np).items():
                 arr = np.asarray(arr)
