@@ -143,7 +143,7 @@ _NOT_SUPPORTED = {
     "no_activate": "ti.no_activate is a GPU-backend hint simgrad does not have",
     "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
               "bitmasked / dynamic)",
-    **{n: "Taichi's AOT/graph deployment is not part of simgrad" for n in ("aot", "graph", "ArgPack", "argpack")},
+    **{n: "Taichi's AOT deployment is not part of simgrad" for n in ("aot", "ArgPack", "argpack")},
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
@@ -169,6 +169,10 @@ def __getattr__(name):
         import simgrad._lib as _lib_module
 
         return _lib_module
+    if name == "graph":  # compute graphs, replayed as kernel launches in order
+        import simgrad.lang.graph as _graph
+
+        return _graph
     if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
         import simgrad.linalg as _linalg
 
