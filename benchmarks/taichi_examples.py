@@ -110,6 +110,24 @@ def _alias_simgrad(examples):
     return simgrad
 
 
+def _is_fast(gui):
+    """taichi's fast_gui keeps the picture as packed uint32 in ``gui.img``, and its get_image() would write
+    float RGBA over that smaller buffer (heap corruption: SIGABRT / SIGSEGV), so it is decoded instead."""
+    import numpy as np
+
+    img = getattr(gui, "img", None)
+    return isinstance(img, np.ndarray) and img.dtype == np.uint32
+
+
+def _fast_gui_image(gui):
+    """0x00RRGGBB words, top row first -> float32 (W, H, 3) indexed [x, y] like get_image()."""
+    import numpy as np
+
+    w, h = gui.res
+    words = gui.img.reshape(h, w)[::-1].T
+    return np.stack([(words >> s) & 255 for s in (16, 8, 0)], axis=-1).astype(np.float32) / 255
+
+
 def _headless(ti, cache_dir):
     """arch, seed, GUI and Window patches, applied to the framework module (never to the program's text)."""
     import numpy as np
@@ -144,7 +162,7 @@ def _headless(ti, cache_dir):
 
         def show(self, file=None):
             try:
-                _State.image = np.array(self.get_image(), dtype=np.float32, copy=True)
+                _State.image = _fast_gui_image(self) if _is_fast(self) else np.array(self.get_image(), np.float32)
             except Exception as e:  # noqa: BLE001 - recorded, not fatal
                 print(f"@@harness: get_image failed: {e!r}", file=sys.stderr)
             _State.frames += 1
@@ -558,6 +576,8 @@ def main():
     ap.add_argument("--timeout", type=float, default=300)
     ap.add_argument("--nice", type=int, default=0)
     ap.add_argument("--keep", action="store_true", help="keep each example's output folder")
+    ap.add_argument("--update", action="store_true",
+                    help="replace only the examples run now in an existing --json file (its header lists the reruns)")
     args = ap.parse_args()
     args.examples = os.path.abspath(args.examples)
     names = list_examples(args.examples)
@@ -568,9 +588,15 @@ def main():
     entries = []
     header = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.node(),
               "cpus": os.cpu_count(), "command": " ".join(sys.argv), "frames": args.frames}
+    if args.update and args.json and os.path.exists(args.json):
+        with open(args.json) as fh:
+            old = json.load(fh)
+        entries = [e for e in old["entries"] if e["example"] not in names]
+        header = dict(old["header"], reruns=old["header"].get("reruns", []) + [header])
     for name in names:
         e = run_example(name, args, pythons)
         entries.append(e)
+        entries.sort(key=lambda x: x["example"])
         print(f"{name:55s} taichi={e.get('taichi', {}).get('status', '-'):8s} "
               f"simgrad={e.get('simgrad', {}).get('status', '-'):8s} match={e.get('match', '-')}", flush=True)
         if args.json:

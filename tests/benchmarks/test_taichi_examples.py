@@ -186,3 +186,20 @@ def test_shipped_examples_run_under_simgrad(name, tmp_path):
         assert rec["stdout"] == "42\n42.0"  # the kernel returns ti.f32
     else:
         assert "x" in np.load(os.path.join(out, "simgrad.npz")).files
+
+
+def test_taichi_fast_gui_words_decode_to_an_x_y_image():
+    # taichi's fast_gui buffer: 0x00RRGGBB words, top row first (read from taichi 1.7.4: a red pixel at
+    # x=1, y=0 of a 4x3 window is word 9, a blue one at x=3, y=2 is word 3)
+    class FakeGUI:
+        res = (4, 3)
+        img = np.zeros(12, np.uint32)
+
+    FakeGUI.img[9], FakeGUI.img[3], FakeGUI.img[0] = 0xFF0000, 0x0000FF, 0x007F00
+    assert tex._is_fast(FakeGUI)
+    img = tex._fast_gui_image(FakeGUI)
+    want = np.zeros((4, 3, 3), np.float32)
+    want[1, 0] = [1, 0, 0]
+    want[3, 2] = [0, 0, 1]
+    want[0, 2, 1] = 127 / 255
+    np.testing.assert_array_equal(img, want)
