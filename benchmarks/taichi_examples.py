@@ -20,8 +20,8 @@ working directory. The child
   classes; gradients too) with ``to_numpy``, and the last shown image (ti.GUI's canvas, the GGUI window's
   image buffer), into an .npz; stdout is captured.
 
-The parent records exit status (signal names for SIGSEGV, SIGKILL...), wall time, peak RSS (``os.wait4``'s
-rusage of that child) and a timeout, then compares simgrad against taichi: every array both dumped (relative
+The parent records exit status (signal names for SIGSEGV, SIGKILL...), wall time, peak RSS (the child's
+VmHWM, polled every 50 ms) and a timeout, then compares simgrad against taichi: every array both dumped (relative
 to the taichi array's largest magnitude), the last image, and stdout (numbers with a relative tolerance,
 the rest as text; ``[Taichi]`` banner lines dropped). taichi comes from --taichi-python or $TAICHI_PYTHON.
 """
@@ -357,8 +357,9 @@ def run_child(python, framework, script, args, out):
     t0 = time.perf_counter()
     with open(so, "w") as fo, open(se, "w") as fe:
         proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=fo, stderr=fe, start_new_session=True)
-        timed_out = False
+        timed_out, hwm = False, 0
         while True:
+            hwm = max(hwm, _vm_hwm_kib(proc.pid))
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid:
                 break
@@ -375,7 +376,7 @@ def run_child(python, framework, script, args, out):
         stdout = fh.read()
     with open(se, errors="replace") as fh:
         stderr = fh.read()
-    rec = {"rc": rc, "wall_s": round(wall, 2), "peak_rss_mib": round(usage.ru_maxrss / 1024, 1),
+    rec = {"rc": rc, "wall_s": round(wall, 2), "peak_rss_mib": round(hwm / 1024, 1),
            "status": "timeout" if timed_out else ("ok" if rc == 0 else
                                                   (_signal_name(rc) if rc < 0 else f"exit {rc}"))}
     meta = os.path.join(out, f"{framework}.json")
@@ -387,6 +388,19 @@ def run_child(python, framework, script, args, out):
         rec["error"] = _last_error(stderr)
         rec["stderr_tail"] = stderr[-2000:]
     return rec
+
+
+def _vm_hwm_kib(pid):
+    """The child's resident high-water mark (VmHWM), 0 once it is gone. Polled rather than read from wait4's
+    ru_maxrss, which also counts the parent's pages the child had between fork and exec."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError):
+        pass
+    return 0
 
 
 def _clean_stdout(text):
