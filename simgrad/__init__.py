@@ -59,6 +59,7 @@ from simgrad.lang.loops import (
     block_local,
     cache_read_only,
     grouped,
+    no_activate,
     stop_grad,
     loop_config,
     ndrange,
@@ -140,7 +141,6 @@ def get_runtime():
 
 
 _NOT_SUPPORTED = {
-    "no_activate": "ti.no_activate is a GPU-backend hint simgrad does not have",
     "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
               "bitmasked / dynamic)",
     **{n: "Taichi's AOT deployment is not part of simgrad" for n in ("aot", "ArgPack", "argpack")},
