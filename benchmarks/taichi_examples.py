@@ -47,6 +47,9 @@ ROOT = os.path.dirname(HERE)
 RTOL = 1e-4  # "match": every compared array within this, relative to the taichi array's magnitude
 CLOSE = 1e-2  # "close": within this
 IMAGE_TOL = 2 / 255  # last image: largest channel difference
+#: examples that show a frame only every so many steps: fewer frames (sdf_renderer: 10 path-traced
+#: 1280x720 samples per frame)
+FRAMES = {"rendering/sdf_renderer.py": 1}
 MAX_ELEMENTS = 1 << 24  # larger arrays are summarised (sum, min, max) instead of dumped
 
 
@@ -350,7 +353,8 @@ def run_child(python, framework, script, args, out):
     env["TAICHI_EXAMPLES_INIT"] = json.dumps(dict(args.taichi_init)) if framework == "taichi" else "{}"
     if framework == "simgrad":
         env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path, os.environ.get("PYTHONPATH", "")] if p)
-    cmd = [python, os.path.abspath(__file__), "--child", framework, script, args.examples, str(args.frames), out]
+    frames = FRAMES.get(os.path.relpath(script, args.examples), args.frames)
+    cmd = [python, os.path.abspath(__file__), "--child", framework, script, args.examples, str(frames), out]
     if args.nice:
         cmd = ["nice", "-n", str(args.nice), *cmd]
     so, se = os.path.join(out, f"{framework}.stdout"), os.path.join(out, f"{framework}.stderr")
@@ -462,11 +466,12 @@ def array_error(a, b):
     return float(diff.max()), float((diff > RTOL).sum() / a.size)
 
 
-def compare_states(out):
-    """Compares simgrad.npz against taichi.npz in ``out``: per-array errors, image difference, worst array."""
+def compare_states(out, s_path=None):
+    """Compares simgrad.npz (or ``s_path``) against taichi.npz in ``out``: per-array errors, image difference,
+    worst array."""
     import numpy as np
 
-    s_path, t_path = os.path.join(out, "simgrad.npz"), os.path.join(out, "taichi.npz")
+    s_path, t_path = s_path or os.path.join(out, "simgrad.npz"), os.path.join(out, "taichi.npz")
     if not (os.path.exists(s_path) and os.path.exists(t_path)):
         return None
     s, t = np.load(s_path), np.load(t_path)
@@ -516,6 +521,14 @@ def run_example(rel, args, pythons):
             ok, why = compare_stdout(entry["simgrad"]["stdout"], entry["taichi"]["stdout"])
             entry["stdout_agrees"], entry["stdout_diff"] = ok, why
             entry["match"] = verdict(entry)
+        if args.self_check and entry.get("taichi", {}).get("status") == "ok":
+            again = os.path.join(out, "again")  # taichi against itself: its run-to-run noise
+            os.makedirs(again)
+            entry["taichi_again"] = run_child(pythons["taichi"], "taichi", script, args, again)
+            c = compare_states(out, os.path.join(again, "taichi.npz"))
+            ok, _ = compare_stdout(entry["taichi_again"]["stdout"], entry["taichi"]["stdout"])
+            entry["taichi_self"] = c and {"worst": c["worst"], "worst_err": c["worst_err"], "image": c["image"],
+                                          "stdout_agrees": ok}
     finally:
         if args.keep:
             entry["dir"] = out
@@ -555,8 +568,9 @@ def _cell(rec):
 
 def table(entries, why=None):
     why = why or {}
-    rows = ["| example | taichi | simgrad | match? | worst array (rel. err) / image / stdout | why not |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| example | taichi | simgrad | match? | worst array (rel. err) / image / stdout | taichi vs itself "
+            "| why not |",
+            "|---|---|---|---|---|---|---|"]
     for e in entries:
         c = e.get("compare")
         detail = "-"
@@ -565,8 +579,12 @@ def table(entries, why=None):
             worst = (f"{c['worst']} {c['worst_err']:.2g} ({c['worst_fraction']:.2%} off)" if c["worst"]
                      else "no arrays")
             detail = f"{worst} / {img} / {'same' if e.get('stdout_agrees') else 'differs'}".replace("|", "\\|")
+        me = e.get("taichi_self")
+        self_detail = "-" if not me else (f"{me['worst']} {me['worst_err']:.2g} / "
+                                          f"{'-' if me['image'] is None else format(me['image'], '.3g')} / "
+                                          f"{'same' if me['stdout_agrees'] else 'differs'}").replace("|", "\\|")
         rows.append(f"| {e['example']} | {_cell(e.get('taichi'))} | {_cell(e.get('simgrad'))} | "
-                    f"{e.get('match', '-')} | {detail} | {why.get(e['example'], '')} |")
+                    f"{e.get('match', '-')} | {detail} | {self_detail} | {why.get(e['example'], '')} |")
     return "\n".join(rows)
 
 
@@ -590,6 +608,8 @@ def main():
     ap.add_argument("--timeout", type=float, default=300)
     ap.add_argument("--nice", type=int, default=0)
     ap.add_argument("--keep", action="store_true", help="keep each example's output folder")
+    ap.add_argument("--self-check", action="store_true",
+                    help="run taichi twice and compare it with itself too (its run-to-run noise: float atomics)")
     ap.add_argument("--update", action="store_true",
                     help="replace only the examples run now in an existing --json file (its header lists the reruns)")
     args = ap.parse_args()
