@@ -10,11 +10,13 @@ working directory. The child
   simgrad, and ``taichi.examples.*`` from PATH, or imports the real taichi,
 - forces ``ti.init(arch=cpu, random_seed=0)`` (TI_ARCH=x64 as well, for programs without ti.init), seeds
   ``random`` and ``numpy.random`` with 0, uses matplotlib's Agg backend,
-- makes ``ti.GUI`` headless (show_gui=False) and ``ti.ui.Window`` hidden (show_window=False): their
+- makes ``ti.GUI`` headless (show_gui=False), without ``gui.text`` (the fonts differ; TAICHI_EXAMPLES_TEXT=1
+  draws it), and ``ti.ui.Window`` hidden (show_window=False): their
   ``running`` turns False after N shown frames, and a program that never asks (``for i in range(10**6)``)
   is stopped at its (N+1)-th ``show()``,
 - gives the program a frame clock instead of the wall clock (``time.time``/``perf_counter``/``time_ns`` in
-  the ``time`` module the program imports advance 1/60 s per shown frame), so clock-driven animations agree,
+  the ``time`` module the program imports advance 1/60 s per shown frame, and 1 us per read by the program
+  itself), so clock-driven animations agree; ``ti.tools.imshow`` keeps its picture as the last image,
 - at exit (normal end, frame limit, SystemExit or exception) dumps every field, ndarray, numpy array and
   number reachable from the program's globals (one level into lists, dicts and objects of the program's own
   classes; gradients too) with ``to_numpy``, and the last shown image (ti.GUI's canvas, the GGUI window's
@@ -63,6 +65,7 @@ class _State:
     limit = 3
     ticks = 0
     image = None  # last shown image (numpy)
+    script = ""  # the program's file
 
 
 def _clock_module():
@@ -74,7 +77,11 @@ def _clock_module():
     fake.__dict__.update({k: v for k, v in real.__dict__.items() if not k.startswith("__")})
 
     def now():
-        _State.ticks += 1
+        f = sys._getframe(1)
+        while f.f_code.co_filename == __file__:  # this module's wrappers (perf_counter, time_ns...)
+            f = f.f_back
+        if f.f_code.co_filename == _State.script:  # the program's own reads, not the frameworks'
+            _State.ticks += 1
         return 1.0e9 + _State.frames / 60.0 + _State.ticks * 1e-6
 
     fake.time = now
@@ -155,6 +162,11 @@ def _headless(ti, cache_dir):
                 kw["show_gui"] = False
             super().__init__(*args, **kw)
 
+        def text(self, *args, **kw):
+            if os.environ.get("TAICHI_EXAMPLES_TEXT") == "1":
+                return super().text(*args, **kw)
+            return None  # the two frameworks' fonts differ; everything else in the picture is compared
+
         @property
         def running(self):
             return gui_cls.running.fget(self) and _State.frames < _State.limit
@@ -177,6 +189,16 @@ def _headless(ti, cache_dir):
     HeadlessGUI.__name__ = HeadlessGUI.__qualname__ = "GUI"
     HeadlessGUI.__module__ = gui_cls.__module__  # not one of the program's classes (see dump_state)
     ti.GUI = HeadlessGUI
+
+    def imshow(img, title="imshow"):
+        """The picture is kept as the last image; no frames shown (taichi's loops until its window closes,
+        simgrad's returns at once without a display)."""
+        arr = img if isinstance(img, np.ndarray) else img.to_numpy()
+        gui = gui_cls(title, res=arr.shape[:2], show_gui=False)
+        gui.set_image(arr)
+        _State.image = np.array(gui.get_image(), np.float32)
+
+    ti.tools.imshow = imshow
     win_cls = getattr(getattr(ti, "ui", None), "Window", None)
     if win_cls is None:
         return
@@ -292,7 +314,7 @@ def child(framework, script, examples, frames, out):
     import random
     import types
 
-    _State.limit = frames
+    _State.limit, _State.script = frames, script
     if framework == "simgrad":
         ti = _alias_simgrad(examples)
     else:
@@ -633,9 +655,10 @@ def main():
         entries.sort(key=lambda x: x["example"])
         print(f"{name:55s} taichi={e.get('taichi', {}).get('status', '-'):8s} "
               f"simgrad={e.get('simgrad', {}).get('status', '-'):8s} match={e.get('match', '-')}", flush=True)
-        if args.json:
-            with open(args.json, "w") as fh:
+        if args.json:  # rewritten whole after each example, atomically (it can be read while a run goes on)
+            with open(args.json + ".tmp", "w") as fh:
                 json.dump({"header": header, "entries": entries}, fh, indent=1, default=str)
+            os.replace(args.json + ".tmp", args.json)
     if args.table:
         print(table(entries))
     bad = [e for e in entries if e.get("simgrad", {}).get("status", "ok") != "ok"]
