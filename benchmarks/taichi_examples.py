@@ -598,7 +598,6 @@ WHY = {
     "real_func/rendering/taichi_ngp.py": "needs cv2, wget, scipy and downloaded weights: both fail alike",
     "rendering/cornell_box.py": "simgrad defect: invalid IR (does not dominate all uses), known (defects helper); "
                                 "taichi: GGUI needs Vulkan",
-    "rendering/oit_renderer.py": "simgrad defect: SIGKILL, known (defects helper)",
     "rendering/simple_texture.py": "textures and GGUI: taichi needs Vulkan; simgrad: located not-supported error",
     "rendering/taichi_ngp.py": "needs cv2, wget, scipy and downloaded weights: both fail alike",
     "simulation/euler.py": "matplotlib 3.9 removed cm.get_cmap: both fail alike",
@@ -606,9 +605,20 @@ WHY = {
     **{f"ggui_examples/{n}.py": _VULKAN for n in ("fem128_ggui", "fractal3d_ggui", "mass_spring_3d_ggui",
                                                   "mass_spring_game_ggui", "mpm128_ggui", "mpm3d_ggui",
                                                   "stable_fluid_ggui")},
-    **{f"simulation/{n}.py": _RANDOM for n in ("ad_gravity", "game_of_life", "mpm128", "mpm3d", "mpm88", "mpm99",
-                                               "nbody", "odop_solar", "pbf2d", "physarum", "two_stream_instability",
+    "graph/mpm88_graph.py": _RANDOM,
+    "rendering/oit_renderer.py": _RANDOM + "; simgrad defect: peaks at 21.3 GiB (taichi 0.9 GiB), SIGKILL when "
+                                           "memory is short, known (defects helper)",
+    "rendering/sdf_renderer.py": _RANDOM + "; taichi differs from itself as much (path tracing)",
+    "simulation/implicit_fem.py": "close in state (positions 6e-8, velocities 2e-6, picture 2e-5); the CG "
+                                  "residual/direction fields at convergence are rounding noise (1e-8 absolute)",
+    "simulation/implicit_mass_spring.py": "close: last picture within 0.011 (not investigated; state is local)",
+    "simulation/initial_value_problem.py": "close: last picture within 0.012 (not investigated)",
+    "simulation/mpm_lagrangian_forces.py": "x.grad is a sum of float atomics: taichi differs from itself as much; "
+                                           "positions agree (picture 0.005)",
+    **{f"simulation/{n}.py": _RANDOM for n in ("game_of_life", "nbody", "odop_solar", "pbf2d", "two_stream_instability",
                                                "vortex_rings")},
+    **{f"simulation/{n}.py": _RANDOM + "; taichi differs from itself as much (per-thread streams, float atomics)"
+       for n in ("ad_gravity", "comet", "mpm128", "mpm3d", "mpm88", "mpm99", "physarum")},
 }
 
 
