@@ -799,6 +799,58 @@ class Compiler:
         return None
 
 
+class VarList(list):
+    """A list bound to a name in a kernel: as Taichi's expr_init does, each run-time value (scalar or matrix)
+    becomes a local variable, so ``v[i] = x`` under run-time control flow is a run-time store. Reading the
+    list (indexing, iterating, unpacking) loads the variables; ``depth`` is the run-time nesting it was bound
+    at (assigning a Python element deeper would happen at compile time: Compiler._python_setitem refuses)."""
+
+    def __init__(self, comp: Compiler, values):
+        self.depth = comp.frame.dynamic_depth
+        super().__init__(comp.new_var(v) if isinstance(v, (Expr, Matrix)) else v
+                         for v in values)
+
+    def is_var(self, index) -> bool:
+        return isinstance(index, int) and isinstance(list.__getitem__(self, index), LOCAL_REFS)
+
+    def ref(self, index):
+        return list.__getitem__(self, index)
+
+    @staticmethod
+    def _value(v):
+        return v.load() if isinstance(v, LOCAL_REFS) else v
+
+    def __getitem__(self, index):
+        item = list.__getitem__(self, index)
+        return [self._value(v) for v in item] if isinstance(index, slice) else self._value(item)
+
+    def __iter__(self):
+        return (self._value(v) for v in list.__iter__(self))
+
+    def __reversed__(self):
+        return (self._value(v) for v in list.__reversed__(self))
+
+    def values(self) -> list:
+        return list(self.__iter__())
+
+    def __add__(self, other):
+        return self.values() + list(other)
+
+    def __radd__(self, other):
+        return list(other) + self.values()
+
+    def __mul__(self, n):
+        return self.values() * n
+
+    __rmul__ = __mul__
+
+    def copy(self):
+        return self.values()
+
+    def __contains__(self, item):
+        return item in self.values()
+
+
 _SPECULATABLE = O.PURE | {Op.LOCAL_LOAD}
 
 
@@ -842,58 +894,6 @@ def _is_static_call(node: ast.expr) -> bool:
 
 def _is_py_matrix_const(v) -> bool:
     return False
-
-
-class VarList(list):
-    """A list bound to a name in a kernel: as Taichi's expr_init does, each run-time value (scalar or matrix)
-    becomes a local variable, so ``v[i] = x`` under run-time control flow is a run-time store. Reading the
-    list (indexing, iterating, unpacking) loads the variables; ``depth`` is the run-time nesting it was bound
-    at (assigning a Python element deeper would happen at compile time: Compiler._python_setitem refuses)."""
-
-    def __init__(self, comp: Compiler, values):
-        self.depth = comp.frame.dynamic_depth
-        super().__init__(comp.new_var(v) if isinstance(v, (Expr, Matrix)) and not _is_py_matrix_const(v) else v
-                         for v in values)
-
-    def is_var(self, index) -> bool:
-        return isinstance(index, int) and isinstance(list.__getitem__(self, index), LOCAL_REFS)
-
-    def ref(self, index):
-        return list.__getitem__(self, index)
-
-    @staticmethod
-    def _value(v):
-        return v.load() if isinstance(v, LOCAL_REFS) else v
-
-    def __getitem__(self, index):
-        item = list.__getitem__(self, index)
-        return [self._value(v) for v in item] if isinstance(index, slice) else self._value(item)
-
-    def __iter__(self):
-        return (self._value(v) for v in list.__iter__(self))
-
-    def __reversed__(self):
-        return (self._value(v) for v in list.__reversed__(self))
-
-    def values(self) -> list:
-        return list(self.__iter__())
-
-    def __add__(self, other):
-        return self.values() + list(other)
-
-    def __radd__(self, other):
-        return list(other) + self.values()
-
-    def __mul__(self, n):
-        return self.values() * n
-
-    __rmul__ = __mul__
-
-    def copy(self):
-        return self.values()
-
-    def __contains__(self, item):
-        return item in self.values()
 
 
 class _Starred:
