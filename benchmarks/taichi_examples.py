@@ -242,6 +242,10 @@ def _arrays(value, np):
         return {"": value} if value.dtype.kind in "biuf" else {}
     if isinstance(value, type) or not hasattr(value, "to_numpy"):
         return {}
+    shape = getattr(value, "shape", None)
+    if isinstance(shape, tuple) and all(isinstance(n, int) for n in shape) and math.prod(shape) > MAX_ELEMENTS:
+        # e.g. oit_renderer's dense(1000^2).dynamic(2048) lists: to_numpy would need 32 GB
+        raise ValueError(f"not dumped: {math.prod(shape)} cells (shape {shape})")
     data = value.to_numpy()
     if isinstance(data, dict):  # struct fields
         for k, v in data.items():

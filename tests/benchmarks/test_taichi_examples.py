@@ -203,3 +203,15 @@ def test_taichi_fast_gui_words_decode_to_an_x_y_image():
     want[3, 2] = [0, 0, 1]
     want[0, 2, 1] = 127 / 255
     np.testing.assert_array_equal(img, want)
+
+
+def test_fields_too_large_to_dump_are_refused_before_to_numpy(monkeypatch):
+    import simgrad as ti
+
+    ti.init(arch=ti.cpu)
+    x = ti.field(ti.f32, shape=(4, 4))
+    monkeypatch.setattr(tex, "MAX_ELEMENTS", 8)
+    with pytest.raises(ValueError, match=r"not dumped: 16 cells"):
+        tex._arrays(x, np)
+    monkeypatch.setattr(tex, "MAX_ELEMENTS", 16)
+    assert tex._arrays(x, np)[""].shape == (4, 4)
