@@ -59,6 +59,7 @@ from simgrad.lang.loops import (
     block_local,
     cache_read_only,
     grouped,
+    no_activate,
     stop_grad,
     loop_config,
     ndrange,
@@ -130,10 +131,9 @@ def get_runtime():
 
 
 _NOT_SUPPORTED = {
-    "no_activate": "ti.no_activate is a GPU-backend hint simgrad does not have",
     "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
               "bitmasked / dynamic)",
-    **{n: "Taichi's AOT/graph deployment is not part of simgrad" for n in ("aot", "graph", "ArgPack", "argpack")},
+    **{n: "Taichi's AOT deployment is not part of simgrad" for n in ("aot", "ArgPack", "argpack")},
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
@@ -159,6 +159,10 @@ def __getattr__(name):
         import simgrad._lib as _lib_module
 
         return _lib_module
+    if name == "graph":  # compute graphs, replayed as kernel launches in order
+        import simgrad.lang.graph as _graph
+
+        return _graph
     if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
         import simgrad.linalg as _linalg
 

@@ -15,6 +15,14 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 
 
+class ElementShape(tuple):
+    """An ndarray parameter's element shape: a tuple for simgrad's own use, and callable, since Taichi's
+    kernel-scope ndarray has ``element_shape()`` giving a list (``ti.static(a.element_shape() == [2])``)."""
+
+    def __call__(self) -> list:
+        return list(self)
+
+
 class ArrayArg:
     """How a kernel sees an ndarray parameter while it is compiled."""
 
@@ -22,7 +30,7 @@ class ArrayArg:
                  boundary: str = "unsafe", grad: bool = False):
         self.boundary = boundary
         self.name, self.slot, self.dtype, self.ndim = name, slot, dtype, ndim
-        self.element_shape = element_shape
+        self.element_shape = ElementShape(element_shape)
         count = ArrayRef(name, slot, dtype, ndim, element_shape).num_components
         # with a gradient, its base pointer takes the slot after the extents (which it shares)
         self.grad_slot = slot + 1 + ndim if grad else -1

@@ -286,6 +286,8 @@ class KernelLowering:
                 self.bind(name, self.new_var(value))
             elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)):
                 self.bind(name, self.new_var(value))
+            elif type(value) is list:
+                self.bind(name, VarList(self, value))
             else:
                 self.bind(name, value)
         elif isinstance(target, (ast.Tuple, ast.List)):
@@ -306,11 +308,21 @@ class KernelLowering:
             raise SimgradSyntaxError(f"cannot assign to {type(target).__name__}", self.loc(target))
 
     def _python_setitem(self, target, value):
-        if self.guard is not None:
-            self.guard.taint("a Python object is modified at compile time")
         obj = self.eval(target.value)
         if isinstance(target, ast.Subscript):
-            obj[self.eval_index(target.slice)] = value
+            index = self.eval_index(target.slice)
+            if isinstance(obj, VarList) and obj.is_var(index):
+                obj.ref(index).store(value)  # a run-time store, as Taichi's element variables take it
+                return
+            depth = obj.depth if isinstance(obj, VarList) else 0
+            if self.frame.dynamic_depth > depth and isinstance(obj, (list, dict)):
+                raise SimgradSyntaxError(
+                    "a Python list or dict element is assigned inside run-time control flow (an `if` or loop "
+                    "on run-time values): the assignment would happen at compile time, whatever the condition; "
+                    "keep the value in a local variable (or a ti.Vector) instead", self.loc(target))
+            if self.guard is not None:
+                self.guard.taint("a Python object is modified at compile time")
+            obj[index] = value
         else:
             setattr(obj, target.attr, value)
 
@@ -740,6 +752,58 @@ class KernelLowering:
                 return base_ref.member(node.attr)
             return None
         return None
+
+
+class VarList(list):
+    """A list bound to a name in a kernel: as Taichi's expr_init does, each run-time value (scalar or matrix)
+    becomes a local variable, so ``v[i] = x`` under run-time control flow is a run-time store. Reading the
+    list (indexing, iterating, unpacking) loads the variables; ``depth`` is the run-time nesting it was bound
+    at (assigning a Python element deeper would happen at compile time: Compiler._python_setitem refuses)."""
+
+    def __init__(self, comp: Compiler, values):
+        self.depth = comp.frame.dynamic_depth
+        super().__init__(comp.new_var(v) if isinstance(v, (Expr, Matrix)) else v
+                         for v in values)
+
+    def is_var(self, index) -> bool:
+        return isinstance(index, int) and isinstance(list.__getitem__(self, index), LOCAL_REFS)
+
+    def ref(self, index):
+        return list.__getitem__(self, index)
+
+    @staticmethod
+    def _value(v):
+        return v.load() if isinstance(v, LOCAL_REFS) else v
+
+    def __getitem__(self, index):
+        item = list.__getitem__(self, index)
+        return [self._value(v) for v in item] if isinstance(index, slice) else self._value(item)
+
+    def __iter__(self):
+        return (self._value(v) for v in list.__iter__(self))
+
+    def __reversed__(self):
+        return (self._value(v) for v in list.__reversed__(self))
+
+    def values(self) -> list:
+        return list(self.__iter__())
+
+    def __add__(self, other):
+        return self.values() + list(other)
+
+    def __radd__(self, other):
+        return list(other) + self.values()
+
+    def __mul__(self, n):
+        return self.values() * n
+
+    __rmul__ = __mul__
+
+    def copy(self):
+        return self.values()
+
+    def __contains__(self, item):
+        return item in self.values()
 
 
 _SPECULATABLE = O.PURE | {Op.LOCAL_LOAD}

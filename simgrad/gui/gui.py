@@ -338,9 +338,10 @@ class GUI:
         return False
 
     def get_cursor_pos(self):
-        """Cursor position in [0, 1]^2 with y up; the centre when headless."""
+        """Cursor position in [0, 1]^2 with y up; (0, 0) when headless, as Taichi's GUI gives (its cursor
+        starts there), so programs steered by the cursor (mciso_advanced.py) compute the same."""
         if self._window is None:
-            return 0.5, 0.5
+            return 0.0, 0.0
         return tuple(float(v) for v in self._window.cursor)
 
     # -- state ------------------------------------------------------------------------------

@@ -137,6 +137,8 @@ class SNode:
             raise SimgradValueError(f"{kind}(): sizes must be non-negative integers, got {dimensions!r}",
                                     caller_loc())
         dims = tuple(int(d) for d in dimensions)
+        if len(dims) == 1:  # one size for every axis, as Taichi's SNode::create_node broadcasts it
+            dims = dims * len(ax)
         if len(dims) != len(ax):
             raise SimgradError(f"{kind}(): {len(ax)} axes but {len(dims)} sizes")
         child = SNode(self, kind, ax, dims)
