@@ -758,9 +758,9 @@ class VarList(list):
     """A list bound to a name in a kernel: as Taichi's expr_init does, each run-time value (scalar or matrix)
     becomes a local variable, so ``v[i] = x`` under run-time control flow is a run-time store. Reading the
     list (indexing, iterating, unpacking) loads the variables; ``depth`` is the run-time nesting it was bound
-    at (assigning a Python element deeper would happen at compile time: Compiler._python_setitem refuses)."""
+    at (assigning a Python element deeper would happen at compile time: KernelLowering._python_setitem refuses)."""
 
-    def __init__(self, comp: Compiler, values):
+    def __init__(self, comp: KernelLowering, values):
         self.depth = comp.frame.dynamic_depth
         super().__init__(comp.new_var(v) if isinstance(v, (Expr, Matrix)) else v
                          for v in values)
