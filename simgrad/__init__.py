@@ -51,7 +51,7 @@ from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.compiler import fill as _fill  # installs the compiled zeroing of large gradients
 from simgrad.compiler import sparse_scope as _sparse_scope  # Python-scope access to sparse fields
-from simgrad.lang.kernel import data_oriented, func, pyfunc, real_func
+from simgrad.lang.functions import data_oriented, func, pyfunc, real_func
 
 
 from simgrad.lang.loops import (
@@ -70,7 +70,7 @@ from simgrad.lang.loops import (
 from simgrad.lang.matrix import Matrix, Vector
 from simgrad.lang.struct import Struct, StructField, dataclass
 from simgrad.lang.ndarray import MatrixNdarray, Ndarray, ScalarNdarray, VectorNdarray, ndarray
-from simgrad.lang.ops import (
+from simgrad.lang.operators import (
     abs,
     bit_cast,
     bit_shr,
@@ -94,7 +94,7 @@ from simgrad.lang.ops import (
     select,
     zero,
 )
-from simgrad.lang.ops import math_functions as _math_functions
+from simgrad.lang.operators import math_functions as _math_functions
 
 globals().update(_math_functions("ti"))  # the registry's math functions (ir/opdefs.py): ti.sin, ti.atan2, ...
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes

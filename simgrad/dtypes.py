@@ -42,7 +42,7 @@ class DataType:
         return (_by_name, (self.name,))
 
 
-# how `ti.f32(x)` casts: lang/ops.py installs its `cast` here (dtypes sits below lang and imports none of it)
+# how `ti.f32(x)` casts: lang/operators.py installs its `cast` here (dtypes sits below lang and imports none of it)
 cast_hook: Callable[[Any, DataType], Any] | None = None
 
 i8 = DataType("i8", np.int8, 8, False, True, "i8")

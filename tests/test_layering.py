@@ -26,7 +26,7 @@ PUBLIC = "simgrad"  # the public namespace, simgrad/__init__.py
 # give Matrices for vector operands and Matrices are built from scalar ops; fields, SNodes, structs, types
 # and ndarrays construct and return those values and each other. Why each one: docs/ARCHITECTURE.md "Layers".
 CORE = frozenset(f"simgrad.lang.{m}" for m in (
-    "expr", "ops", "matrix", "field", "snode", "factories", "types", "struct", "sparse", "ndarray"))
+    "expr", "operators", "matrix", "field", "snode", "factories", "types", "struct", "sparse", "ndarray"))
 
 
 def _modules() -> dict[str, Path]:
@@ -81,7 +81,7 @@ def _imports(module: str) -> list[tuple[int, str]]:
 
 def _resolve(name: str) -> str | None:
     """The simgrad module an imported name lives in: itself when it is a module, else the longest module
-    prefix (`simgrad.lang.ops.cast` -> simgrad.lang.ops)."""
+    prefix (`simgrad.lang.operators.cast` -> simgrad.lang.operators)."""
     parts = name.split(".")
     while parts:
         if ".".join(parts) in MODULES:
@@ -226,7 +226,7 @@ def test_cycle_finder_finds_and_prints_a_cycle():
 
 def test_function_local_and_relative_imports_count(tmp_path):
     src = "from __future__ import annotations\nfrom typing import TYPE_CHECKING\nif TYPE_CHECKING:\n" \
-          "    from simgrad.lang import ops\n\ndef f():\n    from . import nodes\n    import simgrad.errors\n"
+          "    from simgrad.lang import operators\n\ndef f():\n    from . import nodes\n    import simgrad.errors\n"
     MODULES["simgrad.ir._probe"] = p = tmp_path / "_probe.py"
     try:
         p.write_text(src)

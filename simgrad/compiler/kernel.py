@@ -12,7 +12,7 @@ from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
 from simgrad.compiler.params import make_param
 from simgrad.errors import SimgradTypeError, caller_loc
 from simgrad.lang import ad_hooks
-from simgrad.lang.kernel import KernelDef, resolved_signature, unexpected_keywords
+from simgrad.lang.functions import KernelDef, resolved_signature, unexpected_keywords
 from simgrad.lang.program import Program, get_program
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;

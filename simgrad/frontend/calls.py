@@ -11,7 +11,7 @@ from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
 from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
@@ -19,11 +19,11 @@ from simgrad.lang.struct import Struct
 
 
 def _builtin_int(x=0, *rest):
-    return ops.cast(x, dt.Defaults.ip) if isinstance(x, (Expr, Matrix)) else int(x, *rest)
+    return operators.cast(x, dt.Defaults.ip) if isinstance(x, (Expr, Matrix)) else int(x, *rest)
 
 
 def _builtin_float(x=0.0):
-    return ops.cast(x, dt.Defaults.fp) if isinstance(x, (Expr, Matrix)) else float(x)
+    return operators.cast(x, dt.Defaults.fp) if isinstance(x, (Expr, Matrix)) else float(x)
 
 
 def _builtin_len(x):
@@ -34,12 +34,12 @@ def _builtin_len(x):
 
 def _builtin_round(x, ndigits=None):
     if isinstance(x, (Expr, Matrix)):
-        return ops.round(x)
+        return operators.round(x)
     return round(x, ndigits) if ndigits is not None else round(x)
 
 
 def _builtin_bool(x=False):
-    return ops.ne(x, 0) if isinstance(x, Expr) else bool(x)
+    return operators.ne(x, 0) if isinstance(x, Expr) else bool(x)
 
 
 def _builtin_range(*args):
@@ -61,10 +61,10 @@ _BUILTINS = {
     builtins.range: _builtin_range,
     builtins.int: _builtin_int,
     builtins.float: _builtin_float,
-    builtins.abs: ops.abs,
-    builtins.min: ops.min,
-    builtins.max: ops.max,
-    builtins.pow: ops.pow,
+    builtins.abs: operators.abs,
+    builtins.min: operators.min,
+    builtins.max: operators.max,
+    builtins.pow: operators.pow,
     builtins.len: _builtin_len,
     builtins.round: _builtin_round,
     builtins.bool: _builtin_bool,
@@ -113,7 +113,7 @@ def call(comp, node: ast.Call):
         hashable = False
     if hashable:
         return _BUILTINS[fn](*args, **kwargs)
-    from simgrad.lang.kernel import BoundFunc, Func, KernelDef
+    from simgrad.lang.functions import BoundFunc, Func, KernelDef
 
     if isinstance(fn, Func):
         return inline(comp, fn, args, kwargs, node)
@@ -151,7 +151,7 @@ def _local_matrix_method(comp, node: ast.Call, name: str):
 def _template_params(fn) -> set:
     """Positions and names of a ti.func's ti.template() parameters (a local passed there is passed by
     reference, as in Taichi: `x = 1` in the callee assigns the caller's variable)."""
-    from simgrad.lang.kernel import BoundFunc, Func
+    from simgrad.lang.functions import BoundFunc, Func
     from simgrad.lang.types import by_reference
 
     shift = 0
@@ -194,7 +194,7 @@ def inline(comp, fn, args, kwargs, node):
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
-    from simgrad.lang.kernel import unexpected_keywords
+    from simgrad.lang.functions import unexpected_keywords
 
     sig = fn.signature
     unknown = unexpected_keywords(sig, kwargs)
@@ -243,7 +243,7 @@ def inline(comp, fn, args, kwargs, node):
                                  f"(ti.func {fn.name})", comp.loc(node))
     if ann is not None and rv is not None:
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
-            rv = ops.cast(rv, ann)
+            rv = operators.cast(rv, ann)
     return rv
 
 

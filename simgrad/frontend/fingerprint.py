@@ -55,7 +55,7 @@ def _trusted_module(name) -> bool:
 
 # simgrad modules whose functions may run at compile time: they emit IR or compute on their arguments,
 # and change no Python-scope state (fields, trees, the program are in other modules)
-_PURE_LIBRARY = frozenset(("simgrad.dtypes", "simgrad.lang.ops", "simgrad.lang.matrix", "simgrad.lang.mathlib",
+_PURE_LIBRARY = frozenset(("simgrad.dtypes", "simgrad.lang.operators", "simgrad.lang.matrix", "simgrad.lang.mathlib",
                            "simgrad.lang.linalg", "simgrad.lang.loops", "simgrad.lang.types",
                            "simgrad.lang.atomics", "simgrad.lang.expr", "simgrad.frontend.arrays"))
 
@@ -191,7 +191,7 @@ class KeyBuilder:
     def _simgrad_object(self, v, depth: int):
         from simgrad.lang.archs import Arch
         from simgrad.lang.field import Field
-        from simgrad.lang.kernel import Func
+        from simgrad.lang.functions import Func
         from simgrad.lang.loops import ndrange
         from simgrad.lang.matrix import Matrix
         from simgrad.lang.snode import Axis, SNode

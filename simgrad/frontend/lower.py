@@ -27,18 +27,19 @@ from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
-from simgrad.lang.kernel import BoundFunc
+from simgrad.lang.functions import BoundFunc
 from simgrad.lang.matrix import Matrix, dtype_of
 from simgrad.lang.struct import Struct, StructField
 from simgrad.lang.types import MatrixType
 
 _BINOPS = {
-    ast.Add: ops.add, ast.Sub: ops.sub, ast.Mult: ops.mul, ast.Div: ops.truediv, ast.FloorDiv: ops.floordiv,
-    ast.Mod: ops.mod, ast.Pow: ops.pow, ast.BitAnd: ops.bit_and, ast.BitOr: ops.bit_or,
-    ast.BitXor: ops.bit_xor, ast.LShift: ops.shl, ast.RShift: ops.shr,
+    ast.Add: operators.add, ast.Sub: operators.sub, ast.Mult: operators.mul, ast.Div: operators.truediv,
+    ast.FloorDiv: operators.floordiv, ast.Mod: operators.mod, ast.Pow: operators.pow,
+    ast.BitAnd: operators.bit_and, ast.BitOr: operators.bit_or, ast.BitXor: operators.bit_xor,
+    ast.LShift: operators.shl, ast.RShift: operators.shr,
     ast.MatMult: lambda a, b: a @ b,
 }
 _AUG_KIND = {
@@ -47,7 +48,8 @@ _AUG_KIND = {
     ast.LShift: "shl", ast.RShift: "shr",
 }
 _CMPOPS = {
-    ast.Lt: ops.lt, ast.LtE: ops.le, ast.Gt: ops.gt, ast.GtE: ops.ge, ast.Eq: ops.eq, ast.NotEq: ops.ne,
+    ast.Lt: operators.lt, ast.LtE: operators.le, ast.Gt: operators.gt, ast.GtE: operators.ge,
+    ast.Eq: operators.eq, ast.NotEq: operators.ne,
 }
 _PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b: a in b,
            ast.NotIn: lambda a, b: a not in b}
@@ -136,7 +138,7 @@ class KernelLowering:
         elif isinstance(value, bool):
             t = dt.Defaults.ip
         else:
-            t = ops.to_expr(value).dtype
+            t = operators.to_expr(value).dtype
         if dtype is not None:
             t = dt.from_any(dtype)
         ref = VarRef(t)
@@ -170,12 +172,12 @@ class KernelLowering:
             if frame.dynamic_returns != before:  # `s` may have returned: leave loops, guard what follows
                 assert frame.ret_flag is not None
                 if len(self.loop_stack) > frame.loop_base:
-                    stop = self.builder.emit(Op.IF, None, (ops.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    stop = self.builder.emit(Op.IF, None, (operators.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(stop.blocks[0]):
                         self._loop_jump(s, Op.BREAK)
                 rest = stmts[k + 1:]
                 if rest:
-                    guard = self.builder.emit(Op.IF, None, (ops.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    guard = self.builder.emit(Op.IF, None, (operators.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(guard.blocks[0]):
                         self.visit_block(rest)
                 return
@@ -206,7 +208,7 @@ class KernelLowering:
                 t = ann.dtype if isinstance(ann, MatrixType) else dtype_of(value)
                 frame.ret_var = MatrixRef([self._entry_var(t) for _ in value.entries], value.n, value.m)
             elif isinstance(value, (Expr, int, float)) and not isinstance(value, bool):
-                t = ann if isinstance(ann, dt.DataType) else ops.to_expr(value).dtype
+                t = ann if isinstance(ann, dt.DataType) else operators.to_expr(value).dtype
                 frame.ret_var = self._entry_var(t)
             elif value is not None:
                 raise SimgradSyntaxError(f"a {type(value).__name__} cannot be returned from inside run-time "
@@ -367,7 +369,7 @@ class KernelLowering:
         if isinstance(cond, Matrix):
             raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",
                                    self.loc(node.test))
-        c = ops.ne(cond, 0)
+        c = operators.ne(cond, 0)
         stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
         for block, body in zip(stmt.blocks, (node.body, node.orelse)):
             with self.dynamic(block):
@@ -401,7 +403,7 @@ class KernelLowering:
             with self.dynamic(loop.blocks[0]):
                 cond = self.eval(node.test)
                 if isinstance(cond, Expr):
-                    stop = self.builder.emit(Op.IF, None, (ops.eq(cond, 0).stmt,), nblocks=2)
+                    stop = self.builder.emit(Op.IF, None, (operators.eq(cond, 0).stmt,), nblocks=2)
                     with self.builder.inside(stop.blocks[0]):
                         self.builder.emit(Op.BREAK, None, attrs={"header": True})
                 elif not cond:
@@ -461,7 +463,7 @@ class KernelLowering:
             raise SimgradTypeError(f"kernel returns {len(values)} values but is annotated with "
                                    f"{len(self.return_types)}", self.loc(node))
         for slot, (v, t) in enumerate(zip(values, self.return_types)):
-            e = ops.cast_expr(ops.to_expr(v, t), t)
+            e = operators.cast_expr(operators.to_expr(v, t), t)
             self.builder.emit(Op.RET_STORE, None, (e.stmt,), {"slot": slot})
 
     def visit_Assert(self, node: ast.Assert) -> None:
@@ -488,7 +490,7 @@ class KernelLowering:
                 raise SimgradSyntaxError(f"an assert message can show at most {ERR_MAX_ARGS} kernel values, "
                                          f"this one has {len(msg.values)}", self.loc(node))
             args, text = tuple(v.stmt for v in msg.values), msg.template()
-        self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt, *args), {"message": text})
+        self.builder.emit(Op.ASSERT, None, (operators.ne(cond, 0).stmt, *args), {"message": text})
 
     def visit_For(self, node: ast.For) -> None:
         from simgrad.frontend.loops import lower_for
@@ -545,13 +547,13 @@ class KernelLowering:
     def eval_UnaryOp(self, node: ast.UnaryOp):
         v = self.eval(node.operand)
         if isinstance(node.op, ast.USub):
-            return ops.neg(v)
+            return operators.neg(v)
         if isinstance(node.op, ast.UAdd):
             return v
         if isinstance(node.op, ast.Invert):
-            return ops.bit_not(v)
+            return operators.bit_not(v)
         if isinstance(v, (Expr, Matrix)):
-            return ops.logical_not(v)
+            return operators.logical_not(v)
         return not v
 
     def eval_BoolOp(self, node: ast.BoolOp):
@@ -567,7 +569,7 @@ class KernelLowering:
                 continue
             if isinstance(result, Matrix):  # element-wise on matrices: both sides, 1/0 entries
                 other = self.eval(sub)
-                result = ops.logical_and(result, other) if is_and else ops.logical_or(result, other)
+                result = operators.logical_and(result, other) if is_and else operators.logical_or(result, other)
                 continue
             left, right = (lambda a=result: a), (lambda n=sub: self.eval(n))
             result = self.choose(result, right, left) if is_and else self.choose(result, left, right)
@@ -582,7 +584,7 @@ class KernelLowering:
                 r = _PY_CMP[type(op)](left, right)
             else:
                 r = _CMPOPS[type(op)](left, right)
-            result = r if result is None else ops.logical_and(result, r)
+            result = r if result is None else operators.logical_and(result, r)
             left = right
         return result
 
@@ -591,7 +593,7 @@ class KernelLowering:
         if not isinstance(cond, (Expr, Matrix)):
             return self.eval(node.body if cond else node.orelse)
         if isinstance(cond, Matrix):
-            return ops.select(cond, self.eval(node.body), self.eval(node.orelse))
+            return operators.select(cond, self.eval(node.body), self.eval(node.orelse))
         return self.choose(cond, lambda: self.eval(node.body), lambda: self.eval(node.orelse))
 
     def choose(self, cond: Expr, then_fn, else_fn):
@@ -599,7 +601,7 @@ class KernelLowering:
         without memory reads or effects are hoisted and picked by a select (one differentiable op); a
         side that reads memory stays guarded, as in Taichi (`x[i] if i < n else 0` never reads x[n])."""
         parent = self.builder.block
-        c = ops.ne(cond, 0)
+        c = operators.ne(cond, 0)
         stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
         values = []
         for block, fn in zip(stmt.blocks, (then_fn, else_fn)):
@@ -611,7 +613,7 @@ class KernelLowering:
             for x in hoisted:
                 x.block = parent
             parent.stmts[at:at + 1] = hoisted
-            return ops.select(c, *values)
+            return operators.select(c, *values)
         a, b = values
         if isinstance(a, Matrix) or isinstance(b, Matrix):
             if not (isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape == b.shape):
@@ -815,8 +817,8 @@ def _choice_type(a, b) -> dt.DataType:
         return dt.promote(a.dtype, b.dtype)
     if isinstance(a, Expr) or isinstance(b, Expr):
         e, lit = (a, b) if isinstance(a, Expr) else (b, a)
-        return dt.promote(e.dtype, ops._literal_type(lit, e.dtype))
-    return dt.promote(ops._literal_type(a, None), ops._literal_type(b, None))
+        return dt.promote(e.dtype, operators._literal_type(lit, e.dtype))
+    return dt.promote(operators._literal_type(a, None), operators._literal_type(b, None))
 
 
 def _maybe_global(node) -> bool:
@@ -888,10 +890,10 @@ def global_ref(comp: KernelLowering, base, index, node):
             raise SimgradTypeError("field indices must be integers (use ti.cast(i, ti.i32) or int(i))",
                                    comp.loc(node))
         if offset:
-            i = ops.sub(i, offset[k])
-        e = ops.to_expr(i, dt.i32)
+            i = operators.sub(i, offset[k])
+        e = operators.to_expr(i, dt.i32)
         if e.dtype is not dt.i32:
-            e = ops.cast_expr(e, dt.i32)
+            e = operators.cast_expr(e, dt.i32)
         exprs.append(e)
     if isinstance(base, ArrayArg):
         return base.ref(exprs)

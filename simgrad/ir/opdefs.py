@@ -5,7 +5,7 @@ value (through ir/numeric.py, bit for bit what the compiled code computes), its 
 how codegen lowers it, as data. The rest of the compiler derives its tables from `OPS`: the op sets of
 ir/ops.py, the builder's helpers (`b.atan2`), constant folding (passes/simplify.py), the derivative
 tables (autodiff/rules.py), codegen's elementwise lowering (codegen/arith.py) and the math functions of
-`ti.*` / `ti.math` (lang/ops.py). Adding a math function is one entry here (and its enum name), plus its
+`ti.*` / `ti.math` (lang/operators.py). Adding a math function is one entry here (and its enum name), plus its
 row in tests/ir/test_opdefs.py.
 
 Reverse rules get the IR builder `b`, the adjoint of the result `g` and the operand values, and return
@@ -312,7 +312,7 @@ _TI_MATH = ("ti", "math")
 
 def _math(op: Op, lowering: Lowering, python: Callable, vjp: Callable | None, sample=_WIDE,
           export: tuple[str, ...] = _TI_MATH, exact: Callable | None = None) -> OpDef:
-    """A float math function of ti.* / ti.math (an int operand is cast to default_fp by lang/ops.py)."""
+    """A float math function of ti.* / ti.math (an int operand is cast to default_fp by lang/operators.py)."""
     name = op.name.lower()
     return OpDef(op, len(sample), FLOAT, exact or _libm(name), lower_float=lowering, vjp=vjp, export=export,
                  python=python, sample=sample)
@@ -336,7 +336,7 @@ _DEFS = [
     OpDef(Op.MOD, 2, INT, _arith(None, _divide(lambda a, b: a % b)), lower_int=_INT_DIV),  # Python's %
     OpDef(Op.RAW_DIV, 2, INT, _arith(None, _divide(N.c_div)), lower_int=_INT_DIV),  # C's /
     OpDef(Op.RAW_MOD, 2, INT, _arith(None, _divide(lambda a, b: a - b * N.c_div(a, b))), lower_int=_INT_DIV),
-    OpDef(Op.POW, 2, FLOAT, _libm("pow"), Intrinsic("pow"), vjp=_pow),  # integer powers: lang/ops.py
+    OpDef(Op.POW, 2, FLOAT, _libm("pow"), Intrinsic("pow"), vjp=_pow),  # integer powers: lang/operators.py
     OpDef(Op.MIN, 2, ANY, _minmax(min), Intrinsic("minnum"), Intrinsic("smin", "umin"), vjp=_min),
     OpDef(Op.MAX, 2, ANY, _minmax(max), Intrinsic("maxnum"), Intrinsic("smax", "umax"), vjp=_max),
     OpDef(Op.BIT_AND, 2, INT, _bits(lambda a, b: a & b), lower_int=Instr("and")),

@@ -319,10 +319,10 @@ def test_fuzz_generator_generates_every_op(op, tmp_path):
             assert o[None] == pytest.approx(float(want), rel=1e-12), f"{call} at {a}, {b}"
 
 
-@pytest.mark.parametrize("name", sorted(ti.lang.ops.MATH), ids=str)
+@pytest.mark.parametrize("name", sorted(ti.lang.operators.MATH), ids=str)
 def test_math_functions_are_named_for_the_kernel_cache(name):
     """The kernel cache describes a library function by module and qualified name: each generated math
     function must be findable under its own (they were all `_math.<locals>.f`, so a kernel calling a global
     `fn = ti.cos` got the cached kernel of `fn = ti.sin`)."""
-    fn = ti.lang.ops.MATH[name]
+    fn = ti.lang.operators.MATH[name]
     assert getattr(sys.modules[fn.__module__], fn.__qualname__) is fn
