@@ -53,7 +53,7 @@ EXCLUDED = {
                                                                                     "autodiff_mode enum",
     ("test_ad_snode_grad_type.py", "test_"): "reads Taichi's C++ SNode (x.snode.ptr.get_snode_grad_type())",
     ("test_return.py", "test_func_multiple_return"): "Taichi refuses a return inside a run-time if in a ti.func; "
-                                                     "simgrad compiles it (tests/lang/test_control_flow.py, early "
+                                                     "simgrad compiles it (tests/frontend/test_control_flow.py, early "
                                                      "returns)",
     ("test_field.py", "test_field_needs_grad_dtype"): "its last case expects needs_grad=True on a struct field "
                                                       "with an integer member to be refused; simgrad gives the "
@@ -66,13 +66,13 @@ EXCLUDED = {
     ("test_ast_refactor.py", "test_taichi_other_than_ti"): "drives impl.get_runtime().compiling_callable."
                                                            "ast_builder() (Taichi's internal AST builder)",
     ("test_ast_refactor.py", "test_range_for_three_arguments"): "Taichi refuses range(a, b, step) in kernels; "
-                                                                "simgrad runs it (tests/lang/"
+                                                                "simgrad runs it (tests/frontend/"
                                                                 "test_python_forms.py)",
     ("test_ast_refactor.py", "test_static_assign_element"): "Taichi refuses assigning an element of a ti.static "
                                                             "list; simgrad assigns the compile-time list as "
-                                                            "Python does (tests/lang/test_python_forms.py)",
+                                                            "Python does (tests/frontend/test_python_forms.py)",
     ("test_ast_refactor.py", "test_recreate_variable"): "Taichi refuses `a = 1; a = ti.static(2)`; simgrad "
-                                                        "assigns the variable (tests/lang/test_python_forms.py)",
+                                                        "assigns the variable (tests/frontend/test_python_forms.py)",
     ("test_cast.py", "test_int_extension"): "stores -128 into a u8 field from Python scope, which Taichi wraps "
                                             "silently to 128; simgrad refuses the out-of-range value "
                                             "(tests/lang/test_fill_and_ranges.py)",

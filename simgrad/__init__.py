@@ -51,7 +51,7 @@ from simgrad.lang.field import Field, MatrixField, ScalarField, rescale_index
 from simgrad.compiler.kernel import kernel
 from simgrad.compiler import fill as _fill  # installs the compiled zeroing of large gradients
 from simgrad.compiler import sparse_scope as _sparse_scope  # Python-scope access to sparse fields
-from simgrad.lang.kernel import data_oriented, func, pyfunc, real_func
+from simgrad.lang.functions import data_oriented, func, pyfunc, real_func
 
 
 from simgrad.lang.loops import (
@@ -59,6 +59,7 @@ from simgrad.lang.loops import (
     block_local,
     cache_read_only,
     grouped,
+    no_activate,
     stop_grad,
     loop_config,
     ndrange,
@@ -69,21 +70,15 @@ from simgrad.lang.loops import (
 from simgrad.lang.matrix import Matrix, Vector
 from simgrad.lang.struct import Struct, StructField, dataclass
 from simgrad.lang.ndarray import MatrixNdarray, Ndarray, ScalarNdarray, VectorNdarray, ndarray
-from simgrad.lang.ops import (
+from simgrad.lang.operators import (
     abs,
-    acos,
-    asin,
-    atan2,
     bit_cast,
     bit_shr,
     cast,
     ceil,
-    cos,
-    exp,
     floor,
     frexp,
     global_thread_idx,
-    log,
     logical_and,
     logical_not,
     logical_or,
@@ -96,14 +91,12 @@ from simgrad.lang.ops import (
     raw_div,
     raw_mod,
     round,
-    rsqrt,
     select,
-    sin,
-    sqrt,
-    tan,
-    tanh,
     zero,
 )
+from simgrad.lang.operators import math_functions as _math_functions
+
+globals().update(_math_functions("ti"))  # the registry's math functions (ir/opdefs.py): ti.sin, ti.atan2, ...
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import Layout, ref, sparse_matrix_builder, template, types
 from simgrad.lang.atomics import (
@@ -125,8 +118,6 @@ int8, int16, int32, int64 = i8, i16, i32, i64
 uint8, uint16, uint32, uint64 = u8, u16, u32, u64
 float16, float32, float64 = f16, f32, f64
 uint1 = u1
-ScalarField = ScalarField
-MatrixField = MatrixField
 
 
 def sync():
@@ -140,10 +131,9 @@ def get_runtime():
 
 
 _NOT_SUPPORTED = {
-    "no_activate": "ti.no_activate is a GPU-backend hint simgrad does not have",
     "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
               "bitmasked / dynamic)",
-    **{n: "Taichi's AOT/graph deployment is not part of simgrad" for n in ("aot", "graph", "ArgPack", "argpack")},
+    **{n: "Taichi's AOT deployment is not part of simgrad" for n in ("aot", "ArgPack", "argpack")},
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
@@ -169,6 +159,10 @@ def __getattr__(name):
         import simgrad._lib as _lib_module
 
         return _lib_module
+    if name == "graph":  # compute graphs, replayed as kernel launches in order
+        import simgrad.lang.graph as _graph
+
+        return _graph
     if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
         import simgrad.linalg as _linalg
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 
@@ -31,13 +34,16 @@ class DataType:
 
     def __call__(self, value):
         """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast in a kernel)."""
-        from simgrad.lang import ops
-
-        return ops.cast(value, self)
+        if cast_hook is None:
+            raise RuntimeError("simgrad.lang is not loaded: `import simgrad` before casting with a type")
+        return cast_hook(value, self)
 
     def __reduce__(self):
         return (_by_name, (self.name,))
 
+
+# how `ti.f32(x)` casts: lang/operators.py installs its `cast` here (dtypes sits below lang and imports none of it)
+cast_hook: Callable[[Any, DataType], Any] | None = None
 
 i8 = DataType("i8", np.int8, 8, False, True, "i8")
 i16 = DataType("i16", np.int16, 16, False, True, "i16")
@@ -109,5 +115,3 @@ def promote(a: DataType, b: DataType) -> DataType:
     return a if not a.is_signed else b
 
 
-def to_signed(t: DataType) -> DataType:
-    return {u8: i8, u16: i16, u32: i32, u64: i64}.get(t, t)

@@ -6,10 +6,15 @@ from __future__ import annotations
 import linecache
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import FrameType
 
 _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+# whether a kernel is being compiled: ir/context.py (the kernel stack, above this module) installs its
+# in_kernel; before that module is loaded no kernel can be compiling
+compiling: Callable[[], bool] = lambda: False
 
 
 @dataclass(frozen=True)
@@ -36,9 +41,7 @@ class Loc:
 def caller_loc() -> Loc | None:
     """The user's line that called into simgrad (the innermost frame outside the package), for errors
     raised in Python scope."""
-    from simgrad.ir import context
-
-    if context.in_kernel():
+    if compiling():
         return None  # compiling a kernel: the statement being compiled is the place
     frame: FrameType | None = sys._getframe(1)
     while frame is not None and (frame.f_code.co_filename.startswith("<launcher")  # generated launchers

@@ -81,7 +81,8 @@ class Reverse:
         for s in walk(kernel.body):
             for o in s.operands:
                 self.uses[id(o)] = self.uses.get(id(o), 0) + 1
-        self.active = _active(kernel.body)
+        # adjoints only for values that depend on a gradient field and can reach a write of one
+        self.active = _active(kernel.body) & _reaching(kernel.body)
         self.task = _Task(self.body)
         self.used_tape = False
         self.in_task = False  # inside a parallel loop's body (only there are serial loops recomputed)
@@ -228,6 +229,10 @@ class Reverse:
             for x in walk(loop.blocks[0]):
                 for o in x.operands:
                     if id(o) not in inside and o.op is not Op.CONST:
+                        if o.op is Op.GLOBAL_PTR:  # rebuilt from its indices, never taped (not a value)
+                            for i in o.operands:
+                                if i.op is not Op.CONST:
+                                    values.setdefault(id(i), i)
                         (local if o.op is Op.ALLOCA else values).setdefault(id(o), o)
             got = self._free_cache[id(loop)] = (list(values.values()), list(local.values()))
         return got
@@ -252,7 +257,10 @@ class Reverse:
         saved_held = dict(self.held)
         # outer values not in scope here come through the tape, pushed where the replay passed the loop
         taped = [(o, self.fmap[id(o)], self.bmap) for o in values
-                 if id(o) not in self.bmap and self.depth.get(id(o), 0) > 0]
+                 if id(o) not in self.bmap and self.depth.get(id(o), 0) > 0 and o.op is not Op.GLOBAL_PTR]
+        # an element pointer from a nested block (CSE shared it with the loop) is rebuilt from its indices
+        rebuilt = [o for o in values if o.op is Op.GLOBAL_PTR and id(o) not in self.bmap
+                   and self.depth.get(id(o), 0) > 0]
         nested = self.depth.get(id(s), 0) > 0
         for a, value, held in self.snap[id(s)]:
             if nested and not held:
@@ -261,6 +269,9 @@ class Reverse:
                 self.held[id(a)] = value
         for o, value, into in reversed(taped):
             into[id(o)] = self.b.emit(Op.TAPE_POP, value.type, (), {"message": self._overflow_text(s)})
+        for o in rebuilt:
+            self.bmap[id(o)] = self.b.emit(Op.GLOBAL_PTR, o.type, tuple(self.v(i) for i in o.operands),
+                                           dict(o.attrs))
         begin, end = (o if o.op is Op.CONST else self.v(o) for o in s.operands)
         n = _trip(self.b, begin, end)
         t = n.vtype
@@ -596,6 +607,33 @@ def _active(body: Block) -> set[int]:
                 active.add(id(s))
                 changed = True
     return active
+
+
+def _reaching(body: Block) -> set[int]:
+    """Ids of the values (and locals) from which a write of an element with a gradient can be reached: the
+    adjoint of any other value is exactly zero, so none is computed. Besides saving work, this keeps a dead
+    value's infinite derivative out of the gradient (`v = v * v * v` overflowing to inf in a loop whose
+    result is never used gave `0 * inf = NaN` in x.grad, as in taichi)."""
+    live: set[int] = set()
+    stmts = list(walk(body))
+    changed = True
+    while changed:  # a loop-carried local becomes live on a later pass
+        changed = False
+        for s in reversed(stmts):
+            op = s.op
+            if op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+                feeds = s.operands[1:] if _grad_of(s.operands[0]) is not None or id(s) in live else ()
+            elif op in (Op.LOCAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.ALLOCA:
+                feeds = s.operands[1:] if id(s.operands[0]) in live else ()
+            elif id(s) not in live or op is Op.GLOBAL_LOAD:
+                continue
+            else:  # every operand, integers too (a float rebuilt from one must still meet its missing rule)
+                feeds = s.operands
+            for o in feeds:
+                if id(o) not in live and o.op is not Op.CONST:
+                    live.add(id(o))
+                    changed = True
+    return live
 
 
 def _trip(b: Builder, begin: Stmt, end: Stmt) -> Stmt:

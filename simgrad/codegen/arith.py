@@ -1,19 +1,12 @@
-"""Arithmetic, math, comparison and conversion instructions, with Python's semantics for // and %."""
+"""Elementwise ops as their registry entries say (ir/opdefs.py), the named special emitters (Python's //
+and %, masked shifts, ...), conversions and random numbers."""
 
 from __future__ import annotations
 
-from simgrad import dtypes as dt
-from simgrad.ir.ops import Op
+from collections.abc import Callable
 
-_INT_BIN = {Op.ADD: "add", Op.SUB: "sub", Op.MUL: "mul", Op.BIT_AND: "and", Op.BIT_OR: "or",
-            Op.BIT_XOR: "xor"}
-_FLT_BIN = {Op.ADD: "fadd", Op.SUB: "fsub", Op.MUL: "fmul", Op.DIV: "fdiv"}
-_ICMP = {Op.LT: "slt", Op.LE: "sle", Op.GT: "sgt", Op.GE: "sge", Op.EQ: "eq", Op.NE: "ne"}
-_UCMP = {Op.LT: "ult", Op.LE: "ule", Op.GT: "ugt", Op.GE: "uge", Op.EQ: "eq", Op.NE: "ne"}
-_FCMP = {Op.LT: "olt", Op.LE: "ole", Op.GT: "ogt", Op.GE: "oge", Op.EQ: "oeq", Op.NE: "une"}
-_FLOAT_INTRINSIC = {Op.SQRT: "sqrt", Op.SIN: "sin", Op.COS: "cos", Op.EXP: "exp", Op.LOG: "log",
-                    Op.FLOOR: "floor", Op.CEIL: "ceil", Op.ROUND: "round", Op.ABS: "fabs"}
-_LIBM = {Op.TAN: "tan", Op.ASIN: "asin", Op.ACOS: "acos", Op.TANH: "tanh", Op.ATAN2: "atan2"}
+from simgrad import dtypes as dt
+from simgrad.ir.opdefs import OPS, Compare, Instr, Intrinsic, Libm, Op
 
 
 def _sfx(t: dt.DataType) -> str:
@@ -75,47 +68,53 @@ def _nonnegative_digit(x) -> bool:
     return start is not None and start.op is Op.CONST and start.attrs["value"] >= 0
 
 
-def lower_binary(f, s) -> str:
-    a, b = s.operands
-    t = a.type
-    ty = t.llvm
-    x, y = f.v(a), f.v(b)
-    op = s.op
-    r = f.tmp("v")
-    if op in _ICMP:
-        c = f.tmp("cmp")
+def lower_elementwise(f, s) -> str:
+    """An elementwise op, as its registry entry says (ir/opdefs.py): an instruction, an intrinsic, a libm
+    call, a comparison or one of the named emitters in `SPECIAL`."""
+    t = s.operands[0].type
+    d = OPS[s.op]
+    how = d.lower_float if t.is_float else d.lower_int
+    if how is None:
+        raise NotImplementedError(f"{s.op.name} on {t}")
+    args = [f.v(o) for o in s.operands]
+    if isinstance(how, Instr):
+        r = f.tmp("v")
         if t.is_float:
-            f.emit(f"{c} = fcmp {_FCMP[op]} {ty} {x}, {y}")
+            f.emit(f"{r} = {how.name} {f.gen.fm}{t.llvm} {', '.join(args)}")
         else:
-            f.emit(f"{c} = icmp {(_ICMP if t.is_signed else _UCMP)[op]} {ty} {x}, {y}")
+            flags = " nuw nsw" if s.attrs.get("nowrap") else ""  # address arithmetic (passes/lower_access.py)
+            f.emit(f"{r} = {how.name}{flags} {t.llvm} {', '.join(args)}")
+        return r
+    if isinstance(how, Intrinsic):
+        name = how.unsigned if how.unsigned and not t.is_signed else how.name
+        return _intrinsic(f, name, t, args)
+    if isinstance(how, Libm):
+        return _libm(f, how.name, t, args)
+    if isinstance(how, Compare):
+        c, r = f.tmp("cmp"), f.tmp("v")
+        if t.is_float:
+            f.emit(f"{c} = fcmp {how.fcmp} {t.llvm} {args[0]}, {args[1]}")
+        else:
+            f.emit(f"{c} = icmp {how.signed if t.is_signed else how.unsigned} {t.llvm} {args[0]}, {args[1]}")
         f.emit(f"{r} = zext i1 {c} to i32")
         return r
-    if t.is_float:
-        if op in _FLT_BIN:
-            f.emit(f"{r} = {_FLT_BIN[op]} {f.gen.fm}{ty} {x}, {y}")
-            return r
-        if op is Op.POW:
-            return _intrinsic(f, "pow", t, [x, y])
-        if op in (Op.MIN, Op.MAX):
-            return _intrinsic(f, "minnum" if op is Op.MIN else "maxnum", t, [x, y])
-        if op is Op.ATAN2:
-            return _libm(f, "atan2", t, [x, y])
-        raise NotImplementedError(op)
-    if op in (Op.SHL, Op.SHR):
-        # a shift by >= the width is poison in LLVM: take the amount modulo the width, as x86 does at
-        # run time, so a constant shift and a run-time one agree
-        amt = f.tmp("sh")
-        f.emit(f"{amt} = and {ty} {y}, {t.bits - 1}")
-        kind = "shl" if op is Op.SHL else "ashr" if t.is_signed else "lshr"
-        f.emit(f"{r} = {kind} {ty} {x}, {amt}")
-        return r
-    if op in _INT_BIN:
-        flags = " nuw nsw" if s.attrs.get("nowrap") else ""  # address arithmetic (passes/lower_access.py)
-        f.emit(f"{r} = {_INT_BIN[op]}{flags} {ty} {x}, {y}")
-        return r
-    if op in (Op.MIN, Op.MAX):
-        name = ("s" if t.is_signed else "u") + ("min" if op is Op.MIN else "max")
-        return _intrinsic(f, name, t, [x, y])
+    return SPECIAL[how.name](f, s, t, *args)
+
+
+def _shift(f, s, t: dt.DataType, x: str, y: str) -> str:
+    """A shift by >= the width is poison in LLVM: take the amount modulo the width, as x86 does at run time,
+    so a constant shift and a run-time one agree."""
+    amt, r = f.tmp("sh"), f.tmp("v")
+    f.emit(f"{amt} = and {t.llvm} {y}, {t.bits - 1}")
+    kind = "shl" if s.op is Op.SHL else "ashr" if t.is_signed else "lshr"
+    f.emit(f"{r} = {kind} {t.llvm} {x}, {amt}")
+    return r
+
+
+def _int_div(f, s, t: dt.DataType, x: str, y: str) -> str:
+    """Integer // and % (Python's: FLOORDIV, MOD) and C's (RAW_DIV, RAW_MOD), never trapping."""
+    a, b = s.operands
+    op, ty, r = s.op, t.llvm, f.tmp("v")
     if op in (Op.RAW_DIV, Op.RAW_MOD) and _nonnegative_digit(a) and b.op is Op.CONST and b.attrs["value"] > 0:
         # a digit of a flat loop index (never negative): unsigned division is the same and a shift/mask
         f.emit(f"{r} = {'udiv' if op is Op.RAW_DIV else 'urem'} {ty} {x}, {y}")
@@ -146,48 +145,51 @@ def lower_binary(f, s) -> str:
         f.emit(f"{adj} = sext i1 {fix} to {ty}")
         f.emit(f"{r} = add {ty} {q}, {adj}")
         return _negate_if(f, r, minus_one, ty)
-    elif op is Op.MOD:
-        add = f.tmp()
-        f.emit(f"{add} = select i1 {fix}, {ty} {d}, {ty} 0")
-        f.emit(f"{r} = add {ty} {m}, {add}")
-    elif op is Op.POW:
-        raise NotImplementedError("integer pow is lowered by the frontend")
-    else:
-        raise NotImplementedError(op)
+    add = f.tmp()
+    f.emit(f"{add} = select i1 {fix}, {ty} {d}, {ty} 0")
+    f.emit(f"{r} = add {ty} {m}, {add}")
     return r
 
 
-def lower_unary(f, s) -> str:
-    (a,) = s.operands
-    t = a.type
-    ty = t.llvm
-    x = f.v(a)
-    op = s.op
+def _neg(f, s, t: dt.DataType, x: str) -> str:
     r = f.tmp("u")
-    if op is Op.NEG:
-        f.emit(f"{r} = fneg {f.gen.fm}{ty} {x}" if t.is_float else f"{r} = sub {ty} 0, {x}")
-        return r
-    if op is Op.BIT_NOT:
-        f.emit(f"{r} = xor {ty} {x}, -1")
-        return r
-    if op is Op.LOGICAL_NOT:
-        c = f.tmp("c")
-        f.emit(f"{c} = fcmp oeq {ty} {x}, 0.0" if t.is_float else f"{c} = icmp eq {ty} {x}, 0")
-        f.emit(f"{r} = zext i1 {c} to i32")
-        return r
-    if op is Op.ABS and not t.is_float:
-        if not t.is_signed:
-            return x  # |u| = u; llvm.abs reads its operand as signed
-        f.gen.module.declare(f"declare {ty} @llvm.abs.{ty}({ty}, i1)")
-        f.emit(f"{r} = call {ty} @llvm.abs.{ty}({ty} {x}, i1 false)")
-        return r
-    if op is Op.RSQRT:
-        sq = _intrinsic(f, "sqrt", t, [x])
-        f.emit(f"{r} = fdiv {f.gen.fm}{ty} 1.0, {sq}")
-        return r
-    if op in _FLOAT_INTRINSIC:
-        return _intrinsic(f, _FLOAT_INTRINSIC[op], t, [x])
-    return _libm(f, _LIBM[op], t, [x])
+    f.emit(f"{r} = fneg {f.gen.fm}{t.llvm} {x}" if t.is_float else f"{r} = sub {t.llvm} 0, {x}")
+    return r
+
+
+def _bit_not(f, s, t: dt.DataType, x: str) -> str:
+    r = f.tmp("u")
+    f.emit(f"{r} = xor {t.llvm} {x}, -1")
+    return r
+
+
+def _logical_not(f, s, t: dt.DataType, x: str) -> str:
+    c, r = f.tmp("c"), f.tmp("u")
+    f.emit(f"{c} = fcmp oeq {t.llvm} {x}, 0.0" if t.is_float else f"{c} = icmp eq {t.llvm} {x}, 0")
+    f.emit(f"{r} = zext i1 {c} to i32")
+    return r
+
+
+def _int_abs(f, s, t: dt.DataType, x: str) -> str:
+    if not t.is_signed:
+        return x  # |u| = u; llvm.abs reads its operand as signed
+    ty, r = t.llvm, f.tmp("u")
+    f.gen.module.declare(f"declare {ty} @llvm.abs.{ty}({ty}, i1)")
+    f.emit(f"{r} = call {ty} @llvm.abs.{ty}({ty} {x}, i1 false)")
+    return r
+
+
+def _rsqrt(f, s, t: dt.DataType, x: str) -> str:
+    sq, r = _intrinsic(f, "sqrt", t, [x]), f.tmp("u")
+    f.emit(f"{r} = fdiv {f.gen.fm}{t.llvm} 1.0, {sq}")
+    return r
+
+
+# the emitters that opdefs.Special names
+SPECIAL: dict[str, Callable[..., str]] = {
+    "shift": _shift, "int_div": _int_div, "neg": _neg, "bit_not": _bit_not, "logical_not": _logical_not,
+    "int_abs": _int_abs, "rsqrt": _rsqrt,
+}
 
 
 def _conv(f, x: str, src: dt.DataType, dst: dt.DataType) -> str:

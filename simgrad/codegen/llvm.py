@@ -19,7 +19,7 @@ from simgrad.codegen.access import lower_check_index as check_index
 from simgrad.codegen.access import lower_global_ptr as global_address
 from simgrad.codegen.sparse import lower_sparse_action, lower_sparse_cell, lower_tree_root
 from simgrad.ir.nodes import Block, Kernel, Stmt
-from simgrad.ir.ops import Op
+from simgrad.ir.ops import OPS, Op
 from simgrad.passes.parallel_strategy import PAIR, PLAIN, PRIVATE, REDUCE
 from simgrad.passes.privatize import access_key
 from simgrad.runtime import abi
@@ -291,12 +291,37 @@ class KernelCodegen:
             LOWERING[s.op](self, f, s)
             k += 1
 
-    def serial_loop(self, f: FunctionText, s: Stmt, begin: str, end: str) -> None:
+    def serial_loop(self, f: FunctionText, s: Stmt, begin: str, end: str, cancel: bool = False) -> None:
+        """`for i in [begin, end)`; with `cancel`, in strips of CANCEL_STRIDE iterations with a Ctrl-C check
+        before each strip, so the inner loop stays a clean counted loop (LLVM still vectorises it)."""
         ty = llvm_type(s.vtype)
         pre = f.label("pre")
         f.emit(f"br label %{pre}")
         f.start_block(pre)
         head, body, latch, done = f.label("head"), f.label("body"), f.label("latch"), f.label("done")
+        exit_to = done
+        if cancel:
+            # strip: base runs begin, begin + STRIDE, ...; the strip ends at base + STRIDE or at end,
+            # decided by the unsigned distance end - base (no overflow near the type's maximum)
+            shead, strip, sdone = f.label("strip"), f.label("stripbody"), f.label("stripdone")
+            base, stop = f.tmp("base"), f.tmp("stop")
+            f.emit(f"br label %{shead}")
+            f.start_block(shead)
+            f.emit(f"{base} = phi {ty} [{begin}, %{pre}], [{stop}, %{done}]")
+            more = f.tmp("more")
+            f.emit(f"{more} = icmp slt {ty} {base}, {end}")
+            f.emit(f"br i1 {more}, label %{strip}, label %{sdone}")
+            f.start_block(strip)
+            f.cancel_point()
+            dist, far, cut = f.tmp("dist"), f.tmp("far"), f.tmp("cut")
+            f.emit(f"{dist} = sub {ty} {end}, {base}")
+            f.emit(f"{far} = icmp ugt {ty} {dist}, {CANCEL_STRIDE}")
+            f.emit(f"{cut} = add {ty} {base}, {CANCEL_STRIDE}")
+            f.emit(f"{stop} = select i1 {far}, {ty} {cut}, {ty} {end}")
+            pre = f.label("pre")
+            f.emit(f"br label %{pre}")
+            f.start_block(pre)
+            begin, end, exit_to = base, stop, sdone
         f.emit(f"br label %{head}")
         f.start_block(head)
         i, nxt = f.tmp("i"), f.tmp("inext")
@@ -306,7 +331,7 @@ class KernelCodegen:
         f.emit(f"br i1 {c}, label %{body}, label %{done}")
         f.start_block(body)
         f.names[s] = i
-        f.loops.append((done, latch))
+        f.loops.append((exit_to, latch))  # a break leaves the strips too
         self.lower_block(f, s.blocks[0])
         f.loops.pop()
         f.emit(f"br label %{latch}")
@@ -314,6 +339,9 @@ class KernelCodegen:
         f.emit(f"{nxt} = add {ty} {i}, 1")
         f.emit(f"br label %{head}")
         f.start_block(done)
+        if cancel:
+            f.emit(f"br label %{shead}")
+            f.start_block(sdone)
 
     def need_branch_weights(self) -> None:
         """The `!1` metadata (a cold branch) that failure paths and activations are marked with."""
@@ -334,6 +362,8 @@ class KernelCodegen:
 
 
 Lowering = Callable[[KernelCodegen, FunctionText, Stmt], None]
+# iterations of a serial loop between two Ctrl-C checks (a strip takes ~0.1 ms for a cheap body)
+CANCEL_STRIDE = 1 << 16
 
 
 def atomic_form(f: FunctionText, s: Stmt) -> str:
@@ -388,7 +418,9 @@ def lower_range_for(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     if s.attrs.get("parallel") and not f.in_task:
         g.parallel_loop(f, s)
     else:
-        g.serial_loop(f, s, f.v(s.operands[0]), f.v(s.operands[1]))
+        b, e = s.operands
+        short = b.op is Op.CONST and e.op is Op.CONST and e.attrs["value"] - b.attrs["value"] <= CANCEL_STRIDE
+        g.serial_loop(f, s, f.v(b), f.v(e), cancel=not short)  # a long or unknown one watches Ctrl-C
 
 
 # -- memory ------------------------------------------------------------------------------------------
@@ -541,12 +573,8 @@ def lower_ret_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 
 # -- arithmetic --------------------------------------------------------------------------------------
-def lower_binary_op(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.lower_binary(f, s)
-
-
-def lower_unary_op(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    f.names[s] = arith.lower_unary(f, s)
+def lower_elementwise(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    f.names[s] = arith.lower_elementwise(f, s)
 
 
 def lower_cast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -682,12 +710,7 @@ LOWERING: dict[Op, Lowering] = {
     Op.GLOBAL_LOAD: lower_global_load,
     Op.GLOBAL_STORE: lower_global_store, Op.ATOMIC: lower_atomic, Op.ARRAY_SHAPE: lower_array_shape,
     Op.RET_STORE: lower_ret_store,
-    **{op: lower_binary_op for op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.RAW_MOD,
-                                      Op.POW, Op.MIN, Op.MAX, Op.BIT_AND, Op.BIT_OR, Op.BIT_XOR, Op.SHL, Op.SHR,
-                                      Op.ATAN2, Op.LT, Op.LE, Op.GT, Op.GE, Op.EQ, Op.NE)},
-    **{op: lower_unary_op for op in (Op.NEG, Op.BIT_NOT, Op.LOGICAL_NOT, Op.SQRT, Op.RSQRT, Op.SIN, Op.COS, Op.TAN,
-                                     Op.ASIN, Op.ACOS, Op.EXP, Op.LOG, Op.TANH, Op.FLOOR, Op.CEIL, Op.ROUND,
-                                     Op.ABS)},
+    **{op: lower_elementwise for op in OPS},  # every registry op (ir/opdefs.py), as its entry says
     Op.CAST: lower_cast, Op.BITCAST: lower_bitcast, Op.SELECT: lower_select,
     Op.IF: lower_if, Op.RANGE_FOR: lower_range_for, Op.WHILE: lower_while, Op.BREAK: lower_break,
     Op.CONTINUE: lower_continue,

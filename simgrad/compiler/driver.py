@@ -7,115 +7,37 @@ frontend (parameters bound to context slots, body lowered) -> passes (and the au
 from __future__ import annotations
 
 import inspect
+import os
 import pickle
 import threading
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.autodiff.validate import in_place_targets
+from simgrad.compiler.params import Param, Slots
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
-from simgrad.frontend.arrays import ArrayArg, BuilderArg
+from simgrad.errors import SimgradNotSupportedError
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
-from simgrad.frontend.lower import Compiler
-from simgrad.frontend.refs import tensor_text
+from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.source import get_source
 from simgrad.ir import context
 from simgrad.ir.nodes import Kernel as IRKernel
-from simgrad.ir.ops import Op
-from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.program import Program
 from simgrad.lang.struct import StructType
-from simgrad.lang.types import MatrixType, NdarrayType, is_sparse_matrix_builder, is_template
+from simgrad.lang.types import MatrixType
 from simgrad.passes.manager import run_pipeline
+from simgrad.runtime.args import Packing
 from simgrad.runtime.launch import Launcher
+
+if TYPE_CHECKING:
+    from simgrad.codegen.llvm import KernelCodegen
 
 # Compiling touches process-wide state (the frontend's context stack, statement ids, the program's trees);
 # a second thread asking for the same instantiation waits and then finds it in the cache.
 COMPILE_LOCK = threading.RLock()
-
-
-class Param:
-    """One kernel parameter as declared by its annotation."""
-
-    def __init__(self, name: str, ann, kernel_name: str, first: bool = False):
-        self.name = name
-        self.ann = ann
-        if first and name == "self" and ann is inspect.Parameter.empty:
-            self.kind = "template"  # a kernel method of a @ti.data_oriented class: the object is compile-time
-        elif is_template(ann):
-            self.kind = "template"
-        elif isinstance(ann, NdarrayType) or ann is NdarrayType or ann is np.ndarray:
-            self.kind = "ndarray"
-            self.ann = ann if isinstance(ann, NdarrayType) else NdarrayType()
-        elif isinstance(ann, MatrixType):
-            self.kind = "matrix"
-        elif is_sparse_matrix_builder(ann):
-            self.kind = "builder"  # a ti.linalg.SparseMatrixBuilder: its triplet arrays, by reference
-        elif isinstance(ann, StructType):
-            self.kind = "struct"  # passed as its leaves, one slot (or matrix of slots) each
-        elif ann is inspect.Parameter.empty:
-            raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
-                                   "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
-        else:
-            try:
-                dt.from_any(ann)
-            except TypeError:
-                raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' has an unsupported "
-                                       f"annotation {ann!r}") from None
-            self.kind = "scalar"
-
-    def ndarray_key(self, a, kernel_name: str) -> tuple:
-        """What of an ndarray argument an instantiation depends on: dtype, dimensions, element shape."""
-        if not hasattr(a, "dtype") or not hasattr(a, "shape"):
-            raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' expects an ndarray, got "
-                                   f"{type(a).__name__}")
-        arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
-        return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a, kernel_name))
-
-    def builder_key(self, a, kernel_name: str) -> tuple:
-        """What of a sparse matrix builder argument an instantiation depends on: its value type."""
-        triplets = getattr(a, "_triplets", None)
-        if triplets is None:
-            raise SimgradTypeError(f"kernel {kernel_name}: argument '{self.name}' is annotated "
-                                   "ti.types.sparse_matrix_builder() and expects a ti.linalg.SparseMatrixBuilder, "
-                                   f"got {type(a).__name__}", caller_loc())
-        return ("builder", triplets.dtype.name)
-
-    def with_grad(self, a, kernel_name: str) -> bool:
-        """Whether kernels see the gradient of ndarray argument `a`: the annotation's needs_grad, else whether
-        it has one (a ti.ndarray with needs_grad=True, a torch tensor that requires grad)."""
-        has = getattr(a, "grad", None) is not None if hasattr(a, "_ndarray") else \
-            bool(getattr(a, "requires_grad", False))
-        want = self.ann.needs_grad
-        if want and not has:
-            raise SimgradTypeError(f"kernel {kernel_name}: ndarray argument '{self.name}' is annotated "
-                                   "needs_grad=True but has no gradient (create it with ti.ndarray(..., "
-                                   "needs_grad=True), or pass a tensor that requires grad)")
-        return has if want is None else bool(want)
-
-    def element_shape(self, a) -> tuple:
-        """The element shape of argument `a`: the annotation's, else a ti.ndarray object's own."""
-        arr = getattr(a, "_ndarray", a)
-        ann = self.ann
-        if isinstance(ann.dtype, MatrixType) and (ann.dtype.n is None or ann.dtype.m is None):
-            # ti.types.vector() / matrix(): the element shape is the argument's own, of that rank
-            rank = 1 if ann.dtype.m == 0 else 2
-            elem = tuple(getattr(a, "element_shape", ()) or ())
-            if len(elem) != rank:
-                raise SimgradValueError(f"Invalid value for argument {self.name}: a "
-                                        f"{'vector' if rank == 1 else 'matrix'} ndarray is required, got "
-                                        f"element shape {elem}")
-            return elem
-        if isinstance(ann.dtype, MatrixType):
-            return ann.dtype.shape
-        elem = ann.element_shape_of(tuple(arr.shape))
-        if not elem and ann.dtype is None and not ann.element_dim:
-            elem = getattr(a, "element_shape", ())
-        return elem
 
 
 class KernelSource(Protocol):
@@ -125,18 +47,6 @@ class KernelSource(Protocol):
     func: Any
     signature: inspect.Signature
     params: list[Param]
-
-
-class SlotParam:
-    """A parameter as one instantiation lays it out in the context buffer."""
-
-    def __init__(self, name, kind, slot=0, dtype=None, count=1, ndim=0, ndim_total=0, of=None, path=(),
-                 grad_slot=-1):
-        self.name, self.kind, self.slot, self.dtype = name, kind, slot, dtype
-        self.grad_slot = grad_slot  # an ndarray's gradient base pointer, -1 when the kernel does not see one
-        self.count, self.ndim, self.ndim_total = count, ndim, ndim_total
-        # a leaf of struct parameter `of`: its value is `of.path[0].path[1]...`
-        self.of, self.path = of, path
 
 
 class CompiledKernel:
@@ -194,9 +104,41 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
     return CompiledKernel(launcher, ir, text, meta["ret_matrix"], in_place=meta["in_place"])
 
 
+def _on_gpu(prog: Program) -> bool:
+    arch = prog.config.arch
+    return arch is not None and arch.name == "cuda"
+
+
+def ptx_check_enabled() -> bool:
+    return os.environ.get("SIMGRAD_PTX_CHECK", "") not in ("", "0")
+
+
+def _refuse_on_gpu(ir: IRKernel) -> None:
+    """What arch=cuda cannot lower yet is a located error naming the construct, never a wrong result."""
+    from simgrad.codegen import nvptx
+
+    bad = nvptx.unsupported(ir)
+    if bad is not None:
+        what, loc = bad
+        raise SimgradNotSupportedError(f"{what} is not supported with arch=cuda yet (issue 22)", loc)
+
+
+def _ptx_check(ir: IRKernel, symbol: str, tape_entries: int, prog: Program) -> None:
+    """SIMGRAD_PTX_CHECK=1: lower the kernel to PTX and assemble it with ptxas (sm_80, sm_90); an error raises.
+    A kernel with constructs arch=cuda refuses is checked only when arch=cuda (where it raised above)."""
+    from simgrad.codegen import nvptx
+
+    if nvptx.unsupported(ir) is not None:
+        return
+    ptx, _ = nvptx.kernel_ptx(ir, symbol, tape_entries=tape_entries, debug=prog.config.debug,
+                              fast_math=prog.config.fast_math)
+    nvptx.ptxas_check(ptx)
+
+
 def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix):
     """(key, guard) of the kernel cache for this instantiation, or (None, None) when it is not cached."""
-    if not prog.jit.cache_enabled or debug_level() > 0:  # debug levels print what the compile does
+    # debug levels print what the compile does; SIMGRAD_PTX_CHECK checks every kernel as it compiles
+    if not prog.jit.cache_enabled or debug_level() > 0 or ptx_check_enabled():
         return None, None
     kb = KeyBuilder()
     config = tuple(sorted((k, repr(v)) for k, v in vars(prog.config).items()
@@ -205,26 +147,16 @@ def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix
     try:
         parts = (environment(), prog.jit.target_id(), config, dt.Defaults.fp.name, dt.Defaults.ip.name,
                  name_suffix, step, kb.function(kernel.func), kb.signature(kernel.signature),
-                 tuple(_param_fingerprint(kernel, kb, p, a) for p, a in zip(kernel.params, args)))
+                 tuple(p.fingerprint(a, kb) for p, a in zip(kernel.params, args)))
     except Exception:  # Unkeyable, or e.g. a function without source: compiling reports it (or never needs it)
         return None, None
     return kb.digest(parts), Guard(kb.covered)
 
 
-def _param_fingerprint(kernel: KernelSource, kb: KeyBuilder, p: Param, a):
-    if p.kind == "template":
-        return kb.value(a)
-    if p.kind == "ndarray":
-        return p.ndarray_key(a, kernel.name)  # dtype and ndim; the annotation is in the signature
-    if p.kind == "builder":
-        return p.builder_key(a, kernel.name)
-    return None
-
-
 def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
     """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
     ir = IRKernel(kernel.name + name_suffix)
-    comp = Compiler(ir, get_source(kernel.func), debug=prog.config.debug)
+    comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug)
     comp.guard = guard
     trees = len(prog.trees)
     slots, ret_matrix = _bind_params(kernel, comp, args)
@@ -236,77 +168,46 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     ir.ret_slot = slots[1]
     run_pipeline(ir, transform, debug=prog.config.debug)
     symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
-    from simgrad.codegen.cpu import CpuCodegen  # the one target today; loaded when first needed
+    tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
+        else 1
+    cg: KernelCodegen
+    if _on_gpu(prog):  # arch=cuda: today the simulated GPU (codegen/nvptx.py with sim=True)
+        from simgrad.codegen import nvptx
 
-    cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+        _refuse_on_gpu(ir)
+        cg = nvptx.GpuCodegen(ir, symbol, sim=True, tape_entries=tape_entries, debug=prog.config.debug,
+                              fast_math=prog.config.fast_math)
+    else:
+        from simgrad.codegen.cpu import CpuCodegen  # loaded when first needed
+
+        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
     text = cg.generate()
+    if ptx_check_enabled():
+        _ptx_check(ir, symbol, tape_entries, prog)
     # the disk cache is keyed by the IR text with the symbol name made stable
     stable = text.replace(symbol, "sg_kernel")
     uses_tape = ir.uses_tape
     meta = {"name": ir.name, "params": slots[0], "nslots": slots[1], "returns": list(ir.returns),
             "errors": cg.error_table, "ret_matrix": ret_matrix, "uses_tape": uses_tape,
-            "private_slots": cg.private_slots,
+            "private_slots": cg.private_slots, "scratch_slots": getattr(cg, "scratch_slots", 0),
             # the forward reads fields it overwrites: a Tape keeps their values from before each launch
             "in_place": transform is None and bool(in_place_targets(ir)),
             "tape_bound": ir.tape_bound if uses_tape else None}
     return ir, stable, meta
 
 
-def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list[SlotParam], int],
+def _bind_params(kernel: KernelSource, comp: KernelLowering, args) -> tuple[tuple[list[Packing], int],
                                                                       tuple[int, int] | StructType | None]:
-    """Each parameter becomes what the body sees (an ARG value, a Matrix of them, an ndarray view, the
-    template value itself) and its place in the context buffer."""
-    b = comp.builder
-    slot = 0
+    """Each parameter's kind binds its argument (compiler/params.py): what the body sees under the parameter's
+    name, and the Packing that fills the context slots it took."""
+    slots = Slots(comp.builder)
     out = []
     context.push(comp)
     try:
         for p, a in zip(kernel.params, args):
-            if p.kind == "template":
-                comp.bind(p.name, a)
-                out.append(SlotParam(p.name, "template"))
-            elif p.kind == "scalar":
-                t = dt.from_any(p.ann)
-                if t is dt.u1:  # a ti.u1 (bool) argument travels as an i32, 0 or 1
-                    t = dt.i32
-                comp.bind(p.name, Expr(b.emit(Op.ARG, t, (), {"slot": slot})))
-                out.append(SlotParam(p.name, "scalar", slot, t))
-                slot += 1
-            elif p.kind == "matrix":
-                mt: MatrixType = p.ann
-                t = mt.dtype
-                entries = [Expr(b.emit(Op.ARG, t, (), {"slot": slot + k})) for k in range(mt.num_entries)]
-                comp.bind(p.name, Matrix(n=mt.n, m=mt.m, _entries=entries))
-                out.append(SlotParam(p.name, "matrix", slot, t, count=mt.num_entries))
-                slot += mt.num_entries
-            elif p.kind == "struct":
-                out.append(SlotParam(p.name, "struct"))
-                leaves: list = []
-                for path, lt in p.ann.leaves():
-                    leaf = f"{p.name}__{'__'.join(path)}"
-                    if isinstance(lt, MatrixType):
-                        entries = [Expr(b.emit(Op.ARG, lt.dtype, (), {"slot": slot + k}))
-                                   for k in range(lt.num_entries)]
-                        leaves.append(Matrix(n=lt.n, m=lt.m, _entries=entries))
-                        out.append(SlotParam(leaf, "matrix", slot, lt.dtype, count=lt.num_entries, of=p.name,
-                                             path=path))
-                        slot += lt.num_entries
-                    else:
-                        leaves.append(Expr(b.emit(Op.ARG, lt, (), {"slot": slot})))
-                        out.append(SlotParam(leaf, "scalar", slot, lt, of=p.name, path=path))
-                        slot += 1
-                comp.bind(p.name, p.ann.from_leaves(leaves))
-            elif p.kind == "builder":
-                barg = BuilderArg(p.name, slot, a._triplets.dtype)
-                comp.bind(p.name, barg)
-                out.append(SlotParam(p.name, "builder", slot, barg.dtype))
-                slot += barg.num_slots
-            else:
-                arg = _array_arg(kernel.name, p, a, slot)
-                comp.bind(p.name, arg)
-                out.append(SlotParam(p.name, "ndarray", slot, arg.dtype, ndim=arg.ndim,
-                                     ndim_total=arg.ndim + len(arg.element_shape), grad_slot=arg.grad_slot))
-                slot += arg.num_slots
+            value, packing = p.bind(a, slots)
+            comp.bind(p.name, value)
+            out.append(packing)
         ret = kernel.signature.return_annotation
         ret_matrix: tuple[int, int] | StructType | None = None
         if ret is not inspect.Signature.empty and ret is not None:
@@ -324,53 +225,14 @@ def _bind_params(kernel: KernelSource, comp: Compiler, args) -> tuple[tuple[list
             comp.ir.returns = comp.return_types
     finally:
         context.pop()
-    return (out, slot), ret_matrix
-
-
-def _array_arg(kernel_name: str, p: Param, a, slot: int) -> ArrayArg:
-    """The compiler's view of an ndarray argument, its dtype, dimensions and element shape checked (Taichi's
-    messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
-    ann: NdarrayType = p.ann
-    arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
-    t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
-    want: dt.DataType | None
-    elem = p.element_shape(a)
-    own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray") else None
-    if isinstance(ann.dtype, MatrixType):
-        want = ann.dtype.dtype if ann.dtype._dtype is not None or ann.dtype.n is not None else None
-    else:
-        want = dt.from_any(ann.dtype) if ann.dtype is not None else None
-    if want is not None and not isinstance(ann.dtype, MatrixType) and own:
-        raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
-                               f"{tensor_text(own, t)}")
-    if (own is not None and own != elem) or len(elem) > len(arr.shape) \
-            or tuple(arr.shape[len(arr.shape) - len(elem):]) != elem:
-        # never reinterpret the memory: a (2, 3) matrix element is not a 2-vector followed by more
-        given = tensor_text(own, t) if own is not None else f"an array of shape {tuple(arr.shape)}"
-        raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required element "
-                                f"type: {_element_type_text(ann, elem, want or t)}, but {given} is provided")
-    if want is not None and want is not t:
-        raise SimgradTypeError(f"kernel {kernel_name}: Expect element type {want} for argument {p.name}, but get "
-                               f"{tensor_text(own if own is not None else elem, t)}")
-    ndim = len(arr.shape) - len(elem)
-    if ann.ndim is not None and ann.ndim != ndim:
-        raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {p.name} - required "
-                                f"ndim={ann.ndim}, but {ndim}d ndarray with shape {tuple(arr.shape)} is provided")
-    return ArrayArg(p.name, slot, t, ndim, elem, ann.boundary, grad=t.is_float and p.with_grad(a, kernel_name))
-
-
-def _element_type_text(ann: NdarrayType, elem: tuple, want) -> str:
-    """The annotation's element type as Taichi names it: VectorType[2, i32], MatrixType[2,2, f32], f32."""
-    mt = ann.dtype
-    if isinstance(mt, MatrixType) and mt.n is not None:
-        return f"VectorType[{mt.n}, {want}]" if mt.m == 0 else f"MatrixType[{mt.n},{mt.m}, {want}]"
-    return tensor_text(elem, want)
+    return (out, slots.count), ret_matrix
 
 
 def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
     """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
     launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0))
+                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),
+                        meta.get("scratch_slots", 0))
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]
@@ -414,13 +276,3 @@ def _read_entry(prog: Program, key: str):
         return pickle.loads(data)
     except Exception:  # a truncated or foreign file is a miss, never an error
         return None
-
-
-def _torch_dtype(t):
-    import torch
-
-    m = {torch.float32: dt.f32, torch.float64: dt.f64, torch.int32: dt.i32, torch.int64: dt.i64,
-         torch.int8: dt.i8, torch.int16: dt.i16, torch.uint8: dt.u8, torch.float16: dt.f16}
-    return m[t.dtype]
-
-

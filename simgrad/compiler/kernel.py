@@ -6,27 +6,14 @@ from __future__ import annotations
 import inspect
 import time
 
-import numpy as np
-
 from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
-from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, Param, compile_kernel
+from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
+from simgrad.compiler.params import make_param
 from simgrad.errors import SimgradTypeError, caller_loc
 from simgrad.lang import ad_hooks
-from simgrad.lang.kernel import KernelDef, resolved_signature, unexpected_keywords
+from simgrad.lang.functions import KernelDef, resolved_signature, unexpected_keywords
 from simgrad.lang.program import Program, get_program
-
-
-def _template_key(v, keep: list):
-    if isinstance(v, (int, float, bool, str, type(None))):
-        return (type(v), v)
-    if isinstance(v, (tuple, list)):
-        return (type(v), tuple(_template_key(x, keep) for x in v))
-    if isinstance(v, np.ndarray) and v.size <= 16:
-        return ("nd", v.dtype.str, v.shape, v.tobytes())
-    keep.append(v)
-    return ("id", id(v))
-
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
 # "fwd" it with forward-mode tangents (inside ti.ad.FwdMode); "gradfwd" its adjoint with tangents
@@ -45,10 +32,12 @@ class Kernel(KernelDef):
         self.name = func.__name__
         self.__name__, self.__qualname__, self.__module__ = func.__name__, func.__qualname__, func.__module__
         self.signature = resolved_signature(func)
-        self.params = [Param(n, p.annotation, self.name, first=k == 0)
+        self.params = [make_param(n, p.annotation, self.name, first=k == 0)
                        for k, (n, p) in enumerate(self.signature.parameters.items())]
         self._nparams = len(self.params)
-        self._simple = all(p.kind in ("scalar", "matrix") for p in self.params)
+        # the parameters whose arguments pick the instantiation; without any, one instance serves every call
+        self._keyed = [(k, p) for k, p in enumerate(self.params) if p.keyed]
+        self._simple = not self._keyed
         self._has_defaults = any(p.default is not inspect.Parameter.empty
                                  for p in self.signature.parameters.values())
         self._keep: list = []
@@ -115,7 +104,7 @@ class Kernel(KernelDef):
             raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
                                    f"got {len(args)}")
         keep: list = []
-        key = tuple(self._key_part(p, a, keep) for p, a in zip(self.params, args))
+        key = tuple([p.key(args[k], keep) for k, p in self._keyed])
         cache = self._caches[mode]
         inst = cache.get(key)
         if inst is None:
@@ -143,19 +132,6 @@ class Kernel(KernelDef):
         cache[key] = inst
         self._keep.extend(keep)
         return inst
-
-    def _key_part(self, p: Param, a, keep):
-        if p.kind == "template":
-            if hasattr(a, "_ndarray"):
-                raise SimgradTypeError(f"kernel {self.name}: Ndarray shouldn't be passed in via `ti.template()` "
-                                       f"(parameter '{p.name}'), please annotate your kernel using "
-                                       "`ti.types.ndarray(...)` instead", caller_loc())
-            return _template_key(a, keep)
-        if p.kind == "ndarray":
-            return p.ndarray_key(a, self.name)
-        if p.kind == "builder":
-            return p.builder_key(a, self.name)
-        return None
 
 
 class GradKernel:

@@ -10,9 +10,17 @@ from simgrad.frontend.refs import GlobalRef, MatrixRef
 from simgrad.ir import context
 from simgrad.ir.fieldref import ArrayRef
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
+
+
+class ElementShape(tuple):
+    """An ndarray parameter's element shape: a tuple for simgrad's own use, and callable, since Taichi's
+    kernel-scope ndarray has ``element_shape()`` giving a list (``ti.static(a.element_shape() == [2])``)."""
+
+    def __call__(self) -> list:
+        return list(self)
 
 
 class ArrayArg:
@@ -22,7 +30,7 @@ class ArrayArg:
                  boundary: str = "unsafe", grad: bool = False):
         self.boundary = boundary
         self.name, self.slot, self.dtype, self.ndim = name, slot, dtype, ndim
-        self.element_shape = element_shape
+        self.element_shape = ElementShape(element_shape)
         count = ArrayRef(name, slot, dtype, ndim, element_shape).num_components
         # with a gradient, its base pointer takes the slot after the extents (which it shares)
         self.grad_slot = slot + 1 + ndim if grad else -1
@@ -61,7 +69,7 @@ class ArrayArg:
 
     def ref(self, indices):
         if self.boundary == "clamp":  # ti.types.ndarray(boundary="clamp")
-            indices = [ops.max(0, ops.min(i, self.shape_expr(k) - 1)) for k, i in enumerate(indices)]
+            indices = [operators.max(0, operators.min(i, self.shape_expr(k) - 1)) for k, i in enumerate(indices)]
         refs = [GlobalRef(c, indices, self.dtype) for c in self.comps]
         if not self.element_shape:
             return refs[0]
@@ -97,8 +105,8 @@ class BuilderArg:
                     or not isinstance(i, (int, Expr)):
                 raise SimgradTypeError(f"the indices of sparse matrix builder '{self.name}' must be integer "
                                        f"scalars, got {i!r}", loc)
-            e = ops.to_expr(i, dt.i32)
-            exprs.append(e if e.dtype is dt.i32 else ops.cast_expr(e, dt.i32))
+            e = operators.to_expr(i, dt.i32)
+            exprs.append(e if e.dtype is dt.i32 else operators.cast_expr(e, dt.i32))
         return BuilderRef(self, exprs, loc)
 
 
@@ -130,16 +138,16 @@ class BuilderRef:
             raise SimgradTypeError(f"a triplet added to sparse matrix builder '{self.arg.name}' must be a scalar, "
                                    f"got {type(value).__name__}", self.loc)
         a = self.arg
-        v = ops.cast_expr(ops.to_expr(value, a.dtype), a.dtype)
+        v = operators.cast_expr(operators.to_expr(value, a.dtype), a.dtype)
         if kind == "sub":
-            v = ops.neg(v)
+            v = operators.neg(v)
         b = context.builder()
-        k = GlobalRef(a.count.comps[0], [ops.to_expr(0, dt.i32)], dt.i64).atomic("add", 1)
-        cap = ops.cast_expr(a.rows.shape_expr(0), dt.i64)
-        fits = ops.ne(ops.lt(k, cap), 0)
+        k = GlobalRef(a.count.comps[0], [operators.to_expr(0, dt.i32)], dt.i64).atomic("add", 1)
+        cap = operators.cast_expr(a.rows.shape_expr(0), dt.i64)
+        fits = operators.ne(operators.lt(k, cap), 0)
         stmt = b.emit(Op.IF, None, (fits.stmt,), nblocks=2)
         with b.inside(stmt.blocks[0]):
-            k32 = ops.cast_expr(k, dt.i32)
+            k32 = operators.cast_expr(k, dt.i32)
             GlobalRef(a.rows.comps[0], [k32], dt.i32).store(self.indices[0])
             GlobalRef(a.cols.comps[0], [k32], dt.i32).store(self.indices[1])
             GlobalRef(a.values.comps[0], [k32], a.dtype).store(v)

@@ -8,20 +8,22 @@ import inspect
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
-from simgrad.frontend.refs import MatrixRef, VarRef
+from simgrad.frontend.frames import Frame, RangeSpec
+from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
+from simgrad.lang.struct import Struct
 
 
 def _builtin_int(x=0, *rest):
-    return ops.cast(x, dt.Defaults.ip) if isinstance(x, (Expr, Matrix)) else int(x, *rest)
+    return operators.cast(x, dt.Defaults.ip) if isinstance(x, (Expr, Matrix)) else int(x, *rest)
 
 
 def _builtin_float(x=0.0):
-    return ops.cast(x, dt.Defaults.fp) if isinstance(x, (Expr, Matrix)) else float(x)
+    return operators.cast(x, dt.Defaults.fp) if isinstance(x, (Expr, Matrix)) else float(x)
 
 
 def _builtin_len(x):
@@ -32,17 +34,15 @@ def _builtin_len(x):
 
 def _builtin_round(x, ndigits=None):
     if isinstance(x, (Expr, Matrix)):
-        return ops.round(x)
+        return operators.round(x)
     return round(x, ndigits) if ndigits is not None else round(x)
 
 
 def _builtin_bool(x=False):
-    return ops.ne(x, 0) if isinstance(x, Expr) else bool(x)
+    return operators.ne(x, 0) if isinstance(x, Expr) else bool(x)
 
 
 def _builtin_range(*args):
-    from simgrad.frontend.lower import RangeSpec
-
     return RangeSpec(*args)
 
 
@@ -61,10 +61,10 @@ _BUILTINS = {
     builtins.range: _builtin_range,
     builtins.int: _builtin_int,
     builtins.float: _builtin_float,
-    builtins.abs: ops.abs,
-    builtins.min: ops.min,
-    builtins.max: ops.max,
-    builtins.pow: ops.pow,
+    builtins.abs: operators.abs,
+    builtins.min: operators.min,
+    builtins.max: operators.max,
+    builtins.pow: operators.pow,
     builtins.len: _builtin_len,
     builtins.round: _builtin_round,
     builtins.bool: _builtin_bool,
@@ -113,7 +113,7 @@ def call(comp, node: ast.Call):
         hashable = False
     if hashable:
         return _BUILTINS[fn](*args, **kwargs)
-    from simgrad.lang.kernel import BoundFunc, Func, KernelDef
+    from simgrad.lang.functions import BoundFunc, Func, KernelDef
 
     if isinstance(fn, Func):
         return inline(comp, fn, args, kwargs, node)
@@ -151,7 +151,7 @@ def _local_matrix_method(comp, node: ast.Call, name: str):
 def _template_params(fn) -> set:
     """Positions and names of a ti.func's ti.template() parameters (a local passed there is passed by
     reference, as in Taichi: `x = 1` in the callee assigns the caller's variable)."""
-    from simgrad.lang.kernel import BoundFunc, Func
+    from simgrad.lang.functions import BoundFunc, Func
     from simgrad.lang.types import by_reference
 
     shift = 0
@@ -168,8 +168,6 @@ def _template_params(fn) -> set:
 
 def _by_reference(comp, node: ast.expr):
     """A local variable itself when `node` names one, else its value."""
-    from simgrad.frontend.lower import LOCAL_REFS
-
     if isinstance(node, ast.Name):
         v = comp.lookup(node.id, node)
         if isinstance(v, LOCAL_REFS):
@@ -190,14 +188,13 @@ def _atomic(comp, node: ast.Call, kind: str):
 
 def inline(comp, fn, args, kwargs, node):
     """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
-    from simgrad.frontend.lower import Frame
     from simgrad.frontend.source import get_source
     from simgrad.lang.types import MatrixType, by_reference
 
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
-    from simgrad.lang.kernel import unexpected_keywords
+    from simgrad.lang.functions import unexpected_keywords
 
     sig = fn.signature
     unknown = unexpected_keywords(sig, kwargs)
@@ -212,8 +209,10 @@ def inline(comp, fn, args, kwargs, node):
     frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
-        if by_reference(ann) or not isinstance(value, (Expr, Matrix, int, float)) or isinstance(value, bool):
+        if by_reference(ann) or not isinstance(value, (Expr, Matrix, Struct, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
+        elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
+            frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
@@ -244,7 +243,7 @@ def inline(comp, fn, args, kwargs, node):
                                  f"(ti.func {fn.name})", comp.loc(node))
     if ann is not None and rv is not None:
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
-            rv = ops.cast(rv, ann)
+            rv = operators.cast(rv, ann)
     return rv
 
 

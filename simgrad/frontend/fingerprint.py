@@ -55,7 +55,7 @@ def _trusted_module(name) -> bool:
 
 # simgrad modules whose functions may run at compile time: they emit IR or compute on their arguments,
 # and change no Python-scope state (fields, trees, the program are in other modules)
-_PURE_LIBRARY = frozenset(("simgrad.dtypes", "simgrad.lang.ops", "simgrad.lang.matrix", "simgrad.lang.mathlib",
+_PURE_LIBRARY = frozenset(("simgrad.dtypes", "simgrad.lang.operators", "simgrad.lang.matrix", "simgrad.lang.mathlib",
                            "simgrad.lang.linalg", "simgrad.lang.loops", "simgrad.lang.types",
                            "simgrad.lang.atomics", "simgrad.lang.expr", "simgrad.frontend.arrays"))
 
@@ -191,7 +191,7 @@ class KeyBuilder:
     def _simgrad_object(self, v, depth: int):
         from simgrad.lang.archs import Arch
         from simgrad.lang.field import Field
-        from simgrad.lang.kernel import Func
+        from simgrad.lang.functions import Func
         from simgrad.lang.loops import ndrange
         from simgrad.lang.matrix import Matrix
         from simgrad.lang.snode import Axis, SNode
@@ -283,6 +283,16 @@ def _names(src) -> list[str]:
 _environment: tuple | None = None
 
 
+def source_files(root: str) -> list[str]:
+    """simgrad's sources under `root`, in a fixed order: Python modules and the LLVM IR of runtime/ll, which
+    generated code contains too."""
+    out = []
+    for d, dirs, files in os.walk(root):
+        dirs[:] = sorted(x for x in dirs if x != "__pycache__")
+        out += [os.path.join(d, name) for name in sorted(files) if name.endswith((".py", ".ll"))]
+    return out
+
+
 def environment() -> tuple:
     """The versions the generated code depends on: simgrad's own sources, Python, numpy, llvmlite."""
     global _environment
@@ -291,15 +301,11 @@ def environment() -> tuple:
 
         h = hashlib.sha256()
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        for d, dirs, files in os.walk(root):
-            dirs[:] = sorted(x for x in dirs if x != "__pycache__")
-            for name in sorted(files):
-                if name.endswith(".py"):
-                    path = os.path.join(d, name)
-                    h.update(os.path.relpath(path, root).encode() + b"\0")
-                    with open(path, "rb") as fh:
-                        h.update(fh.read())
-                    h.update(b"\0")
+        for path in source_files(root):
+            h.update(os.path.relpath(path, root).encode() + b"\0")
+            with open(path, "rb") as fh:
+                h.update(fh.read())
+            h.update(b"\0")
         _environment = (h.hexdigest(), sys.version, np.__version__, llvmlite.__version__)
     return _environment
 

@@ -9,8 +9,9 @@ import ast
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradSyntaxError
+from simgrad.frontend.frames import RangeSpec
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field
 from simgrad.lang.loops import grouped, ndrange, static
@@ -33,8 +34,6 @@ def lower_for(comp, node: ast.For) -> None:
         _unroll(comp, node)
         return
     it = comp.eval(node.iter)
-    from simgrad.frontend.lower import RangeSpec
-
     if isinstance(it, RangeSpec):
         _range_for(comp, node, it)
     elif isinstance(it, ndrange):
@@ -140,7 +139,7 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
     def bind(coords):
         idx = [coords[a] for a in axes]
         if offset:
-            idx = [ops.add(i, o) for i, o in zip(idx, offset)]
+            idx = [operators.add(i, o) for i, o in zip(idx, offset)]
         if all(isinstance(i, Expr) and i.stmt.op is not Op.CONST for i in idx):
             for k, i in enumerate(idx):  # the cell's indices: each iteration owns its cell (parallel_strategy)
                 i.stmt.attrs["cell_index"] = k
@@ -154,12 +153,12 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
         if group[0].kind == "dynamic":
             dyn = group[0]
             ax = dyn.axes[0]
-            base = {a: ops.mul(v, dyn.sizes[0]) if a == ax else v for a, v in coords.items()}
+            base = {a: operators.mul(v, dyn.sizes[0]) if a == ax else v for a, v in coords.items()}
             base.setdefault(ax, 0)
             count = _node_op("length", dyn, base, axes)
 
             def inner(i):
-                level(k + 1, {**base, ax: ops.add(base[ax], i)})
+                level(k + 1, {**base, ax: operators.add(base[ax], i)})
 
             _emit_loop(comp, 0, count, inner)
             return
@@ -177,7 +176,7 @@ def active_cells_loop(comp, cells: SNode, offset, body) -> None:
                 rest = _raw(Op.RAW_DIV, rest, size)
             values.reverse()
             for (_n, a, size), v in zip(digits, values):
-                new[a] = ops.add(ops.mul(new[a], size), v) if a in new else v
+                new[a] = operators.add(operators.mul(new[a], size), v) if a in new else v
             return new
 
         if k == 0 and group[-1].is_sparse and _is_top(comp):
@@ -202,14 +201,14 @@ def _node_op(op: str, node: SNode, coords: dict, axes: list) -> Expr:
     """ti.<op>(node, ...) at the struct-for's coordinates so far (those of node's axes), as i32."""
     from simgrad.lang import sparse
 
-    return sparse._emit(op, node, [ops.cast_expr(ops.to_expr(coords[a], dt.i32), dt.i32) for a in axes
+    return sparse._emit(op, node, [operators.cast_expr(operators.to_expr(coords[a], dt.i32), dt.i32) for a in axes
                                    if a in coords])
 
 
 def _if_active(comp, node: SNode, coords: dict, axes: list):
     """Emit `if ti.is_active(node, coords):` and return the context in which its body is emitted."""
     active = _node_op("is_active", node, coords, axes)
-    guard = comp.builder.emit(Op.IF, None, (ops.ne(active, 0).stmt,), nblocks=2)
+    guard = comp.builder.emit(Op.IF, None, (operators.ne(active, 0).stmt,), nblocks=2)
     return comp.dynamic(guard.blocks[0])
 
 
@@ -319,8 +318,8 @@ def _emit_loop(comp, begin, end, body) -> None:
     cfg = comp.next_loop_config or {}
     comp.next_loop_config = None
     t = _index_type(begin, end)
-    b = ops.cast_expr(ops.to_expr(begin, t), t)
-    e = ops.cast_expr(ops.to_expr(end, t), t)
+    b = operators.cast_expr(operators.to_expr(begin, t), t)
+    e = operators.cast_expr(operators.to_expr(end, t), t)
     top = comp.depth == 0 and not comp.loop_stack and not any(f.real for f in comp.frames)
     parallel = top and not cfg.get("serialize", False)
     attrs = {"parallel": parallel, "top": top}
@@ -352,9 +351,10 @@ def _range_for(comp, node, r) -> None:
         _emit_loop(comp, r.start, r.stop, _visit(comp, node, lambda i: comp.bind(name, i)))
         return
     step = r.step
-    count = ops.floordiv(ops.sub(r.stop, r.start) + (step - 1 if step > 0 else step + 1), step)
-    count = ops.max(count, 0)
-    _emit_loop(comp, 0, count, _visit(comp, node, lambda k: comp.bind(name, ops.add(r.start, ops.mul(k, step)))))
+    count = operators.floordiv(operators.sub(r.stop, r.start) + (step - 1 if step > 0 else step + 1), step)
+    count = operators.max(count, 0)
+    _emit_loop(comp, 0, count,
+               _visit(comp, node, lambda k: comp.bind(name, operators.add(r.start, operators.mul(k, step)))))
 
 
 def _nd_for(comp, node, bounds, grouped_: bool) -> None:
@@ -365,7 +365,7 @@ def _nd_loop(comp, bounds, body) -> None:
     """One flat loop over the box `bounds` ((begin, end) per axis); `body(indices)` emits the body. The
     flat index is i64 when the count exceeds i32 (ti.ndrange(70000, 70000)); the indices stay i32."""
     nd = len(bounds)
-    extents = [ops.max(ops.sub(e, b), 0) if isinstance(e, Expr) or isinstance(b, Expr) else max(e - b, 0)
+    extents = [operators.max(operators.sub(e, b), 0) if isinstance(e, Expr) or isinstance(b, Expr) else max(e - b, 0)
                for b, e in bounds]
     total = _count(extents)
 
@@ -379,8 +379,8 @@ def _nd_loop(comp, bounds, body) -> None:
                 digit = _raw(Op.RAW_MOD, rest, extents[k])
                 rest = _raw(Op.RAW_DIV, rest, extents[k])
             if isinstance(digit, Expr) and digit.dtype is dt.i64 and _fits_i32(extents[k]):
-                digit = ops.cast_expr(digit, dt.i32)
-            idx.append(ops.add(digit, bounds[k][0]) if not _is_zero(bounds[k][0]) else digit)
+                digit = operators.cast_expr(digit, dt.i32)
+            idx.append(operators.add(digit, bounds[k][0]) if not _is_zero(bounds[k][0]) else digit)
         idx.reverse()
         body(idx)
 
@@ -397,27 +397,27 @@ def _count(extents):
     if len(extents) == 1 or all(isinstance(n, int) for n in extents):
         total = 1
         for n in extents:
-            total = ops.mul(total, n)
+            total = operators.mul(total, n)
         return total
-    total = ops.to_expr(1, dt.i64)
+    total = operators.to_expr(1, dt.i64)
     for n in extents:
-        total = ops.mul(total, ops.cast_expr(ops.to_expr(n, dt.i64), dt.i64))
+        total = operators.mul(total, operators.cast_expr(operators.to_expr(n, dt.i64), dt.i64))
     if not all(_fits_i32(n) for n in extents):
         return total  # a 64-bit extent: a 64-bit loop
     from simgrad.ir import context
 
-    context.builder().emit(Op.ASSERT, None, (ops.le(total, _I32_MAX).stmt,), {
+    context.builder().emit(Op.ASSERT, None, (operators.le(total, _I32_MAX).stmt,), {
         "message": "the loop's iteration count (the product of its extents) exceeds 2**31 - 1; give the "
                    "bounds an i64 type"})
-    return ops.cast_expr(total, dt.i32)
+    return operators.cast_expr(total, dt.i32)
 
 
 def _raw(op: Op, a: Expr, n):
     from simgrad.ir import context
 
     if isinstance(n, int) and n == 1:
-        return a if op is Op.RAW_DIV else ops.to_expr(0, a.dtype)
-    n = ops.cast_expr(ops.to_expr(n, a.dtype), a.dtype)
+        return a if op is Op.RAW_DIV else operators.to_expr(0, a.dtype)
+    n = operators.cast_expr(operators.to_expr(n, a.dtype), a.dtype)
     return Expr(context.builder().binary(op, a.stmt, n.stmt))
 
 
@@ -453,7 +453,7 @@ def emit_fill(field, value) -> None:
     comps = field._components()
 
     def body(idx):
-        idx = [ops.cast_expr(ops.to_expr(i, dt.i32), dt.i32) for i in idx]
+        idx = [operators.cast_expr(operators.to_expr(i, dt.i32), dt.i32) for i in idx]
         refs = [GlobalRef(c, idx, c.dtype) for c in comps]
         if isinstance(field, MatrixField):
             MatrixRef(refs, field.n, field.ncols).store(value)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import ast
 import builtins
-import inspect
 import operator
 
 from simgrad import dtypes as dt
@@ -20,26 +19,27 @@ from simgrad.errors import (
     SimgradSyntaxError,
     SimgradTypeError,
 )
+from simgrad.frontend.frames import Frame
 from simgrad.frontend.refs import LOCAL_REFS, DynamicElementRef, GlobalRef, MatrixRef, StructRef, VarRef
-from simgrad.frontend.source import FunctionSource, get_source
+from simgrad.frontend.source import FunctionSource
 from simgrad.ir import context
 from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
-from simgrad.ir.nodes import Block, Kernel, walk
+from simgrad.ir.nodes import Kernel, walk
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
-from simgrad.lang.kernel import BoundFunc
-from simgrad.lang.loops import grouped, ndrange, static
+from simgrad.lang.functions import BoundFunc
 from simgrad.lang.matrix import Matrix, dtype_of
 from simgrad.lang.struct import Struct, StructField
 from simgrad.lang.types import MatrixType
 
 _BINOPS = {
-    ast.Add: ops.add, ast.Sub: ops.sub, ast.Mult: ops.mul, ast.Div: ops.truediv, ast.FloorDiv: ops.floordiv,
-    ast.Mod: ops.mod, ast.Pow: ops.pow, ast.BitAnd: ops.bit_and, ast.BitOr: ops.bit_or,
-    ast.BitXor: ops.bit_xor, ast.LShift: ops.shl, ast.RShift: ops.shr,
+    ast.Add: operators.add, ast.Sub: operators.sub, ast.Mult: operators.mul, ast.Div: operators.truediv,
+    ast.FloorDiv: operators.floordiv, ast.Mod: operators.mod, ast.Pow: operators.pow,
+    ast.BitAnd: operators.bit_and, ast.BitOr: operators.bit_or, ast.BitXor: operators.bit_xor,
+    ast.LShift: operators.shl, ast.RShift: operators.shr,
     ast.MatMult: lambda a, b: a @ b,
 }
 _AUG_KIND = {
@@ -48,57 +48,14 @@ _AUG_KIND = {
     ast.LShift: "shl", ast.RShift: "shr",
 }
 _CMPOPS = {
-    ast.Lt: ops.lt, ast.LtE: ops.le, ast.Gt: ops.gt, ast.GtE: ops.ge, ast.Eq: ops.eq, ast.NotEq: ops.ne,
+    ast.Lt: operators.lt, ast.LtE: operators.le, ast.Gt: operators.gt, ast.GtE: operators.ge,
+    ast.Eq: operators.eq, ast.NotEq: operators.ne,
 }
 _PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b: a in b,
            ast.NotIn: lambda a, b: a not in b}
 
 
-class RangeSpec:
-    """`range(...)` seen inside a kernel: a run-time loop unless wrapped in ti.static."""
-
-    def __init__(self, *args):
-        if len(args) == 1:
-            self.start, self.stop, self.step = 0, args[0], 1
-        elif len(args) == 2:
-            self.start, self.stop, self.step = args[0], args[1], 1
-        else:
-            self.start, self.stop, self.step = args
-        if isinstance(self.step, Expr):
-            raise SimgradSyntaxError("range() step must be a compile-time constant", context.current_loc())
-
-    def __iter__(self):
-        return iter(builtins.range(self.start, self.stop, self.step))
-
-    def __len__(self):
-        return len(builtins.range(self.start, self.stop, self.step))
-
-
-class _Return(Exception):
-    pass
-
-
-class Frame:
-    def __init__(self, src: FunctionSource, is_kernel: bool):
-        self.src = src
-        self.is_kernel = is_kernel
-        self.scopes: list[dict] = [{}]
-        self.return_value = None
-        self.has_returned = False
-        self.dynamic_depth = 0  # run-time control flow nesting inside this frame
-        # early returns from run-time control flow in a ti.func: the value and a flag live in locals declared
-        # at the function's entry (entry_block/entry_index); the rest of the body is guarded by the flag
-        self.entry_block: Block | None = None
-        self.entry_index = 0
-        self.loop_base = 0  # run-time loops open when the function was entered
-        self.ret_var: VarRef | MatrixRef | None = None
-        self.ret_flag: VarRef | None = None
-        self.dynamic_returns = 0
-        self.returned_here = False
-        self.real = False  # a ti.real_func: its loops are serial (it is a function the kernel calls)
-
-
-class Compiler:
+class KernelLowering:
     """Compiles one kernel instantiation. `bind` the parameters, then `compile_body`."""
 
     MAX_INLINE_DEPTH = 64
@@ -181,7 +138,7 @@ class Compiler:
         elif isinstance(value, bool):
             t = dt.Defaults.ip
         else:
-            t = ops.to_expr(value).dtype
+            t = operators.to_expr(value).dtype
         if dtype is not None:
             t = dt.from_any(dtype)
         ref = VarRef(t)
@@ -215,12 +172,12 @@ class Compiler:
             if frame.dynamic_returns != before:  # `s` may have returned: leave loops, guard what follows
                 assert frame.ret_flag is not None
                 if len(self.loop_stack) > frame.loop_base:
-                    stop = self.builder.emit(Op.IF, None, (ops.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    stop = self.builder.emit(Op.IF, None, (operators.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(stop.blocks[0]):
                         self._loop_jump(s, Op.BREAK)
                 rest = stmts[k + 1:]
                 if rest:
-                    guard = self.builder.emit(Op.IF, None, (ops.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+                    guard = self.builder.emit(Op.IF, None, (operators.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(guard.blocks[0]):
                         self.visit_block(rest)
                 return
@@ -251,7 +208,7 @@ class Compiler:
                 t = ann.dtype if isinstance(ann, MatrixType) else dtype_of(value)
                 frame.ret_var = MatrixRef([self._entry_var(t) for _ in value.entries], value.n, value.m)
             elif isinstance(value, (Expr, int, float)) and not isinstance(value, bool):
-                t = ann if isinstance(ann, dt.DataType) else ops.to_expr(value).dtype
+                t = ann if isinstance(ann, dt.DataType) else operators.to_expr(value).dtype
                 frame.ret_var = self._entry_var(t)
             elif value is not None:
                 raise SimgradSyntaxError(f"a {type(value).__name__} cannot be returned from inside run-time "
@@ -329,8 +286,10 @@ class Compiler:
                         f"assigned here (arguments are immutable in Taichi); copy it into a local first "
                         f"({name}_ = {name})", self.loc(target))
                 self.bind(name, self.new_var(value))
-            elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)) and not _is_py_matrix_const(value):
+            elif isinstance(value, (Expr, Matrix, int, float, bool, Struct)):
                 self.bind(name, self.new_var(value))
+            elif type(value) is list:
+                self.bind(name, VarList(self, value))
             else:
                 self.bind(name, value)
         elif isinstance(target, (ast.Tuple, ast.List)):
@@ -351,11 +310,21 @@ class Compiler:
             raise SimgradSyntaxError(f"cannot assign to {type(target).__name__}", self.loc(target))
 
     def _python_setitem(self, target, value):
-        if self.guard is not None:
-            self.guard.taint("a Python object is modified at compile time")
         obj = self.eval(target.value)
         if isinstance(target, ast.Subscript):
-            obj[self.eval_index(target.slice)] = value
+            index = self.eval_index(target.slice)
+            if isinstance(obj, VarList) and obj.is_var(index):
+                obj.ref(index).store(value)  # a run-time store, as Taichi's element variables take it
+                return
+            depth = obj.depth if isinstance(obj, VarList) else 0
+            if self.frame.dynamic_depth > depth and isinstance(obj, (list, dict)):
+                raise SimgradSyntaxError(
+                    "a Python list or dict element is assigned inside run-time control flow (an `if` or loop "
+                    "on run-time values): the assignment would happen at compile time, whatever the condition; "
+                    "keep the value in a local variable (or a ti.Vector) instead", self.loc(target))
+            if self.guard is not None:
+                self.guard.taint("a Python object is modified at compile time")
+            obj[index] = value
         else:
             setattr(obj, target.attr, value)
 
@@ -400,7 +369,7 @@ class Compiler:
         if isinstance(cond, Matrix):
             raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",
                                    self.loc(node.test))
-        c = ops.ne(cond, 0)
+        c = operators.ne(cond, 0)
         stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
         for block, body in zip(stmt.blocks, (node.body, node.orelse)):
             with self.dynamic(block):
@@ -434,7 +403,7 @@ class Compiler:
             with self.dynamic(loop.blocks[0]):
                 cond = self.eval(node.test)
                 if isinstance(cond, Expr):
-                    stop = self.builder.emit(Op.IF, None, (ops.eq(cond, 0).stmt,), nblocks=2)
+                    stop = self.builder.emit(Op.IF, None, (operators.eq(cond, 0).stmt,), nblocks=2)
                     with self.builder.inside(stop.blocks[0]):
                         self.builder.emit(Op.BREAK, None, attrs={"header": True})
                 elif not cond:
@@ -494,7 +463,7 @@ class Compiler:
             raise SimgradTypeError(f"kernel returns {len(values)} values but is annotated with "
                                    f"{len(self.return_types)}", self.loc(node))
         for slot, (v, t) in enumerate(zip(values, self.return_types)):
-            e = ops.cast_expr(ops.to_expr(v, t), t)
+            e = operators.cast_expr(operators.to_expr(v, t), t)
             self.builder.emit(Op.RET_STORE, None, (e.stmt,), {"slot": slot})
 
     def visit_Assert(self, node: ast.Assert) -> None:
@@ -521,7 +490,7 @@ class Compiler:
                 raise SimgradSyntaxError(f"an assert message can show at most {ERR_MAX_ARGS} kernel values, "
                                          f"this one has {len(msg.values)}", self.loc(node))
             args, text = tuple(v.stmt for v in msg.values), msg.template()
-        self.builder.emit(Op.ASSERT, None, (ops.ne(cond, 0).stmt, *args), {"message": text})
+        self.builder.emit(Op.ASSERT, None, (operators.ne(cond, 0).stmt, *args), {"message": text})
 
     def visit_For(self, node: ast.For) -> None:
         from simgrad.frontend.loops import lower_for
@@ -578,13 +547,13 @@ class Compiler:
     def eval_UnaryOp(self, node: ast.UnaryOp):
         v = self.eval(node.operand)
         if isinstance(node.op, ast.USub):
-            return ops.neg(v)
+            return operators.neg(v)
         if isinstance(node.op, ast.UAdd):
             return v
         if isinstance(node.op, ast.Invert):
-            return ops.bit_not(v)
+            return operators.bit_not(v)
         if isinstance(v, (Expr, Matrix)):
-            return ops.logical_not(v)
+            return operators.logical_not(v)
         return not v
 
     def eval_BoolOp(self, node: ast.BoolOp):
@@ -600,7 +569,7 @@ class Compiler:
                 continue
             if isinstance(result, Matrix):  # element-wise on matrices: both sides, 1/0 entries
                 other = self.eval(sub)
-                result = ops.logical_and(result, other) if is_and else ops.logical_or(result, other)
+                result = operators.logical_and(result, other) if is_and else operators.logical_or(result, other)
                 continue
             left, right = (lambda a=result: a), (lambda n=sub: self.eval(n))
             result = self.choose(result, right, left) if is_and else self.choose(result, left, right)
@@ -615,7 +584,7 @@ class Compiler:
                 r = _PY_CMP[type(op)](left, right)
             else:
                 r = _CMPOPS[type(op)](left, right)
-            result = r if result is None else ops.logical_and(result, r)
+            result = r if result is None else operators.logical_and(result, r)
             left = right
         return result
 
@@ -624,7 +593,7 @@ class Compiler:
         if not isinstance(cond, (Expr, Matrix)):
             return self.eval(node.body if cond else node.orelse)
         if isinstance(cond, Matrix):
-            return ops.select(cond, self.eval(node.body), self.eval(node.orelse))
+            return operators.select(cond, self.eval(node.body), self.eval(node.orelse))
         return self.choose(cond, lambda: self.eval(node.body), lambda: self.eval(node.orelse))
 
     def choose(self, cond: Expr, then_fn, else_fn):
@@ -632,7 +601,7 @@ class Compiler:
         without memory reads or effects are hoisted and picked by a select (one differentiable op); a
         side that reads memory stays guarded, as in Taichi (`x[i] if i < n else 0` never reads x[n])."""
         parent = self.builder.block
-        c = ops.ne(cond, 0)
+        c = operators.ne(cond, 0)
         stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
         values = []
         for block, fn in zip(stmt.blocks, (then_fn, else_fn)):
@@ -644,7 +613,7 @@ class Compiler:
             for x in hoisted:
                 x.block = parent
             parent.stmts[at:at + 1] = hoisted
-            return ops.select(c, *values)
+            return operators.select(c, *values)
         a, b = values
         if isinstance(a, Matrix) or isinstance(b, Matrix):
             if not (isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape == b.shape):
@@ -787,6 +756,58 @@ class Compiler:
         return None
 
 
+class VarList(list):
+    """A list bound to a name in a kernel: as Taichi's expr_init does, each run-time value (scalar or matrix)
+    becomes a local variable, so ``v[i] = x`` under run-time control flow is a run-time store. Reading the
+    list (indexing, iterating, unpacking) loads the variables; ``depth`` is the run-time nesting it was bound
+    at (assigning a Python element deeper would happen at compile time: KernelLowering._python_setitem refuses)."""
+
+    def __init__(self, comp: KernelLowering, values):
+        self.depth = comp.frame.dynamic_depth
+        super().__init__(comp.new_var(v) if isinstance(v, (Expr, Matrix)) else v
+                         for v in values)
+
+    def is_var(self, index) -> bool:
+        return isinstance(index, int) and isinstance(list.__getitem__(self, index), LOCAL_REFS)
+
+    def ref(self, index):
+        return list.__getitem__(self, index)
+
+    @staticmethod
+    def _value(v):
+        return v.load() if isinstance(v, LOCAL_REFS) else v
+
+    def __getitem__(self, index):
+        item = list.__getitem__(self, index)
+        return [self._value(v) for v in item] if isinstance(index, slice) else self._value(item)
+
+    def __iter__(self):
+        return (self._value(v) for v in list.__iter__(self))
+
+    def __reversed__(self):
+        return (self._value(v) for v in list.__reversed__(self))
+
+    def values(self) -> list:
+        return list(self.__iter__())
+
+    def __add__(self, other):
+        return self.values() + list(other)
+
+    def __radd__(self, other):
+        return list(other) + self.values()
+
+    def __mul__(self, n):
+        return self.values() * n
+
+    __rmul__ = __mul__
+
+    def copy(self):
+        return self.values()
+
+    def __contains__(self, item):
+        return item in self.values()
+
+
 _SPECULATABLE = O.PURE | {Op.LOCAL_LOAD}
 
 
@@ -796,8 +817,8 @@ def _choice_type(a, b) -> dt.DataType:
         return dt.promote(a.dtype, b.dtype)
     if isinstance(a, Expr) or isinstance(b, Expr):
         e, lit = (a, b) if isinstance(a, Expr) else (b, a)
-        return dt.promote(e.dtype, ops._literal_type(lit, e.dtype))
-    return dt.promote(ops._literal_type(a, None), ops._literal_type(b, None))
+        return dt.promote(e.dtype, operators._literal_type(lit, e.dtype))
+    return dt.promote(operators._literal_type(a, None), operators._literal_type(b, None))
 
 
 def _maybe_global(node) -> bool:
@@ -828,16 +849,12 @@ def _is_static_call(node: ast.expr) -> bool:
     return (isinstance(f, ast.Attribute) and f.attr == "static") or (isinstance(f, ast.Name) and f.id == "static")
 
 
-def _is_py_matrix_const(v) -> bool:
-    return False
-
-
 class _Starred:
     def __init__(self, value):
         self.value = value
 
 
-def global_ref(comp: Compiler, base, index, node):
+def global_ref(comp: KernelLowering, base, index, node):
     """Ref of `field[index]` / `array[index]`, with indices cast to i32 and shifted by field offsets."""
     from simgrad.frontend.arrays import ArrayArg
 
@@ -873,10 +890,10 @@ def global_ref(comp: Compiler, base, index, node):
             raise SimgradTypeError("field indices must be integers (use ti.cast(i, ti.i32) or int(i))",
                                    comp.loc(node))
         if offset:
-            i = ops.sub(i, offset[k])
-        e = ops.to_expr(i, dt.i32)
+            i = operators.sub(i, offset[k])
+        e = operators.to_expr(i, dt.i32)
         if e.dtype is not dt.i32:
-            e = ops.cast_expr(e, dt.i32)
+            e = operators.cast_expr(e, dt.i32)
         exprs.append(e)
     if isinstance(base, ArrayArg):
         return base.ref(exprs)
@@ -906,12 +923,4 @@ def _member_dtype(value: Struct, name: str):
     return t.dtype if isinstance(t, MatrixType) else t if isinstance(t, dt.DataType) else None
 
 
-def make_frame(func, is_kernel: bool) -> Frame:
-    return Frame(get_source(func), is_kernel)
-
-
-def signature(func):
-    return inspect.signature(func)
-
-
-__all__ = ["Compiler", "RangeSpec", "global_ref", "static", "ndrange", "grouped"]
+__all__ = ["KernelLowering", "global_ref"]

@@ -159,9 +159,9 @@ def _format(v, spec: str = "") -> list[Piece]:
         return out + ["]"]
     if spec and isinstance(v, (bool, int, float)):  # a number with a spec is a kernel constant (as Taichi)
         b = context.builder()
-        from simgrad.lang import ops
+        from simgrad.lang import operators
 
-        e = Expr(b.const(True if v else False, dt.u1)) if isinstance(v, bool) else ops.to_expr(v)
+        e = Expr(b.const(True if v else False, dt.u1)) if isinstance(v, bool) else operators.to_expr(v)
         return [(e, printf_spec(e.dtype, spec))]
     return [format(v, spec) if spec else str(v)]
 
@@ -216,7 +216,7 @@ _PERCENT = re.compile(r"%(?:\((\w+)\))?([-+ #0]*)(\d*)(?:\.(\d*))?[hlL]?([diouxX
 def percent_format(fmt: str, args) -> str | FormattedString:
     """`fmt % args` in a kernel with kernel values among args: printf-like conversions of each value
     (Python's leniency kept: %d of a float truncates, %f of an int converts, %s is the default format)."""
-    from simgrad.lang import ops
+    from simgrad.lang import operators
 
     values = args.values() if isinstance(args, dict) else args if isinstance(args, tuple) else (args,)
     if not any(isinstance(v, (Expr, Matrix, FormattedString)) for v in values):
@@ -249,12 +249,12 @@ def percent_format(fmt: str, args) -> str | FormattedString:
         t = v.dtype
         if conv in "diu":
             if t.is_float:
-                v = ops.cast(v, dt.i64)
+                v = operators.cast(v, dt.i64)
             conv = "d" if v.dtype.is_signed else "u"
         elif conv in "xXo" and t.is_float:
             raise SimgradTypeError(f"%{conv} format: an integer is required, not {t}")
         elif conv in _FLOAT and not t.is_float:
-            v = ops.cast(v, dt.f64)
+            v = operators.cast(v, dt.f64)
         spec = flags + width + ("." + prec if prec is not None else "")
         pieces.append((v, "%" + spec + _length(v.dtype) + conv))
     if mapping is None and k < len(seq):

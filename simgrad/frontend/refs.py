@@ -11,7 +11,7 @@ from simgrad import dtypes as dt
 from simgrad.errors import SimgradIndexError, SimgradTypeError
 from simgrad.ir import context
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import ScalarField
 from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index
@@ -34,16 +34,16 @@ class VarRef:
         return Expr(context.builder().emit(Op.LOCAL_LOAD, self.dtype, (self.alloca,)))
 
     def store(self, value) -> None:
-        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        v = operators.cast_expr(operators.to_expr(value, self.dtype), self.dtype)
         context.builder().emit(Op.LOCAL_STORE, None, (self.alloca, v.stmt))
 
     def atomic(self, kind: str, value) -> Expr:
         if kind in ("add", "sub", "min", "max", "and", "or", "xor", "atomic_mul"):
             kind = "mul" if kind == "atomic_mul" else kind
             # an ATOMIC on the local: atomic if a parallel task shares it, a plain update otherwise
-            v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+            v = operators.cast_expr(operators.to_expr(value, self.dtype), self.dtype)
             if kind == "sub":
-                kind, v = "add", ops.neg(v)
+                kind, v = "add", operators.neg(v)
             return Expr(context.builder().emit(Op.ATOMIC, self.dtype, (self.alloca, v.stmt), {"kind": kind}))
         old = self.load()
         self.store(_combine(kind, old, value))
@@ -69,10 +69,10 @@ class GlobalRef:
 
     def load(self) -> Expr:
         e = Expr(context.builder().emit(Op.GLOBAL_LOAD, self.dtype, (self.ptr(),)))
-        return ops.cast_expr(e, dt.f32) if self.dtype is dt.f16 else e  # f16 is a storage type
+        return operators.cast_expr(e, dt.f32) if self.dtype is dt.f16 else e  # f16 is a storage type
 
     def store(self, value) -> None:
-        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        v = operators.cast_expr(operators.to_expr(value, self.dtype), self.dtype)
         context.builder().emit(Op.GLOBAL_STORE, None, (self.ptr(), v.stmt))
 
     def atomic(self, kind: str, value) -> Expr:
@@ -80,9 +80,9 @@ class GlobalRef:
             old = self.load()
             self.store(_combine(kind, old, value))
             return old
-        v = ops.cast_expr(ops.to_expr(value, self.dtype), self.dtype)
+        v = operators.cast_expr(operators.to_expr(value, self.dtype), self.dtype)
         if kind == "sub":
-            kind, v = "add", ops.neg(v)
+            kind, v = "add", operators.neg(v)
         kind = "mul" if kind == "atomic_mul" else kind  # ti.atomic_mul (`x *= v` is a plain update, as Taichi)
         if kind in ("and", "or", "xor") and self.dtype.is_float:
             raise SimgradTypeError("atomic bit operation on a float field", context.current_loc())
@@ -231,10 +231,11 @@ class DynamicElementRef:
 
     def __init__(self, base: MatrixRef, key: tuple):
         if base.clamp and base.m == 0:
-            key = tuple(ops.max(0, ops.min(k, base.n - 1)) for k in key)
+            key = tuple(operators.max(0, operators.min(k, base.n - 1)) for k in key)
         elif base.clamp and len(key) == 2:  # as Taichi: the row-major flat index is clamped
-            flat = ops.max(0, ops.min(ops.add(ops.mul(key[0], base.m), key[1]), base.n * base.m - 1))
-            key = (ops.floordiv(flat, base.m), ops.mod(flat, base.m))
+            flat = operators.add(operators.mul(key[0], base.m), key[1])
+            flat = operators.max(0, operators.min(flat, base.n * base.m - 1))
+            key = (operators.floordiv(flat, base.m), operators.mod(flat, base.m))
         self.base, self.key = base, key
 
     @property
@@ -256,8 +257,8 @@ class DynamicElementRef:
             cond = None
             for k, c in zip(self.key, combo):
                 if isinstance(k, Expr):
-                    hit = ops.eq(k, c)
-                    cond = hit if cond is None else ops.bit_and(cond, hit)
+                    hit = operators.eq(k, c)
+                    cond = hit if cond is None else operators.bit_and(cond, hit)
             assert cond is not None  # some index is a run-time value, else the element is known
             stmt = b.emit(Op.IF, None, (cond.stmt,), nblocks=2)
             with b.inside(stmt.blocks[0]):
@@ -280,9 +281,10 @@ def _check(i, n: int) -> int:
 
 
 _COMBINE = {
-    "add": ops.add, "sub": ops.sub, "mul": ops.mul, "div": ops.truediv, "floordiv": ops.floordiv,
-    "mod": ops.mod, "pow": ops.pow, "and": ops.bit_and, "or": ops.bit_or, "xor": ops.bit_xor,
-    "shl": ops.shl, "shr": ops.shr, "min": ops.min, "max": ops.max,
+    "add": operators.add, "sub": operators.sub, "mul": operators.mul, "div": operators.truediv,
+    "floordiv": operators.floordiv, "mod": operators.mod, "pow": operators.pow, "and": operators.bit_and,
+    "or": operators.bit_or, "xor": operators.bit_xor,
+    "shl": operators.shl, "shr": operators.shr, "min": operators.min, "max": operators.max,
 }
 
 

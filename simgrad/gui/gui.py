@@ -338,15 +338,21 @@ class GUI:
         return False
 
     def get_cursor_pos(self):
-        """Cursor position in [0, 1]^2 with y up; the centre when headless."""
+        """Cursor position in [0, 1]^2 with y up; (0, 0) when headless, as Taichi's GUI gives (its cursor
+        starts there), so programs steered by the cursor (mciso_advanced.py) compute the same."""
         if self._window is None:
-            return 0.5, 0.5
+            return 0.0, 0.0
         return tuple(float(v) for v in self._window.cursor)
 
     # -- state ------------------------------------------------------------------------------
     @property
     def running(self):
-        """False once the window was closed, ``close()`` was called, or ``running = False``."""
+        """False once the window was closed, ``close()`` was called, or ``running = False``; also after
+        ``SIMGRAD_UI_MAX_FRAMES`` shown frames (as ``ti.ui.Window``), so a headless ``while gui.running``
+        loop ends (oit_renderer.py's ran until a harness killed it)."""
+        limit = os.environ.get("SIMGRAD_UI_MAX_FRAMES")
+        if limit and self.frame >= int(limit):
+            return False
         return not (self._should_close or self._closed)
 
     @running.setter

@@ -47,8 +47,9 @@ class PLYWriter:
 
     @staticmethod
     def _add(names, types, data_list, count, what, key, data_type, data):
-        if data_type not in _TYPES:
-            raise ValueError(f"unknown PLY type {data_type!r}; use one of {', '.join(_TYPES)}")
+        if data_type not in _TYPES:  # Taichi's writer says so and goes on without the channel
+            print("Unknown type " + str(data_type) + " detected, skipping this channel")
+            return
         arr = np.asarray(data)
         if arr.size % count or arr.size == 0:
             raise ValueError(f"{what} channel {key!r} has {arr.size} values, not a multiple of {count}")

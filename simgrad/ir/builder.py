@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
-from simgrad import dtypes as dt
 from simgrad.dtypes import DataType
 from simgrad.errors import Loc, SimgradTypeError
 from simgrad.ir import numeric
-from simgrad.ir import ops as O
 from simgrad.ir.nodes import Block, Stmt
-from simgrad.ir.ops import Op
+from simgrad.ir.opdefs import FLOAT, OPS, Op, OpDef
 
 
 class Builder:
@@ -71,20 +71,18 @@ class Builder:
     def binary(self, op: Op, a: Stmt, b: Stmt) -> Stmt:
         if a.type is not b.type:
             raise SimgradTypeError(f"internal: {op.name} on {a.type} and {b.type}", self.loc)
-        if op in O.FLOAT_ONLY and not a.vtype.is_float:
-            raise SimgradTypeError(f"{op.name.lower()} needs floating-point operands, got {a.type}", self.loc)
-        if op in O.INT_ONLY and a.vtype.is_float:
-            raise SimgradTypeError(f"{op.name.lower()} needs integer operands, got {a.type}", self.loc)
-        result = dt.i32 if op in O.COMPARE else a.type
-        return self.emit(op, result, (a, b))
+        return self.emit(op, self._checked(OPS[op], a.vtype), (a, b))
 
     def unary(self, op: Op, a: Stmt) -> Stmt:
-        if op in O.FLOAT_ONLY and not a.vtype.is_float:
-            raise SimgradTypeError(f"{op.name.lower()} needs a floating-point operand, got {a.type}", self.loc)
-        if op in O.INT_ONLY and a.vtype.is_float:
-            raise SimgradTypeError(f"{op.name.lower()} needs an integer operand, got {a.type}", self.loc)
-        result = dt.i32 if op is Op.LOGICAL_NOT else a.type
-        return self.emit(op, result, (a,))
+        return self.emit(op, self._checked(OPS[op], a.vtype), (a,))
+
+    def _checked(self, d: OpDef, t: DataType) -> DataType:
+        """The result type of `d` on operands of type `t` (a located error where it does not take them)."""
+        if not d.accepts(t):
+            kind = "floating-point" if d.domain == FLOAT else "integer"
+            what = f"{kind} operands" if d.arity == 2 else f"a {'n' if kind[0] == 'i' else ''}{kind} operand"
+            raise SimgradTypeError(f"{d.name} needs {what}, got {t}", self.loc)
+        return d.result_type(t)
 
     def select(self, cond: Stmt, a, b) -> Stmt:
         a, b = self._pair(a, b)
@@ -105,59 +103,27 @@ class Builder:
         a, b = self._pair(a, b)
         return self.binary(op, a, b)
 
-    def add(self, a, b) -> Stmt:
-        return self._arith(Op.ADD, a, b)
+    if TYPE_CHECKING:
+        def __getattr__(self, name: str) -> Callable[..., Stmt]:
+            """The helpers below, one per registry op: `b.add(x, 1.0)`, `b.atan2(y, x)`, `b.sin(x)`."""
 
-    def sub(self, a, b) -> Stmt:
-        return self._arith(Op.SUB, a, b)
 
-    def mul(self, a, b) -> Stmt:
-        return self._arith(Op.MUL, a, b)
+def _helper(d: OpDef) -> Callable[..., Stmt]:
+    """`b.<op>(...)`: a binary op takes statements or Python numbers (typed like the other operand)."""
+    op = d.op
+    fn: Callable[..., Stmt]
+    if d.arity == 2:
+        def binary(self: Builder, a, b) -> Stmt:
+            return self._arith(op, a, b)
+        fn = binary
+    else:
+        def unary(self: Builder, a: Stmt) -> Stmt:
+            return self.unary(op, a)
+        fn = unary
+    fn.__name__ = fn.__qualname__ = d.name
+    return fn
 
-    def div(self, a, b) -> Stmt:
-        return self._arith(Op.DIV, a, b)
 
-    def pow(self, a, b) -> Stmt:
-        return self._arith(Op.POW, a, b)
-
-    def lt(self, a, b) -> Stmt:
-        return self._arith(Op.LT, a, b)
-
-    def le(self, a, b) -> Stmt:
-        return self._arith(Op.LE, a, b)
-
-    def gt(self, a, b) -> Stmt:
-        return self._arith(Op.GT, a, b)
-
-    def ge(self, a, b) -> Stmt:
-        return self._arith(Op.GE, a, b)
-
-    def eq(self, a, b) -> Stmt:
-        return self._arith(Op.EQ, a, b)
-
-    def neg(self, a: Stmt) -> Stmt:
-        return self.unary(Op.NEG, a)
-
-    def sqrt(self, a: Stmt) -> Stmt:
-        return self.unary(Op.SQRT, a)
-
-    def rsqrt(self, a: Stmt) -> Stmt:
-        return self.unary(Op.RSQRT, a)
-
-    def sin(self, a: Stmt) -> Stmt:
-        return self.unary(Op.SIN, a)
-
-    def cos(self, a: Stmt) -> Stmt:
-        return self.unary(Op.COS, a)
-
-    def tan(self, a: Stmt) -> Stmt:
-        return self.unary(Op.TAN, a)
-
-    def exp(self, a: Stmt) -> Stmt:
-        return self.unary(Op.EXP, a)
-
-    def log(self, a: Stmt) -> Stmt:
-        return self.unary(Op.LOG, a)
-
-    def tanh(self, a: Stmt) -> Stmt:
-        return self.unary(Op.TANH, a)
+for _d in OPS.values():
+    assert not hasattr(Builder, _d.name), _d.name  # a registry op must not shadow a builder method
+    setattr(Builder, _d.name, _helper(_d))

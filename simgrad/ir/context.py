@@ -1,9 +1,11 @@
 """The kernel under construction: a stack of the compilers whose builder operators emit into (anything with
 `.builder`), and the source location. In ir/ so that lang operators and the IR builder meet without lang
-depending on the frontend."""
+depending on the frontend. errors.py sits below ir and asks whether a kernel is compiling through the
+`errors.compiling` hook this module installs."""
 
 from __future__ import annotations
 
+from simgrad import errors
 from simgrad.errors import Loc
 
 _stack: list = []
@@ -32,3 +34,6 @@ def current_loc() -> Loc | None:
 
 def in_kernel() -> bool:
     return bool(_stack)
+
+
+errors.compiling = in_kernel

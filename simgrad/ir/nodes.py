@@ -62,6 +62,11 @@ def walk(block: Block) -> Iterator[Stmt]:
             yield from walk(b)
 
 
+def indices_of(ptr: Stmt) -> tuple[Stmt, ...]:
+    """A GLOBAL_PTR's index operands, whether or not passes/lower_access.py has appended its offset."""
+    return ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands
+
+
 def offset_form(s: Stmt) -> tuple[Stmt | None, int]:
     """(base, constant) with s == base + constant, looking through integer +/- constants; (None, value) for a
     constant. Two indices with the same base and different constants never name the same element."""
@@ -85,7 +90,6 @@ class Kernel:
     def __init__(self, name: str):
         self.name = name
         self.body = Block()
-        self.args: list = []  # runtime argument descriptors, in slot order (the compile driver fills these)
         self.returns: list[DataType] = []
         self.ret_slot = 0  # the first context slot after the arguments: return values go there
         self.uses_tape = False  # an adjoint that pushes values on the per-thread tape (autodiff sets it)

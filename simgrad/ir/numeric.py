@@ -7,6 +7,8 @@ not folded at all."""
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import math
 import warnings
 
@@ -98,3 +100,46 @@ def minmax(pick, a, b):
         return a
     return pick(a, b)
 
+
+
+# -- the exact value of an elementwise op (ir/opdefs.py evaluators) ----------------------------------------
+def _load_libm() -> ctypes.CDLL:
+    name = ctypes.util.find_library("m")
+    return ctypes.CDLL(name) if name else ctypes.CDLL(None)
+
+
+_LIBM = _load_libm()
+_C_TYPES = {64: ctypes.c_double, 32: ctypes.c_float}
+
+
+def libm(name: str, t: DataType, *vals: float) -> float:
+    """The C library's `name` (double) or `name`f (float) called on `vals`: the very function a compiled
+    kernel calls for this op (llvm.sin.f32 becomes a call of sinf), so the value is the machine's on this
+    machine, bit for bit, whatever libm's accuracy. f16 goes through f32, as codegen and LLVM promote it."""
+    if t.bits == 16:
+        return round_float(libm(name, dt.f32, *vals), t)
+    c = _C_TYPES[t.bits]
+    fn = getattr(_LIBM, name if t.bits == 64 else name + "f")
+    fn.restype, fn.argtypes = c, [c] * len(vals)
+    return float(fn(*vals))
+
+
+def ieee(fn, t: DataType, *vals: float) -> float:
+    """A correctly rounded IEEE operation (+ - * / sqrt) at `t` through numpy's scalars of that width; f16
+    computes at f32 and rounds once (what LLVM's promotion of half arithmetic does; exact, as f32 carries
+    more than 2 * 11 + 2 significand bits)."""
+    w = dt.f32 if t.bits == 16 else t
+    with np.errstate(all="ignore"):
+        r = float(fn(*(w.np.type(v) for v in vals)))
+    return round_float(r, t) if t.bits == 16 else r
+
+
+def c_div(a: int, b: int) -> int:
+    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
+    q = abs(a) // abs(b)
+    return q if (a < 0) == (b < 0) else -q
+
+
+def shift_amount(b: int, t: DataType) -> int:
+    """The amount a shift uses: taken modulo the width (codegen masks it; LLVM makes a larger one poison)."""
+    return b & (t.bits - 1)

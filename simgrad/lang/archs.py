@@ -1,8 +1,11 @@
-"""Architectures. Only the CPU backend exists today: asking for another falls back with a warning, as
-Taichi does when a backend is unavailable."""
+"""Architectures. The CPU backend, and arch=cuda / ti.gpu (issue 22): the GPU when a CUDA driver and a device
+exist (and simgrad's GPU runtime is built), else the simulated GPU when SIMGRAD_GPU_SIM=1, else the CPU with
+one warning, as Taichi does when a backend is unavailable. TI_ARCH=cuda overrides the arch ti.init asks for.
+`current_cfg().arch` is ti.cuda on the GPU and the simulated GPU, the CPU arch after a fallback."""
 
 from __future__ import annotations
 
+import os
 import platform
 import warnings
 from enum import Enum
@@ -32,16 +35,46 @@ gpu = Arch("gpu")
 _CPU = {x64.name, arm64.name}
 
 
+_BY_NAME = {a.name: a for a in (x64, arm64, cuda, vulkan, metal, opengl, gles, dx11, dx12, amdgpu, gpu)}
+_BY_NAME["cpu"] = cpu
+
+
+def requested(arch):
+    """The arch to resolve: TI_ARCH (as in Taichi) overrides what ti.init asked for."""
+    env = os.environ.get("TI_ARCH", "").strip().lower()
+    if env:
+        if env not in _BY_NAME:
+            raise ValueError(f"TI_ARCH={env!r} is not an arch ({', '.join(sorted(_BY_NAME))})")
+        return _BY_NAME[env]
+    return arch
+
+
+def gpu_mode() -> str | None:
+    """How arch=cuda can run here: "cuda" (a GPU and the runtime), "sim" (SIMGRAD_GPU_SIM=1) or None."""
+    from simgrad.runtime import device
+
+    if device.CUDA_RUNTIME_READY and device.cuda_available():
+        return "cuda"
+    if device.sim_requested():
+        return "sim"
+    return None
+
+
 def resolve(arch) -> Arch:
+    arch = requested(arch)
     if arch is None:
         return cpu
-    if isinstance(arch, (list, tuple)):
+    if isinstance(arch, (list, tuple)):  # the first that is available, in order
         for a in arch:
             if a.name in _CPU:
                 return cpu
+            if a.name in ("cuda", "gpu") and gpu_mode() is not None:
+                return cuda
         arch = arch[0] if arch else cpu
     if arch.name in _CPU:
         return cpu
+    if arch.name in ("cuda", "gpu") and gpu_mode() is not None:
+        return cuda
     warnings.warn(f"arch={arch.name} is not available in this build of simgrad; falling back to the CPU "
                   f"({cpu.name})", stacklevel=4)
     return cpu
@@ -67,4 +100,6 @@ _SUPPORTED = {extension.data64, extension.adstack, extension.assertion, extensio
 
 
 def is_extension_supported(arch, ext: extension) -> bool:
+    if arch is cuda or getattr(arch, "name", None) == "gpu":
+        return gpu_mode() is not None and ext in _SUPPORTED and ext is not extension.bls
     return resolve(arch) is cpu and ext in _SUPPORTED

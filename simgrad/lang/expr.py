@@ -34,7 +34,7 @@ class Expr:
     def __hash__(self):
         return id(self)
 
-    # arithmetic: all defined by lang.ops so that Python numbers and matrices mix freely
+    # arithmetic: all defined by lang.operators so that Python numbers and matrices mix freely
     def __add__(self, o):
         return _ops().add(self, o)
 
@@ -139,6 +139,6 @@ class Expr:
 
 
 def _ops():
-    from simgrad.lang import ops
+    from simgrad.lang import operators
 
-    return ops
+    return operators

@@ -70,7 +70,7 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
     if shape is None:
         f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
         return f  # to be placed by the user with ti.root...place()
-    tree = get_program().new_tree()
+    tree = sn.new_tree(get_program())
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
@@ -160,7 +160,7 @@ class _Root:
     """`ti.root`: forwards to the root of the tree currently being built."""
 
     def __getattr__(self, name):
-        return getattr(get_program().root_tree.root, name)
+        return getattr(sn.root_tree(get_program()).root, name)
 
     def lazy_grad(self) -> None:
         """Place the gradient of every float field not yet in memory, beside its primal: the fields under
@@ -192,7 +192,7 @@ class FieldsBuilder:
     """`ti.FieldsBuilder()`: an explicit SNode tree; `finalize()` materialises it."""
 
     def __init__(self):
-        self.tree = get_program().new_tree()
+        self.tree = sn.new_tree(get_program())
         self.root = self.tree.root
 
     def dense(self, indices, dimensions):
@@ -254,7 +254,7 @@ def place_struct_field(stype, shape, name, offset, needs_grad: bool, needs_dual:
     f._auto_name = auto
     if shape is None:
         return f
-    tree = get_program().new_tree()
+    tree = sn.new_tree(get_program())
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
     return f

@@ -1,6 +1,6 @@
 """Small-matrix decompositions (ti.polar_decompose, ti.svd, ti.sym_eig), unrolled into scalar IR.
 
-Everything here is straight-line code: a fixed number of Jacobi sweeps, branches as `ops.select`, so the
+Everything here is straight-line code: a fixed number of Jacobi sweeps, branches as `operators.select`, so the
 same code runs on Python floats (Python scope) and on kernel values, and reverse-mode autodiff can
 differentiate it entry by entry.
 
@@ -28,7 +28,7 @@ import math
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 
@@ -72,7 +72,7 @@ class _Work:
             t = dt.f32 if t is dt.f16 else t
             self.dtype = t
             self.bits = 64 if t.bits == 64 else 32
-            self.entries = [ops.cast(e, t) for e in self.A.entries]
+            self.entries = [operators.cast(e, t) for e in self.A.entries]
         self.tiny = _TINY[self.bits]
         self.sweeps = _SWEEPS[self.bits] if self.n == 3 else 1
 
@@ -85,15 +85,15 @@ class _Work:
         clear of overflow/underflow. A power of two scales exactly, and e is piecewise constant (floor),
         so no derivative flows through it: the result is exactly differentiable as f(A 2**-e) 2**e."""
         lo, hi = (-126, 126) if self.bits == 32 else (-1022, 1022)
-        s = ops.max(*[ops.abs(e) for e in self.entries])
-        e = ops.floor(ops.log(ops.max(s, 2.0**lo)) / math.log(2.0))
-        e = ops.min(ops.max(e, float(lo)), float(hi))
-        inv = ops.pow(2.0, -e)
-        return [x * inv for x in self.entries], ops.pow(2.0, e)
+        s = operators.max(*[operators.abs(e) for e in self.entries])
+        e = operators.floor(operators.log(operators.max(s, 2.0**lo)) / math.log(2.0))
+        e = operators.min(operators.max(e, float(lo)), float(hi))
+        inv = operators.pow(2.0, -e)
+        return [x * inv for x in self.entries], operators.pow(2.0, e)
 
     def const(self, v: float):
         """A constant of the working type (two bare literals in a select would get default_fp)."""
-        return v if self.dtype is None else ops.cast(v, self.dtype)
+        return v if self.dtype is None else operators.cast(v, self.dtype)
 
     def eye(self):
         """Python floats, also in kernels: the first rotations applied to them fold at trace time."""
@@ -105,9 +105,9 @@ def _rotation(app, aqq, apq, tiny):
     d = aqq - app
     # t = tan(theta), the smaller root of t^2 + 2 t cot(2 theta) - 1 = 0, in a form with no division by
     # apq: t = 2 apq / (d + sign(d) sqrt(d^2 + 4 apq^2)); tiny keeps sqrt off 0 when apq = d = 0 (t = 0)
-    r = ops.sqrt(d * d + 4.0 * apq * apq + tiny)
-    t = 2.0 * apq / (d + ops.select(d >= 0.0, r, -r))
-    c = ops.rsqrt(1.0 + t * t)
+    r = operators.sqrt(d * d + 4.0 * apq * apq + tiny)
+    t = 2.0 * apq / (d + operators.select(d >= 0.0, r, -r))
+    c = operators.rsqrt(1.0 + t * t)
     return c, t * c, t
 
 
@@ -173,13 +173,13 @@ def _sort(vals, mats, descending: bool, keep_det: bool):
     n = len(vals)
     for i, j in _PAIRS[n]:
         a, b = vals[i], vals[j]
-        swap = ops.lt(a, b) if descending else ops.gt(a, b)
-        vals[i], vals[j] = ops.select(swap, b, a), ops.select(swap, a, b)
+        swap = operators.lt(a, b) if descending else operators.gt(a, b)
+        vals[i], vals[j] = operators.select(swap, b, a), operators.select(swap, a, b)
         for M in mats:
             for k in range(n):
                 x, y = M[k][i], M[k][j]
-                M[k][i] = ops.select(swap, y, x)
-                M[k][j] = ops.select(swap, -x if keep_det else x, y)
+                M[k][i] = operators.select(swap, y, x)
+                M[k][j] = operators.select(swap, -x if keep_det else x, y)
 
 
 def _givens_qr(w: _Work, B):
@@ -191,9 +191,9 @@ def _givens_qr(w: _Work, B):
         a, b = B[p][col], B[q][col]
         r2 = a * a + b * b
         ok = r2 > w.tiny
-        inv = ops.rsqrt(ops.max(r2, w.tiny))
-        c = ops.select(ok, a * inv, 1.0)
-        s = ops.select(ok, b * inv, 0.0)
+        inv = operators.rsqrt(operators.max(r2, w.tiny))
+        c = operators.select(ok, a * inv, 1.0)
+        s = operators.select(ok, b * inv, 0.0)
         for j in range(w.n):
             bp, bq = B[p][j], B[q][j]
             B[p][j] = c * bp + s * bq
@@ -244,15 +244,15 @@ def polar_decompose(A, dt=None):
         # (exact, and piecewise constant: no derivative through it). Then x^2 + y^2 neither overflows
         # nor underflows, and rsqrt(r2)**3 in the derivative stays finite; r2 <= floor means x = y = 0
         # (A = [[p, q], [q, -p]]: every rotation is equally close, take I) or a subnormal A.
-        m = ops.max(ops.abs(x), ops.abs(y))
+        m = operators.max(operators.abs(x), operators.abs(y))
         (lo, up), (hi, down), floor = _POLAR_RANGE[w.bits]
         one = w.const(1.0)
-        k = ops.select(m < lo, w.const(up), one) * ops.select(m > hi, w.const(down), one)
+        k = operators.select(m < lo, w.const(up), one) * operators.select(m > hi, w.const(down), one)
         x, y = x * k, y * k
         r2 = x * x + y * y
         ok = r2 > floor
-        inv = ops.rsqrt(ops.select(ok, r2, 1.0))
-        cs, sn = ops.select(ok, x * inv, 1.0), ops.select(ok, y * inv, 0.0)
+        inv = operators.rsqrt(operators.select(ok, r2, 1.0))
+        cs, sn = operators.select(ok, x * inv, 1.0), operators.select(ok, y * inv, 0.0)
         U = Matrix([[cs, -sn], [sn, cs]])
         return U, U.transpose() @ Matrix(w.rows())
     U, S, V = svd(Matrix(w.rows()), w.dtype)
@@ -280,24 +280,24 @@ def eig(A, dt=None):
     gap = tr * tr - 4.0 * det
     real = gap >= 0
     zero, one = w.const(0.0), w.const(1.0)
-    s = ops.sqrt(ops.select(real, gap, zero))
-    si = ops.sqrt(ops.select(real, zero, -gap))
-    l1, l2 = [(tr + s) * 0.5, si * 0.5], [(tr - s) * 0.5, ops.select(real, zero, -si * 0.5)]  # +0.0, as Taichi
+    s = operators.sqrt(operators.select(real, gap, zero))
+    si = operators.sqrt(operators.select(real, zero, -gap))
+    l1, l2 = [(tr + s) * 0.5, si * 0.5], [(tr - s) * 0.5, operators.select(real, zero, -si * 0.5)]  # +0.0, as Taichi
 
     def vector(other):  # a nonzero column of A - other * I (complex), normalised
-        im = ops.select(real, zero, -other[1])
+        im = operators.select(real, zero, -other[1])
         col0 = [a - other[0], im, c, zero]
         col1 = [b, zero, d - other[0], im]
         n0, n1 = _sum([x * x for x in col0]), _sum([x * x for x in col1])
         first = n0 > 0
-        v = [ops.select(first, x, y) for x, y in zip(col0, col1)]
-        norm2 = ops.select(first, n0, n1)
-        inv = 1.0 / ops.sqrt(ops.select(norm2 > 0, norm2, one))
+        v = [operators.select(first, x, y) for x, y in zip(col0, col1)]
+        norm2 = operators.select(first, n0, n1)
+        inv = 1.0 / operators.sqrt(operators.select(norm2 > 0, norm2, one))
         return [x * inv for x in v], norm2 > 0
 
     (v1, ok1), (v2, ok2) = vector(l2), vector(l1)
-    v1 = [ops.select(ok1, x, e) for e, x in zip((zero, zero, one, zero), v1)]
-    v2 = [ops.select(ok2, x, e) for e, x in zip((one, zero, zero, zero), v2)]
+    v1 = [operators.select(ok1, x, e) for e, x in zip((zero, zero, one, zero), v1)]
+    v2 = [operators.select(ok2, x, e) for e, x in zip((one, zero, zero, zero), v2)]
     return Matrix([l1, l2]), Matrix([[v1[k], v2[k]] for k in range(4)])
 
 
@@ -309,19 +309,19 @@ def solve(A, b, dt=None):
     if bv.n != w.n:
         raise ValueError(f"ti.solve: a {w.n}x{w.n} matrix needs a vector of {w.n} entries, got {bv.n}")
     n = w.n
-    rhs = [ops.cast(e, w.dtype) if w.dtype is not None else float(e) for e in bv.entries]
+    rhs = [operators.cast(e, w.dtype) if w.dtype is not None else float(e) for e in bv.entries]
     M = [row + [rhs[i]] for i, row in enumerate(w.rows())]
     for i in range(n):
         # the row with the largest |pivot| (the first of equals) swaps with row i
-        best, chosen = ops.abs(M[i][i]), i
+        best, chosen = operators.abs(M[i][i]), i
         for j in range(i + 1, n):
-            take = ops.abs(M[j][i]) > best
-            best, chosen = ops.select(take, ops.abs(M[j][i]), best), ops.select(take, j, chosen)
+            take = operators.abs(M[j][i]) > best
+            best, chosen = operators.select(take, operators.abs(M[j][i]), best), operators.select(take, j, chosen)
         old = [list(r) for r in M]
         for j in range(i + 1, n):
             here = chosen == j
-            M[i] = [ops.select(here, y, x) for x, y in zip(M[i], old[j])]
-            M[j] = [ops.select(here, x, y) for x, y in zip(old[i], old[j])]
+            M[i] = [operators.select(here, y, x) for x, y in zip(M[i], old[j])]
+            M[j] = [operators.select(here, x, y) for x, y in zip(old[i], old[j])]
         for j in range(i + 1, n):
             scale = M[j][i] / M[i][i]
             M[j] = [M[j][k] - M[i][k] * scale if k > i else w.const(0.0) for k in range(n + 1)]

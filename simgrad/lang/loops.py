@@ -126,6 +126,12 @@ def cache_read_only(*fields) -> None:
     _check_fields("cache_read_only", fields)
 
 
+def no_activate(*fields) -> None:
+    """Taichi's promise that this kernel touches only active cells of these fields, so its accesses need not
+    activate; activating anyway computes the same for a program that keeps the promise."""
+    _check_fields("no_activate", fields)
+
+
 def assume_in_range(val, base, low: int, high: int):
     """Taichi's promise that base + low <= val < base + high (it shrinks GPU shared-memory tiles); the value
     itself is returned unchanged."""

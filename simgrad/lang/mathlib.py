@@ -7,9 +7,11 @@ they also work in Python scope. Results keep the precision of their inputs."""
 from __future__ import annotations
 
 import math as _m
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from simgrad import dtypes as _dt
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.types import matrix as _matrix
@@ -25,9 +27,13 @@ ivec2, ivec3, ivec4 = _vector(2, int), _vector(3, int), _vector(4, int)
 uvec2, uvec3, uvec4 = _vector(2, _dt.u32), _vector(3, _dt.u32), _vector(4, _dt.u32)
 mat2, mat3, mat4 = _matrix(2, 2), _matrix(3, 3), _matrix(4, 4)
 
-sqrt, sin, cos, tan, asin, acos, atan2 = ops.sqrt, ops.sin, ops.cos, ops.tan, ops.asin, ops.acos, ops.atan2
-exp, log, tanh, floor, ceil, round = ops.exp, ops.log, ops.tanh, ops.floor, ops.ceil, ops.round  # noqa: A001
-min, max, abs, pow = ops.min, ops.max, ops.abs, ops.pow  # noqa: A001
+# the registry's math functions exported under ti.math (ir/opdefs.py: sqrt, sin, ..., atan2, ...)
+globals().update(operators.math_functions("math"))
+floor, ceil, round = operators.floor, operators.ceil, operators.round  # noqa: A001
+min, max, abs, pow = operators.min, operators.max, operators.abs, operators.pow  # noqa: A001
+if TYPE_CHECKING:
+    def __getattr__(name: str) -> Callable[..., Any]:
+        """The registry's functions set above, for the type checker."""
 
 
 def dot(a, b):
@@ -39,7 +45,7 @@ def cross(a, b):
 
 
 def length(v):
-    return v.norm() if isinstance(v, Matrix) else ops.abs(v)
+    return v.norm() if isinstance(v, Matrix) else operators.abs(v)
 
 
 def distance(a, b):
@@ -51,7 +57,7 @@ def normalize(v):
 
 
 def clamp(x, lo, hi):
-    return ops.min(ops.max(x, lo), hi)
+    return operators.min(operators.max(x, lo), hi)
 
 
 def mix(x, y, a):
@@ -59,11 +65,11 @@ def mix(x, y, a):
 
 
 def sign(x):
-    return ops.select(ops.gt(x, 0), 1.0, 0.0) - ops.select(ops.lt(x, 0), 1.0, 0.0)
+    return operators.select(operators.gt(x, 0), 1.0, 0.0) - operators.select(operators.lt(x, 0), 1.0, 0.0)
 
 
 def step(edge, x):
-    return ops.select(ops.ge(x, edge), 1.0, 0.0)
+    return operators.select(operators.ge(x, edge), 1.0, 0.0)
 
 
 def smoothstep(e0, e1, x):
@@ -72,19 +78,19 @@ def smoothstep(e0, e1, x):
 
 
 def fract(x):
-    return x - ops.floor(x)
+    return x - operators.floor(x)
 
 
 def mod(x, y):
-    return ops.mod(x, y)
+    return operators.mod(x, y)
 
 
 def log2(x):
-    return ops.log(x) / _m.log(2.0)
+    return operators.log(x) / _m.log(2.0)
 
 
 def exp2(x):
-    return ops.exp(x * _m.log(2.0))
+    return operators.exp(x * _m.log(2.0))
 
 
 def reflect(i, n):
@@ -94,7 +100,8 @@ def reflect(i, n):
 def refract(i, n, eta):
     cos_i = -i.dot(n)
     k = 1.0 - eta * eta * (1.0 - cos_i * cos_i)
-    return ops.select(ops.lt(k, 0.0), 0.0 * i, eta * i + (eta * cos_i - ops.sqrt(ops.max(k, 0.0))) * n)
+    refracted = eta * i + (eta * cos_i - operators.sqrt(operators.max(k, 0.0))) * n
+    return operators.select(operators.lt(k, 0.0), 0.0 * i, refracted)
 
 
 def radians(deg):
@@ -106,11 +113,11 @@ def degrees(rad):
 
 
 def isinf(x):
-    return ops.eq(ops.abs(x), _m.inf)
+    return operators.eq(operators.abs(x), _m.inf)
 
 
 def isnan(x):
-    return ops.ne(x, x)
+    return operators.ne(x, x)
 
 
 def determinant(m):
@@ -126,7 +133,7 @@ def eye(n):
 
 
 def rotation2d(ang):
-    c, s = ops.cos(ang), ops.sin(ang)
+    c, s = operators.cos(ang), operators.sin(ang)
     return Matrix([[c, -s], [s, c]])
 
 
@@ -150,38 +157,40 @@ def cinv(z):
 def _polar(z):
     """(z != 0, |z|^2, arg z), with z == 0 replaced by 1 inside so that neither the value nor the
     derivative of the untaken branch is infinite (pow(0, -k), atan2(0, 0)'s 0/0)."""
-    nz = ops.bit_or(ops.ne(z[0], 0), ops.ne(z[1], 0))
-    x, y = ops.select(nz, z[0], 1.0), ops.select(nz, z[1], 0.0)
-    return nz, x * x + y * y, ops.atan2(y, x)
+    nz = operators.bit_or(operators.ne(z[0], 0), operators.ne(z[1], 0))
+    x, y = operators.select(nz, z[0], 1.0), operators.select(nz, z[1], 0.0)
+    return nz, x * x + y * y, operators.atan2(y, x)
 
 
 def cpow(z, n):
     """z**n for a real (not only integer) exponent, in polar form; 0 for z == 0, as Taichi."""
     nz, r2, a = _polar(z)
-    r = ops.pow(r2, n / 2.0)
-    return Matrix([ops.select(nz, r * ops.cos(a * n), 0.0), ops.select(nz, r * ops.sin(a * n), 0.0)])
+    r = operators.pow(r2, n / 2.0)
+    return Matrix([operators.select(nz, r * operators.cos(a * n), 0.0),
+                   operators.select(nz, r * operators.sin(a * n), 0.0)])
 
 
 def csqrt(z):
     """The principal square root (non-negative real part); csqrt(0) == 0."""
     nz, r2, a = _polar(z)
-    r = ops.sqrt(ops.sqrt(r2))
-    return Matrix([ops.select(nz, r * ops.cos(a / 2.0), 0.0), ops.select(nz, r * ops.sin(a / 2.0), 0.0)])
+    r = operators.sqrt(operators.sqrt(r2))
+    return Matrix([operators.select(nz, r * operators.cos(a / 2.0), 0.0),
+                   operators.select(nz, r * operators.sin(a / 2.0), 0.0)])
 
 
 def cexp(z):
-    r = ops.exp(z[0])
-    return Matrix([r * ops.cos(z[1]), r * ops.sin(z[1])])
+    r = operators.exp(z[0])
+    return Matrix([r * operators.cos(z[1]), r * operators.sin(z[1])])
 
 
 def clog(z):
     """The principal logarithm: argument in (-pi, pi]."""
-    return Matrix([ops.log(z.dot(z)) / 2.0, ops.atan2(z[1], z[0])])
+    return Matrix([operators.log(z.dot(z)) / 2.0, operators.atan2(z[1], z[0])])
 
 
 def vdir(ang):
     """The unit 2D vector at angle `ang`."""
-    return Matrix([ops.cos(ang), ops.sin(ang)])
+    return Matrix([operators.cos(ang), operators.sin(ang)])
 
 
 # -- 4x4 homogeneous transforms --------------------------------------------------------------------------
@@ -201,7 +210,7 @@ def rot_by_axis(axis, ang):
     """Rotation about `axis` (normalised here) by `ang`, with Taichi's orientation: the transpose of the
     right-handed Rodrigues matrix, i.e. c I + (1 - c) a a^T - s [a]x."""
     a = axis / axis.norm()
-    c, s = ops.cos(ang), ops.sin(ang)
+    c, s = operators.cos(ang), operators.sin(ang)
     x, y, z = a[0], a[1], a[2]
     k = 1.0 - c
     return _homogeneous([
@@ -212,17 +221,17 @@ def rot_by_axis(axis, ang):
 
 
 def _rx(a):
-    c, s = ops.cos(a), ops.sin(a)
+    c, s = operators.cos(a), operators.sin(a)
     return Matrix([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def _ry(a):
-    c, s = ops.cos(a), ops.sin(a)
+    c, s = operators.cos(a), operators.sin(a)
     return Matrix([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def _rz(a):
-    c, s = ops.cos(a), ops.sin(a)
+    c, s = operators.cos(a), operators.sin(a)
     return Matrix([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -245,10 +254,10 @@ def _popcnt_bits(x, bits):
     """SWAR population count of an unsigned kernel value of `bits` (32 or 64) bits."""
     m1, m2, m4 = (0x5555555555555555, 0x3333333333333333, 0x0F0F0F0F0F0F0F0F)
     mask = (1 << bits) - 1
-    x = x - ops.bit_and(ops.shr(x, 1), m1 & mask)
-    x = ops.bit_and(x, m2 & mask) + ops.bit_and(ops.shr(x, 2), m2 & mask)
-    x = ops.bit_and(x + ops.shr(x, 4), m4 & mask)
-    return ops.shr(x * (0x0101010101010101 & mask), bits - 8)
+    x = x - operators.bit_and(operators.shr(x, 1), m1 & mask)
+    x = operators.bit_and(x, m2 & mask) + operators.bit_and(operators.shr(x, 2), m2 & mask)
+    x = operators.bit_and(x + operators.shr(x, 4), m4 & mask)
+    return operators.shr(x * (0x0101010101010101 & mask), bits - 8)
 
 
 def _bits_of(x):
@@ -279,10 +288,10 @@ def clz(x):
     y = _as(x, _UNSIGNED.get(x.dtype, x.dtype))
     k = 1
     while k < bits:  # smear the highest set bit downwards; then clz = bits - popcount
-        y = ops.bit_or(y, ops.shr(y, k))
+        y = operators.bit_or(y, operators.shr(y, k))
         k *= 2
     return _as(bits - _popcnt_bits(y, bits), x.dtype)
 
 
 def _as(x, t):
-    return x if x.dtype is t else ops.bit_cast(x, t)
+    return x if x.dtype is t else operators.bit_cast(x, t)

@@ -12,7 +12,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradIndexError, SimgradTypeError
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 
 _SWIZZLE_GROUPS = ("xyzw", "rgba", "stpq")
@@ -56,7 +56,7 @@ class Matrix:
                 else:
                     self.entries, self.n, self.m = arr, len(arr), 0
             if dt is not None:
-                self.entries = [ops.cast(e, dt) for e in self.entries]
+                self.entries = [operators.cast(e, dt) for e in self.entries]
 
     # -- shape -----------------------------------------------------------------------------------
     @property
@@ -178,12 +178,12 @@ class Matrix:
             rows = [self._row(r) for r in range(self.n)]
             out = rows[-1]
             for r in range(self.n - 2, -1, -1):
-                out = ops.select(ops.eq(key[0], r), rows[r], out)
+                out = operators.select(operators.eq(key[0], r), rows[r], out)
             return out
-        flat = ops.mul(key[0], self.m) + key[1] if self.m else key[0]
+        flat = operators.mul(key[0], self.m) + key[1] if self.m else key[0]
         out = self.entries[-1]
         for c in range(len(self.entries) - 2, -1, -1):
-            out = ops.select(ops.eq(flat, c), self.entries[c], out)
+            out = operators.select(operators.eq(flat, c), self.entries[c], out)
         return out
 
     def __setitem__(self, key, value):
@@ -224,100 +224,100 @@ class Matrix:
 
     # -- arithmetic --------------------------------------------------------------------------------
     def __add__(self, o):
-        return ops.add(self, o)
+        return operators.add(self, o)
 
     def __radd__(self, o):
-        return ops.add(o, self)
+        return operators.add(o, self)
 
     def __sub__(self, o):
-        return ops.sub(self, o)
+        return operators.sub(self, o)
 
     def __rsub__(self, o):
-        return ops.sub(o, self)
+        return operators.sub(o, self)
 
     def __mul__(self, o):
-        return ops.mul(self, o)
+        return operators.mul(self, o)
 
     def __rmul__(self, o):
-        return ops.mul(o, self)
+        return operators.mul(o, self)
 
     def __truediv__(self, o):
-        return ops.truediv(self, o)
+        return operators.truediv(self, o)
 
     def __rtruediv__(self, o):
-        return ops.truediv(o, self)
+        return operators.truediv(o, self)
 
     def __floordiv__(self, o):
-        return ops.floordiv(self, o)
+        return operators.floordiv(self, o)
 
     def __rfloordiv__(self, o):
-        return ops.floordiv(o, self)
+        return operators.floordiv(o, self)
 
     def __mod__(self, o):
-        return ops.mod(self, o)
+        return operators.mod(self, o)
 
     def __rmod__(self, o):
-        return ops.mod(o, self)
+        return operators.mod(o, self)
 
     def __pow__(self, o):
-        return ops.pow(self, o)
+        return operators.pow(self, o)
 
     def __rpow__(self, o):
-        return ops.pow(o, self)
+        return operators.pow(o, self)
 
     def __neg__(self):
-        return ops.neg(self)
+        return operators.neg(self)
 
     def __pos__(self):
         return self
 
     def __abs__(self):
-        return ops.abs(self)
+        return operators.abs(self)
 
     def __lt__(self, o):
-        return ops.lt(self, o)
+        return operators.lt(self, o)
 
     def __le__(self, o):
-        return ops.le(self, o)
+        return operators.le(self, o)
 
     def __gt__(self, o):
-        return ops.gt(self, o)
+        return operators.gt(self, o)
 
     def __ge__(self, o):
-        return ops.ge(self, o)
+        return operators.ge(self, o)
 
     def __eq__(self, o):  # type: ignore[override]
-        return ops.eq(self, o)
+        return operators.eq(self, o)
 
     def __ne__(self, o):  # type: ignore[override]
-        return ops.ne(self, o)
+        return operators.ne(self, o)
 
     def __and__(self, o):
-        return ops.bit_and(self, o)
+        return operators.bit_and(self, o)
 
     def __rand__(self, o):
-        return ops.bit_and(o, self)
+        return operators.bit_and(o, self)
 
     def __or__(self, o):
-        return ops.bit_or(self, o)
+        return operators.bit_or(self, o)
 
     def __ror__(self, o):
-        return ops.bit_or(o, self)
+        return operators.bit_or(o, self)
 
     def __xor__(self, o):
-        return ops.bit_xor(self, o)
+        return operators.bit_xor(self, o)
 
     def __rxor__(self, o):
-        return ops.bit_xor(o, self)
+        return operators.bit_xor(o, self)
 
     def __lshift__(self, o):
-        return ops.shl(self, o)
+        return operators.shl(self, o)
 
     def __rshift__(self, o):
-        return ops.shr(self, o)
+        return operators.shr(self, o)
 
     def __invert__(self):
-        return ops.bit_not(self)
+        return operators.bit_not(self)
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -333,7 +333,7 @@ class Matrix:
         b = o if o.m else Matrix([[e] for e in o.entries])
         if a.m != b.n:
             raise ValueError(f"matmul of {self.shape} and {o.shape}")
-        rows = [[_sum([ops.mul(a.entries[i * a.m + k], b.entries[k * b.m + j]) for k in range(a.m)])
+        rows = [[_sum([operators.mul(a.entries[i * a.m + k], b.entries[k * b.m + j]) for k in range(a.m)])
                  for j in range(b.m)] for i in range(a.n)]
         if o.m == 0:
             return Matrix([r[0] for r in rows])
@@ -359,38 +359,38 @@ class Matrix:
         return _sum(self.entries)
 
     def max(self):
-        return ops.max(*self.entries) if len(self.entries) > 1 else self.entries[0]
+        return operators.max(*self.entries) if len(self.entries) > 1 else self.entries[0]
 
     def min(self):
-        return ops.min(*self.entries) if len(self.entries) > 1 else self.entries[0]
+        return operators.min(*self.entries) if len(self.entries) > 1 else self.entries[0]
 
     def any(self):
-        return _reduce(ops.bit_or, [ops.ne(e, 0) for e in self.entries])
+        return _reduce(operators.bit_or, [operators.ne(e, 0) for e in self.entries])
 
     def all(self):
-        return _reduce(ops.bit_and, [ops.ne(e, 0) for e in self.entries])
+        return _reduce(operators.bit_and, [operators.ne(e, 0) for e in self.entries])
 
     def dot(self, o):
         o = o if isinstance(o, Matrix) else Matrix(o)
         if self.m != 0 or o.m != 0 or self.n != o.n:
             raise ValueError(f"dot needs two vectors of one size, got {self.shape} and {o.shape}")
-        return _sum([ops.mul(a, b) for a, b in zip(self.entries, o.entries)])
+        return _sum([operators.mul(a, b) for a, b in zip(self.entries, o.entries)])
 
     def norm(self, eps=0):
         """sqrt(sum of squares + eps); also the Frobenius norm of a matrix."""
-        s = _sum([ops.mul(e, e) for e in self.entries])
-        return ops.sqrt(ops.add(s, eps) if not _is_zero(eps) else s)
+        s = _sum([operators.mul(e, e) for e in self.entries])
+        return operators.sqrt(operators.add(s, eps) if not _is_zero(eps) else s)
 
     def norm_inv(self, eps=0):
-        return ops.rsqrt(ops.add(self.norm_sqr(), eps))
+        return operators.rsqrt(operators.add(self.norm_sqr(), eps))
 
     def norm_sqr(self):
-        return _sum([ops.mul(e, e) for e in self.entries])
+        return _sum([operators.mul(e, e) for e in self.entries])
 
     def normalized(self, eps=0):
         """v / (|v| + eps): Taichi's formula (eps is added to the norm, not under the sqrt)."""
         n = self.norm()
-        return ops.mul(self, ops.truediv(1.0, n if _is_zero(eps) else ops.add(n, eps)))
+        return operators.mul(self, operators.truediv(1.0, n if _is_zero(eps) else operators.add(n, eps)))
 
     def cross(self, o):
         """2D: the scalar a.x*b.y - a.y*b.x; 3D: the cross-product vector."""
@@ -399,18 +399,18 @@ class Matrix:
             raise ValueError(f"cross needs two 2D or two 3D vectors, got {self.shape} and {o.shape}")
         a, b = self.entries, o.entries
         if self.n == 2:
-            return ops.sub(ops.mul(a[0], b[1]), ops.mul(a[1], b[0]))
+            return operators.sub(operators.mul(a[0], b[1]), operators.mul(a[1], b[0]))
         return Matrix([
-            ops.sub(ops.mul(a[1], b[2]), ops.mul(a[2], b[1])),
-            ops.sub(ops.mul(a[2], b[0]), ops.mul(a[0], b[2])),
-            ops.sub(ops.mul(a[0], b[1]), ops.mul(a[1], b[0])),
+            operators.sub(operators.mul(a[1], b[2]), operators.mul(a[2], b[1])),
+            operators.sub(operators.mul(a[2], b[0]), operators.mul(a[0], b[2])),
+            operators.sub(operators.mul(a[0], b[1]), operators.mul(a[1], b[0])),
         ])
 
     def outer_product(self, o):
         o = o if isinstance(o, Matrix) else Matrix(o)
         if self.m != 0 or o.m != 0:
             raise ValueError(f"outer_product needs two vectors, got {self.shape} and {o.shape}")
-        return Matrix([[ops.mul(x, y) for y in o.entries] for x in self.entries])
+        return Matrix([[operators.mul(x, y) for y in o.entries] for x in self.entries])
 
     def trace(self):
         if self.n != self.m:
@@ -427,12 +427,13 @@ class Matrix:
         if n == 1:
             return self.entries[0]
         if n == 2:
-            return ops.sub(ops.mul(self._e(0, 0), self._e(1, 1)), ops.mul(self._e(0, 1), self._e(1, 0)))
+            m = operators.mul
+            return operators.sub(m(self._e(0, 0), self._e(1, 1)), m(self._e(0, 1), self._e(1, 0)))
         terms = []
         for j in range(n):
             minor = Matrix([[self._e(r, c) for c in range(n) if c != j] for r in range(1, n)])
-            t = ops.mul(self._e(0, j), minor.determinant())
-            terms.append(t if j % 2 == 0 else ops.neg(t))
+            t = operators.mul(self._e(0, j), minor.determinant())
+            terms.append(t if j % 2 == 0 else operators.neg(t))
         return _sum(terms)
 
     def inverse(self):
@@ -441,24 +442,24 @@ class Matrix:
         if n != self.m:
             raise ValueError("inverse of a non-square matrix")
         if n == 1:
-            return Matrix([[ops.truediv(1.0, self.entries[0])]])
-        inv_det = ops.truediv(1.0, self.determinant())
+            return Matrix([[operators.truediv(1.0, self.entries[0])]])
+        inv_det = operators.truediv(1.0, self.determinant())
         if n == 2:
             a, b, c, d = self.entries
-            return Matrix([[ops.mul(d, inv_det), ops.mul(ops.neg(b), inv_det)],
-                           [ops.mul(ops.neg(c), inv_det), ops.mul(a, inv_det)]])
+            return Matrix([[operators.mul(d, inv_det), operators.mul(operators.neg(b), inv_det)],
+                           [operators.mul(operators.neg(c), inv_det), operators.mul(a, inv_det)]])
         cof = []
         for i in range(n):
             row = []
             for j in range(n):
                 minor = Matrix([[self._e(r, c) for c in range(n) if c != i] for r in range(n) if r != j])
                 d = minor.determinant()
-                row.append(ops.mul(d if (i + j) % 2 == 0 else ops.neg(d), inv_det))
+                row.append(operators.mul(d if (i + j) % 2 == 0 else operators.neg(d), inv_det))
             cof.append(row)
         return Matrix(cof)
 
     def cast(self, dtype) -> Matrix:
-        return self._like([ops.cast(e, dtype) for e in self.entries])
+        return self._like([operators.cast(e, dtype) for e in self.entries])
 
     def to_numpy(self, keep_dims=False):
         return np.array(self.entries).reshape(self.shape)
@@ -480,7 +481,7 @@ class Matrix:
     # -- constructors -------------------------------------------------------------------------------
     @staticmethod
     def identity(dt_, n):
-        return Matrix([[ops.cast(1 if i == j else 0, dt_) for j in range(n)] for i in range(n)])
+        return Matrix([[operators.cast(1 if i == j else 0, dt_) for j in range(n)] for i in range(n)])
 
     @staticmethod
     def zero(dt_, n, m=None):
@@ -493,14 +494,14 @@ class Matrix:
     @staticmethod
     def _filled(v, dt_, n, m):
         if m is None:
-            return Matrix([ops.cast(v, dt_) for _ in range(n)])
-        return Matrix([[ops.cast(v, dt_) for _ in range(m)] for _ in range(n)])
+            return Matrix([operators.cast(v, dt_) for _ in range(n)])
+        return Matrix([[operators.cast(v, dt_) for _ in range(m)] for _ in range(n)])
 
     @staticmethod
     def diag(dim, val):
         """val on the diagonal, zeros of val's type elsewhere."""
         if isinstance(val, Expr):
-            zero = ops.cast(0, val.dtype)
+            zero = operators.cast(0, val.dtype)
         else:
             zero = 0.0 if isinstance(val, float) else 0
         return Matrix([[val if i == j else zero for j in range(dim)] for i in range(dim)])
@@ -571,7 +572,7 @@ def _reduce(fn, xs):
 
 
 def _sum(xs):
-    return _reduce(ops.add, xs)
+    return _reduce(operators.add, xs)
 
 
 def dtype_of(m: Matrix) -> dt.DataType:
@@ -589,8 +590,8 @@ def check_dynamic_index(key, dims) -> None:
         return
     for k, d in zip(key, dims):
         if isinstance(k, Expr):
-            ok = ops.logical_and(ops.ge(k, 0), ops.lt(k, d))
-            comp.builder.emit(Op.ASSERT, None, (ops.ne(ok, 0).stmt,),
+            ok = operators.logical_and(operators.ge(k, 0), operators.lt(k, d))
+            comp.builder.emit(Op.ASSERT, None, (operators.ne(ok, 0).stmt,),
                               {"message": f"Out of bound access: index out of range for a local vector/matrix "
                                           f"dimension of size {d}"})
 

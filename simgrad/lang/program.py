@@ -91,20 +91,6 @@ class Program:
             self.jit.cache_dir = Path(self.config.offline_cache_file_path)
 
     # -- SNode trees -------------------------------------------------------------------------------
-    def new_tree(self):
-        from simgrad.lang.snode import SNodeTree
-
-        tree = SNodeTree(self, len(self.trees))
-        self.trees.append(tree)
-        return tree
-
-    @property
-    def root_tree(self):
-        """The tree `ti.root` builds into; a fresh one once the previous was materialised."""
-        if self._open_tree is None or self._open_tree.materialized:
-            self._open_tree = self.new_tree()
-        return self._open_tree
-
     def materialize_all(self) -> None:
         for t in self.trees:
             if not t.materialized:

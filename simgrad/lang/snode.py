@@ -137,6 +137,8 @@ class SNode:
             raise SimgradValueError(f"{kind}(): sizes must be non-negative integers, got {dimensions!r}",
                                     caller_loc())
         dims = tuple(int(d) for d in dimensions)
+        if len(dims) == 1:  # one size for every axis, as Taichi's SNode::create_node broadcasts it
+            dims = dims * len(ax)
         if len(dims) != len(ax):
             raise SimgradError(f"{kind}(): {len(ax)} axes but {len(dims)} sizes")
         child = SNode(self, kind, ax, dims)
@@ -401,3 +403,17 @@ class SNodeTree:
 def check_placed(field) -> None:
     if field.snode is None:
         raise SimgradError(f"field {field.name} is not placed in any SNode tree (call ti.root...place())")
+
+
+def new_tree(program) -> SNodeTree:
+    """A new SNode tree of `program` (lang/program.py holds the trees and imports no SNode code)."""
+    tree = SNodeTree(program, len(program.trees))
+    program.trees.append(tree)
+    return tree
+
+
+def root_tree(program) -> SNodeTree:
+    """The tree `ti.root` builds into; a fresh one once the previous was materialised."""
+    if program._open_tree is None or program._open_tree.materialized:
+        program._open_tree = new_tree(program)
+    return program._open_tree

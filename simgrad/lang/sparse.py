@@ -9,7 +9,7 @@ from simgrad.errors import SimgradError, SimgradSyntaxError, caller_loc
 from simgrad.ir import context
 from simgrad.ir.fieldref import SNodeRef
 from simgrad.ir.ops import Op
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.snode import SNode
 
@@ -55,12 +55,12 @@ def _indices(node: SNode, indices, what: str, dims: int) -> list[Expr]:
     if len(indices) != dims:
         raise SimgradSyntaxError(f"ti.{what}: this {node.kind} node takes {dims} index(es), got {len(indices)}",
                                  context.current_loc())
-    return [ops.cast_expr(ops.to_expr(i, dt.i32), dt.i32) for i in indices]
+    return [operators.cast_expr(operators.to_expr(i, dt.i32), dt.i32) for i in indices]
 
 
 def _emit(op: str, node: SNode, idx: list[Expr]) -> Expr:
     if not node.is_sparse and op in ("activate", "deactivate"):
-        return Expr(ops.to_expr(0, dt.i32).stmt)  # as Taichi: a dense cell is always active, nothing to do
+        return Expr(operators.to_expr(0, dt.i32).stmt)  # as Taichi: a dense cell is always active, nothing to do
     if not node.is_sparse:
         raise SimgradSyntaxError(f"ti.{_PUBLIC[op]} works on pointer, bitmasked and dynamic SNodes, not on a "
                                  f"{node.kind} node", context.current_loc())
@@ -118,7 +118,7 @@ def _list_indices(n: SNode, indices, what: str) -> list[Expr]:
                                  context.current_loc())
     idx = _indices(n, indices, what, len(n.shape) - 1)
     ax = _list_axis(n)
-    return idx[:ax] + [ops.to_expr(0, dt.i32)] + idx[ax:]
+    return idx[:ax] + [operators.to_expr(0, dt.i32)] + idx[ax:]
 
 
 def length(node, indices):
@@ -143,11 +143,12 @@ def append(node, indices, value):
     ax = _list_axis(n)
     full = idx[:ax] + [k] + idx[ax + 1:]
     b = context.builder()
-    guard = b.emit(Op.IF, None, (ops.lt(k, n.sizes[0]).stmt,), nblocks=2)
+    guard = b.emit(Op.IF, None, (operators.lt(k, n.sizes[0]).stmt,), nblocks=2)
     with context.current().dynamic(guard.blocks[0]):
         for field, v in zip(fields, values):
             ptr = b.emit(Op.GLOBAL_PTR, field.dtype, tuple(i.stmt for i in full), {"target": field.ref()})
-            b.emit(Op.GLOBAL_STORE, None, (ptr, ops.cast_expr(ops.to_expr(v, field.dtype), field.dtype).stmt))
+            value = operators.cast_expr(operators.to_expr(v, field.dtype), field.dtype)
+            b.emit(Op.GLOBAL_STORE, None, (ptr, value.stmt))
     return k
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
-from simgrad.lang import ops
+from simgrad.lang import operators
 from simgrad.lang.field import Field, FieldElement, ScalarField
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.types import MatrixType
@@ -91,7 +91,7 @@ def _convert(t, v):
         return v if isinstance(v, Struct) and v._type is t else t(v)
     if isinstance(t, MatrixType):
         return t.make(v)
-    return ops.cast(v, t)
+    return operators.cast(v, t)
 
 
 def _zero_dict(value) -> dict:
@@ -277,7 +277,7 @@ class StructElement:
 def dataclass(cls):
     """@ti.dataclass: a struct type from the class's annotations; its ti.func methods become the struct's
     methods (called on struct values, locals and field elements, `self` being the struct)."""
-    from simgrad.lang.kernel import Func
+    from simgrad.lang.functions import Func
 
     ann = dict(getattr(cls, "__annotations__", {}))
     defaults = [k for k in ann if k in vars(cls)]

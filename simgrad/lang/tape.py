@@ -17,11 +17,10 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.autodiff.validate import differentiable, user_name, written_targets
 from simgrad.errors import AccessRuleError, GradientError, SimgradError
-from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
-from simgrad.passes.lower_access import indices_of
 
 
 class Tape:
@@ -358,7 +357,7 @@ def _watched(f, leads, args: dict) -> bytes:
     data = field.view if field.view is not None else field.to_numpy()
     try:
         picked = None if leads is None else sorted({_evaluate(e, args) for e in leads})
-    except KeyError:  # an index from a matrix argument's entry: watch everything
+    except KeyError:  # an index from a slot with no value here (a matrix argument's entry): watch everything
         picked = None
     if picked is None:
         return hashlib.blake2b(np.ascontiguousarray(data).tobytes(), digest_size=16).digest()
@@ -377,7 +376,8 @@ class Snapshot:
     def __init__(self, kernel, args):
         inst = kernel.instance(args)
         self.kernel = kernel
-        self.args = {p.slot: a for p, a in zip(inst.launcher.params, args) if p.kind == "scalar"}
+        # ARG slot -> value of the scalar words the arguments fill (each parameter's packing says which)
+        self.args = {slot: v for p, a in zip(inst.launcher.params, args) for slot, v in p.slot_values(a).items()}
         self.reads = reads_of(inst.ir)
         self.prints = self._fingerprint()
 

@@ -262,7 +262,7 @@ def _assemble(rows, cols, vals, n: int, m: int, t: dt.DataType, fmt: str):
 
 
 class TripletStore:
-    """A builder's triplets as kernels see them (runtime/launch.py `_builder_info`): `count` (one i64, the
+    """A builder's triplets as kernels see them (runtime/args.py `builder_info`): `count` (one i64, the
     number of triplets added; past `capacity` the excess were dropped), `rows`, `cols` (i32) and `values`."""
 
     def __init__(self, capacity: int, dtype: dt.DataType):

@@ -32,11 +32,6 @@ from simgrad.passes.digits import digit_chain
 _NOWRAP = {"nowrap": True}
 
 
-def indices_of(ptr: Stmt) -> tuple[Stmt, ...]:
-    """A GLOBAL_PTR's index operands, whether or not it has been lowered."""
-    return ptr.operands[:-1] if ptr.attrs.get("lowered") else ptr.operands
-
-
 def lower_access(kernel: Kernel, debug: bool = False) -> bool:
     written = {id(s.operands[0]) for s in walk(kernel.body)
                if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR}

@@ -39,6 +39,9 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
     steps.append(("lower_access", partial(lower_access.lower_access, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass
         steps = [("verify", verify.verify)] + [x for st in steps for x in (st, ("verify", verify.verify))]
+    else:  # the frontend's output and the last pass's always (linear, cheap next to LLVM): invalid IR is a
+        # located internal error, never LLVM's verifier or a silently wrong fold of an out-of-scope value
+        steps = [("verify", verify.verify), *steps, ("verify", verify.verify)]
     for name, fn in steps:
         if level >= 1:
             print(f"[simgrad] {kernel.name}: {name}")

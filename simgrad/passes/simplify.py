@@ -1,29 +1,19 @@
 """Local simplification: constant folding, algebraic identities, common subexpressions, dead code.
 
-A fold must give exactly what the instruction computes at its type (ir/numeric.py): integers wrap,
-f32/f16 arithmetic is left to the hardware, float min/max return the non-NaN operand (llvm.minnum),
-and identities keep the sign of zero (x + 0.0 is not x when x is -0.0)."""
+Every elementwise op with constant operands folds to exactly what the instruction computes at its type
+(ir/opdefs.py through ir/numeric.py): integers wrap, floats round at their width (f16 through f32, as
+LLVM promotes it), math functions are the very libm calls the kernel would make, float min/max return the
+non-NaN operand (llvm.minnum), integer division by zero is not folded; identities keep the sign of zero
+(x + 0.0 is not x when x is -0.0)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
 
 from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
-from simgrad.ir.numeric import minmax, wrap_int
-from simgrad.ir.ops import Op
-
-_FOLD: dict[Op, Callable[[Any, Any], Any]] = {
-    Op.ADD: lambda a, b: a + b, Op.SUB: lambda a, b: a - b, Op.MUL: lambda a, b: a * b,
-    Op.MIN: lambda a, b: minmax(min, a, b), Op.MAX: lambda a, b: minmax(max, a, b),
-    Op.BIT_AND: lambda a, b: a & b, Op.BIT_OR: lambda a, b: a | b,
-    Op.BIT_XOR: lambda a, b: a ^ b, Op.LT: lambda a, b: int(a < b), Op.LE: lambda a, b: int(a <= b),
-    Op.GT: lambda a, b: int(a > b), Op.GE: lambda a, b: int(a >= b), Op.EQ: lambda a, b: int(a == b),
-    Op.NE: lambda a, b: int(a != b),
-}
+from simgrad.ir.ops import OPS, Op
 
 
 def simplify(kernel: Kernel) -> bool:
@@ -40,17 +30,18 @@ def _const(s: Stmt):
     return s.attrs["value"] if s.op is Op.CONST else None
 
 
-def _fold(s: Stmt):
-    """A folded constant value for `s`, or None."""
-    if s.op in _FOLD and len(s.operands) == 2:
-        a, b = (_const(o) for o in s.operands)
-        if a is None or b is None:
+def fold(s: Stmt):
+    """The constant value of an elementwise statement whose operands are all constants (ir/opdefs.py: exactly
+    what the instruction computes at its type), or None."""
+    d = OPS.get(s.op)
+    if d is None or not s.operands:
+        return None
+    values = []
+    for o in s.operands:
+        if o.op is not Op.CONST:
             return None
-        if s.vtype.is_float and s.vtype.bits < 64 and s.op in (Op.ADD, Op.SUB, Op.MUL):
-            return None  # leave f32 rounding to the hardware
-        v = _FOLD[s.op](a, b)
-        return v if s.vtype.is_float else wrap_int(int(v), s.vtype)
-    return None
+        values.append(o.attrs["value"])
+    return d.fold(s.operands[0].vtype, *values)
 
 
 _IDENTITY_OPS = {Op.ADD, Op.SUB, Op.MUL, Op.CAST}
@@ -103,7 +94,7 @@ def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
         if any(id(o) in repl for o in s.operands):
             s.operands = tuple(repl.get(id(o), o) for o in s.operands)
             n += 1
-        folded = _fold(s)
+        folded = fold(s)
         if folded is not None:
             repl[id(s)] = Builder.constant(folded, s.vtype, s.loc)
             n += 1

@@ -21,21 +21,37 @@ def verify(kernel: Kernel) -> bool:
 
 
 def _block(block: Block, visible: set) -> None:
-    local = set(visible)
-    for s in block.stmts:
-        if s.op is Op.CONST:
-            raise IRVerifyError(f"internal: constant {s!r} placed in a block", s.loc)
-        for o in s.operands:
-            if o.op is Op.CONST:
-                if o.block is not None:
-                    raise IRVerifyError(f"internal: {s!r} uses constant {o!r} placed in a block", s.loc)
-            elif id(o) not in local:
-                raise IRVerifyError(f"internal: {s!r} uses {o!r} outside its scope", s.loc)
-        if s.op in O.BINARY_ARITH or s.op in O.COMPARE:
-            a, b = s.operands
-            if a.type is not b.type and s.op not in (Op.SHL, Op.SHR):
-                raise IRVerifyError(f"internal: {s!r} mixes {a.type} and {b.type}", s.loc)
-        for b in s.blocks:
-            inner = local | {id(s)} if s.op is Op.RANGE_FOR else local
-            _block(b, inner)
-        local.add(id(s))
+    """`visible` holds the values in scope; what this block defines is taken out again when it ends (one
+    set for the whole walk, so a kernel of many nested branches costs linear time)."""
+    added = []
+    try:
+        for s in block.stmts:
+            _stmt(s, visible)
+            for b in s.blocks:
+                if s.op is Op.RANGE_FOR:  # the loop index is visible only inside the body
+                    visible.add(id(s))
+                    try:
+                        _block(b, visible)
+                    finally:
+                        visible.discard(id(s))
+                else:
+                    _block(b, visible)
+            visible.add(id(s))
+            added.append(id(s))
+    finally:
+        visible.difference_update(added)
+
+
+def _stmt(s, visible: set) -> None:
+    if s.op is Op.CONST:
+        raise IRVerifyError(f"internal: constant {s!r} placed in a block", s.loc)
+    for o in s.operands:
+        if o.op is Op.CONST:
+            if o.block is not None:
+                raise IRVerifyError(f"internal: {s!r} uses constant {o!r} placed in a block", s.loc)
+        elif id(o) not in visible:
+            raise IRVerifyError(f"internal: {s!r} uses {o!r} outside its scope", s.loc)
+    if s.op in O.BINARY_ARITH or s.op in O.COMPARE:
+        a, b = s.operands
+        if a.type is not b.type and s.op not in (Op.SHL, Op.SHR):
+            raise IRVerifyError(f"internal: {s!r} mixes {a.type} and {b.type}", s.loc)

@@ -28,6 +28,3 @@ ERR_INTERRUPTED = -1
 
 # Slots the program fills identically for every kernel (Program.context_header), in slot order.
 HEADER_SLOTS = (CTX_ROOTS, CTX_ERR, CTX_RNG, CTX_PFOR, CTX_CANCEL, CTX_SPARSE)
-
-# Closure of an outlined task: slot 0 holds the context pointer, captured values follow.
-CLOSURE_CTX = 0

@@ -1,14 +1,23 @@
 """Field memory: one zeroed, 64-byte aligned buffer per SNode tree, and the table of tree roots that
 compiled kernels read their base addresses from (so compiled code holds no absolute addresses and can
-be cached on disk)."""
+be cached on disk).
+
+Trees are placed one after another in anonymous mappings (chunks), as Taichi places fields in its root
+buffer, never in Python's heap: a write a few elements past a field, which Taichi programs get away with
+(differential_evolution.py writes best_fit[max_iter]), lands in the next tree or in the chunk's spare
+zero pages instead of malloc's bookkeeping, where it crashed the process later (SIGSEGV while Python
+collected garbage). A chunk is unmapped when the program's memory is released."""
 
 from __future__ import annotations
 
 import ctypes
+import mmap
 
 import numpy as np
 
 MAX_TREES = 4096
+CHUNK = 16 << 20  # bytes of address space per mapping (pages cost memory only once touched)
+SLACK = 4096  # spare bytes always left after a chunk's last tree
 
 
 class Memory:
@@ -16,12 +25,18 @@ class Memory:
         self.roots = (ctypes.c_void_p * MAX_TREES)()
         self.roots_address = ctypes.addressof(self.roots)
         self._buffers: dict[int, np.ndarray] = {}
+        self._chunk: np.ndarray | None = None
+        self._used = 0
 
-    @staticmethod
-    def allocate(nbytes: int) -> np.ndarray:
-        raw = np.zeros(nbytes + 64, dtype=np.uint8)
-        start = (-raw.ctypes.data) % 64
-        return raw[start : start + nbytes]
+    def allocate(self, nbytes: int) -> np.ndarray:
+        size = -(-nbytes // 64) * 64
+        if self._chunk is None or self._used + size + SLACK > len(self._chunk):
+            n = max(CHUNK, -(-(size + SLACK) // mmap.PAGESIZE) * mmap.PAGESIZE)
+            self._chunk = np.frombuffer(mmap.mmap(-1, n), dtype=np.uint8)  # zeroed, page aligned
+            self._used = 0
+        buf = self._chunk[self._used : self._used + nbytes]
+        self._used += size
+        return buf
 
     def set_root(self, tree_id: int, buffer: np.ndarray) -> None:
         if tree_id >= MAX_TREES:

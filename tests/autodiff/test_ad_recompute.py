@@ -534,3 +534,46 @@ def test_activity_reaches_a_local_through_the_loop_back_edge():
     y.grad.fill(1.0)
     f.grad()
     np.testing.assert_allclose(x.grad.to_numpy(), 6 * 2 * xs, rtol=1e-14)  # y = 6 x^2
+
+
+def test_dynamic_for_inside_while_reads_an_element_pointer_shared_with_its_bound():
+    """Issue 21: CSE made `p[i]` of the loop bound and of the body one element pointer, defined in the while
+    body outside the recomputed for: the adjoint pushed that pointer on the i32 tape (LLVM: 'defined with
+    type ptr but expected i32'). The pointer is rebuilt from its indices; both forms of the choice."""
+    f64()
+    n = 4
+    x = ti.field(ti.f64, shape=n, needs_grad=True)
+    p = ti.field(ti.i32, shape=n)
+    loss = ti.field(ti.f64, shape=(), needs_grad=True)
+    x.from_numpy(np.array([0.5, -0.25, 1.5, 2.0]))
+    p.from_numpy(np.array([3, 1, 4, 2], dtype=np.int32))
+
+    @ti.kernel
+    def a():
+        for i in range(n):
+            w = 0
+            while w < 2:
+                w += 1
+                for _k in range(p[i]):
+                    loss[None] += x[i] * x[i] if p[i] > 1 else 0.0
+
+    @ti.kernel
+    def b():
+        for i in range(n):
+            w = 0
+            while w < 1:
+                w += 1
+                for k in range(p[i] + w):
+                    loss[None] += ti.select(p[i] > 2, ti.sin(x[i]) * k, 0.0)
+
+    def run(kernel):
+        loss[None] = 0.0
+        kernel()
+
+    check_grads(lambda: run(a), [x], [loss])
+    check_grads(lambda: run(b), [x], [loss])
+    loss[None] = 0.0
+    with ti.ad.Tape(loss=loss):
+        a()
+    xs, ps = x.to_numpy(), p.to_numpy()
+    np.testing.assert_allclose(x.grad.to_numpy(), np.where(ps > 1, 2 * ps * 2 * xs, 0.0), rtol=1e-12)

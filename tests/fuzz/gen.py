@@ -17,8 +17,45 @@ import random
 
 import numpy as np
 
+from simgrad import dtypes as dt
+from simgrad.ir.ops import OPS, Op
+
 T = 4  # iterations of the outer (parallel) loop
 N_INT, N_F64, N_F32 = 3, 3, 2
+
+
+# the registry's math functions (ir/opdefs.py), every one generated: a new entry needs nothing here
+MATH = [d for d in OPS.values() if d.export]
+# how kernels (and the reference, on numpy scalars) write the registry's other ops, operands kept where both
+# agree (divisors in [8, 14], shift amounts in [0, 3] so literal-only chains stay in i32, a positive
+# base); comparisons are written by cond()
+SPELLING = {
+    Op.ADD: "({a} + {b})", Op.SUB: "({a} - {b})", Op.MUL: "({a} * {b})", Op.DIV: "({a} / ({b} * {b} + 1.0))",
+    Op.FLOORDIV: "({a} // ({b} % 7 + 8))", Op.MOD: "({a} % ({b} % 7 + 8))",
+    Op.RAW_DIV: "ti.raw_div({a}, {b} % 7 + 8)", Op.RAW_MOD: "ti.raw_mod({a}, {b} % 7 + 8)",
+    Op.POW: "((abs({a}) + 0.5) ** ti.tanh({b}))", Op.MIN: "ti.min({a}, {b})", Op.MAX: "ti.max({a}, {b})",
+    Op.BIT_AND: "({a} & {b})", Op.BIT_OR: "({a} | {b})", Op.BIT_XOR: "({a} ^ {b})",
+    Op.SHL: "({a} << ({b} & 3))", Op.SHR: "({a} >> ({b} & 3))", Op.NEG: "(-{a})", Op.BIT_NOT: "(~{a})",
+    Op.LOGICAL_NOT: "ti.cast(not {a}, ti.i32)", Op.ABS: "abs({a})", Op.FLOOR: "ti.floor({a})",
+    Op.CEIL: "ti.ceil({a})", Op.ROUND: "ti.round({a})",
+}
+COMPARISON = {Op.LT: "<", Op.LE: "<=", Op.GT: ">", Op.GE: ">=", Op.EQ: "==", Op.NE: "!="}
+# the registry's ops on i32 and on f64 that expressions draw from (math functions by name, the rest as spelled)
+INT_OPS = [op for op, d in OPS.items() if op in SPELLING and d.accepts(dt.i32)]
+FLOAT_OPS = [op for op, d in OPS.items() if (op in SPELLING or d.export) and d.accepts(dt.f64) and d.result == "same"]
+
+
+def op_expr(op: Op, a: str, b: str) -> str:
+    """The registry op `op` written on the operand texts a, b."""
+    d = OPS[op]
+    return math_call(d, [a, b]) if d.export else SPELLING[op].format(a=a, b=b)
+
+
+def math_call(d, args: list[str]) -> str:
+    """A call of the math function `d` on `args`, each mapped into the entry's sample range (where it is
+    defined and smooth) by a tanh, so any value may come in."""
+    inner = [f"({(lo + hi) / 2!r} + {(hi - lo) / 2!r} * ti.tanh({a}))" for (lo, hi), a in zip(d.sample, args)]
+    return f"{'ti' if 'ti' in d.export else 'ti.math'}.{d.name}({', '.join(inner)})"
 
 
 class _Gen:
@@ -43,8 +80,10 @@ class _Gen:
         r = self.r
         if d <= 0 or r.random() < 0.25:
             return self.int_leaf()
-        k = r.randrange(11)
+        k = r.randrange(12)
         a, b = self.int_expr(d - 1), self.int_expr(d - 1)
+        if k == 11:
+            return op_expr(r.choice(INT_OPS), a, b)
         if k == 0:
             return f"({a} + {b})"
         if k == 1:
@@ -71,8 +110,10 @@ class _Gen:
         r = self.r
         if d <= 0 or r.random() < 0.25:
             return self.f64_leaf()
-        k = r.randrange(12)
+        k = r.randrange(13)
         a, b = self.f64_expr(d - 1), self.f64_expr(d - 1)
+        if k == 12:
+            return op_expr(r.choice(FLOAT_OPS), a, b)
         if k == 0:
             return f"({a} + {b})"
         if k == 1:
@@ -107,7 +148,7 @@ class _Gen:
 
     def cond(self, d: int) -> str:
         r = self.r
-        op = r.choice(["<", "<=", ">", ">=", "==", "!="])
+        op = r.choice([COMPARISON[op] for op in OPS if op in COMPARISON])
         if r.random() < 0.5:
             return f"{self.int_expr(d)} {op} {self.int_expr(d)}"
         return f"{self.f64_expr(d)} {op.replace('==', '<').replace('!=', '>')} {self.f64_expr(d)}"
@@ -229,6 +270,22 @@ class RefNamespace:
     @staticmethod
     def atomic_add(ref, v):  # tot[0] += v, with the reference's array as the place
         raise NotImplementedError  # replaced by the rewrite in reference_source
+
+
+def _reference_math(d):
+    """The registry function on f64 values: the same libm call the kernel makes."""
+    return staticmethod(lambda *v: np.float64(d.fold(dt.f64, *(float(x) for x in v))))
+
+
+def _reference_int(d):
+    return staticmethod(lambda a, b: np.int32(d.fold(dt.i32, int(a), int(b))))
+
+
+for _d in MATH + [OPS[Op.CEIL], OPS[Op.ROUND]]:
+    setattr(RefNamespace, _d.name, _reference_math(_d))
+for _d in (OPS[Op.RAW_DIV], OPS[Op.RAW_MOD]):
+    setattr(RefNamespace, _d.name, _reference_int(_d))
+RefNamespace.math = RefNamespace  # type: ignore[attr-defined]  # ti.math.<name> in the reference
 
 
 def _minmax(fn, a, b):

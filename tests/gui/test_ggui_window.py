@@ -165,15 +165,19 @@ def test_ply_writer_binary_round_trip(tmp_path):
     assert (faces["n"] == 3).all() and faces["v"].tolist() == [[0, 1, 2], [2, 3, 4]]
 
 
-def test_ply_writer_ascii_and_errors(tmp_path):
+def test_ply_writer_ascii_and_errors(tmp_path, capsys):
     w = ti.tools.PLYWriter(num_vertices=2)
     w.add_vertex_pos(np.array([0.0, 1.0]), np.array([2.0, 3.0]), np.array([4.0, 5.0]))
     w.add_vertex_channel("temperature", "double", np.array([1.5, 2.5]))
     w.export_ascii(str(tmp_path / "a.ply"))
     lines = (tmp_path / "a.ply").read_text().splitlines()
     assert lines[lines.index("end_header") + 1:] == ["0.0 2.0 4.0 1.5", "1.0 3.0 5.0 2.5"]
-    with pytest.raises(ValueError, match="unknown PLY type"):
-        w.add_vertex_channel("q", "float128", np.zeros(2))
+    # Taichi's writer prints and skips a channel of an unknown type (its export_mesh.py example relies on it)
+    w.add_vertex_channel("q", "float128", np.zeros(2))
+    w.add_face_channel("foo_key", "foo_data_type", np.zeros(2))
+    assert capsys.readouterr().out.splitlines() == ["Unknown type float128 detected, skipping this channel",
+                                                    "Unknown type foo_data_type detected, skipping this channel"]
+    assert w.vertex_channels == ["x", "y", "z", "temperature"] and w.face_channels == []
     with pytest.raises(ValueError, match="not a multiple of 2"):
         w.add_vertex_channel("q", "float", np.zeros(3))
     bad = ti.tools.PLYWriter(num_vertices=2, num_faces=1)
@@ -192,3 +196,16 @@ def test_canvas_circles_per_vertex_radius():
     img = window.get_image_buffer_as_numpy()[..., 0]
     left, right = img[:50].sum(), img[50:].sum()
     assert abs(left - np.pi * 5 ** 2) < 2 * np.pi * 5 and abs(right - np.pi * 15 ** 2) < 2 * np.pi * 15
+
+
+def test_max_frames_ends_a_ti_gui_loop_too(monkeypatch):
+    """Issue 21: oit_renderer.py's `while gui.running: gui.show()` ran headless until a harness killed it."""
+    monkeypatch.setenv("SIMGRAD_UI_MAX_FRAMES", "4")
+    gui = ti.GUI("g", (16, 16), show_gui=False)
+    frames = 0
+    while gui.running and frames < 100:
+        gui.show()
+        frames += 1
+    assert frames == 4
+    monkeypatch.delenv("SIMGRAD_UI_MAX_FRAMES")
+    assert gui.running

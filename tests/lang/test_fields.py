@@ -220,6 +220,15 @@ def test_nested_and_blocked_dense():
     assert total() == want.sum()
 
 
+def test_one_size_in_a_list_is_given_to_every_axis():
+    # Taichi's SNode::create_node broadcasts a single size (mgpcg.py: ti.root.pointer(ti.ijk, [n // 4]))
+    x = ti.field(ti.i32)
+    ti.root.dense(ti.ijk, [2]).dense(ti.ijk, (3,)).place(x)
+    assert x.shape == (6, 6, 6)
+    with pytest.raises(ti.SimgradError, match="3 axes but 2 sizes"):
+        ti.root.dense(ti.ijk, [2, 3])
+
+
 def test_copy_from_and_fill():
     a = ti.field(ti.f32, shape=(3, 3))
     b = ti.field(ti.f32, shape=(3, 3))

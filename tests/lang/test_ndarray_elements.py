@@ -63,3 +63,24 @@ def test_element_dim_2_and_a_wrong_trailing_shape():
     with pytest.raises(ValueError, match=r"Invalid value for argument y - required element type: \[Tensor \(3\) "
                                          r"f32\], but an array of shape \(4, 2\) is provided"):
         first(np.zeros((4, 2), np.float32))
+
+
+def test_element_shape_is_a_method_in_kernels():
+    # Taichi's kernel-scope ndarray (AnyArray) has element_shape() returning a list (real_func/graph/
+    # stable_fluid_graph.py: `if ti.static(vf.element_shape() == [2])`); in Python scope it is a tuple property
+    @ti.func
+    def width(a: ti.template()):
+        w = 0
+        if ti.static(a.element_shape() == [2]):
+            w = 2
+        elif ti.static(a.element_shape() == []):
+            w = 1
+        return w
+
+    @ti.kernel
+    def widths(v: ti.types.ndarray(ndim=1), s: ti.types.ndarray(ndim=1)) -> ti.i32:
+        return width(v) * 10 + width(s)
+
+    v = ti.Vector.ndarray(2, ti.f32, shape=3)
+    assert v.element_shape == (2,)
+    assert widths(v, ti.ndarray(ti.f32, shape=3)) == 21

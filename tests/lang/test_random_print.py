@@ -66,7 +66,7 @@ def test_print_f64_keeps_precision(capfd):
 
 
 def test_print_format_specs_on_64_bit_and_int_values(capfd):
-    # specs are Taichi's printf specs (tests/lang/test_print_format.py has the rest)
+    # specs are Taichi's printf specs (tests/frontend/test_print_format.py has the rest)
     @ti.kernel
     def k(a: ti.i64, b: ti.i32, c: ti.u64):
         print(f"{a:d}|{b:.2}|{c:x}")

@@ -72,6 +72,27 @@ def test_gpu_scheduling_hints_run_and_change_nothing():
     np.testing.assert_allclose(b.to_numpy(), (av[:-2] + av[1:-1] + av[2:]) / 3, rtol=1e-6)
 
 
+def test_no_activate_is_a_hint_on_the_cpu():
+    # simulation/comet.py: `ti.no_activate(x)` before a struct-for over x (Taichi: accesses of x in this kernel
+    # do not activate cells; the program promises they are active, so activating anyway computes the same)
+    x = ti.field(ti.f32)
+    ti.root.pointer(ti.i, 4).dense(ti.i, 4).place(x)
+    y = ti.field(ti.f32, 16)
+
+    @ti.kernel
+    def step():
+        ti.no_activate(x, y)
+        for i in x:
+            x[i] = x[i] * 2 + 1
+            y[i] = x[i]
+
+    x[3], x[9] = 1.0, 2.0
+    step()
+    assert x[3] == 3.0 and x[9] == 5.0 and y.to_numpy().sum() == 3 + 5 + 6 * 1
+    with pytest.raises(TypeError, match="no_activate expects fields"):
+        ti.no_activate(3)
+
+
 # Taichi 1.7.4's public names (dir(taichi) without underscores), listed here so the test needs no taichi
 TAICHI_1_7_4_NAMES = """ArgPack BitpackedFields CRITICAL DEBUG DeviceCapability ERROR Field FieldsBuilder Format GUI
 INFO Layout Matrix MatrixField MatrixNdarray Mesh MeshInstance Ndarray SNode ScalarField ScalarNdarray Struct

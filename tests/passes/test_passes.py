@@ -1,6 +1,7 @@
 """Each pass on IR built with the Builder: what it must do (asserted) and its whole output (golden text,
 tests/passes/golden; rewrite with `pytest tests/passes --update-golden` and review the diff)."""
 
+import numpy as np
 import pytest
 from irkit import atomic_add, load, new_kernel, parallel_for, ptr, serial_for, store
 
@@ -35,7 +36,7 @@ def test_simplify_folds_identities_cse_and_dead_code(golden):
     same = b.binary(Op.MUL, b.binary(Op.ADD, i, b.const(0, dt.i32)), b.const(1, dt.i32))  # i
     p, q = b.binary(Op.MUL, same, five), b.binary(Op.MUL, same, five)  # one of them after CSE
     b.binary(Op.MUL, x, x)  # unused: removed
-    f32_sum = b.binary(Op.ADD, b.const(0.1, dt.f32), b.const(0.2, dt.f32))  # f32 rounding: not folded
+    f32_sum = b.binary(Op.ADD, b.const(0.1, dt.f32), b.const(0.2, dt.f32))  # folds, rounded to f32
     f64_sum = b.binary(Op.ADD, b.const(0.5, dt.f64), b.const(0.25, dt.f64))  # folds to 0.75
     b.emit(Op.RET_STORE, None, (b.binary(Op.ADD, p, q),), {"slot": 0})
     b.emit(Op.RET_STORE, None, (f32_sum,), {"slot": 1})
@@ -44,7 +45,7 @@ def test_simplify_folds_identities_cse_and_dead_code(golden):
     muls = [s for s in walk(k.body) if s.op is Op.MUL]
     assert len(muls) == 1 and muls[0].operands[0] is i and muls[0].operands[1].attrs["value"] == 5
     rets = [s.operands[0] for s in k.body.stmts if s.op is Op.RET_STORE]
-    assert rets[1] is f32_sum and f32_sum.op is Op.ADD
+    assert rets[1].op is Op.CONST and rets[1].attrs["value"] == float(np.float32(0.1) + np.float32(0.2))
     assert rets[2].op is Op.CONST and rets[2].attrs["value"] == 0.75 and f64_sum not in list(walk(k.body))
     golden.check("simplify.txt", text)
 
@@ -104,6 +105,32 @@ def test_verify_reports_scope_and_type_errors():
     k, b = new_kernel("bad_types")
     b.emit(Op.ADD, dt.i32, (b.const(1, dt.i32), b.const(1.0, dt.f32)))  # emit itself does not check
     with pytest.raises(IRVerifyError, match="mixes i32 and f32"):
+        verify(k)
+
+
+def test_verify_runs_without_SIMGRAD_VERIFY_and_sees_sibling_blocks(monkeypatch):
+    """The pipeline verifies the frontend's output even outside tests (issue 21: a value computed in a loop
+    used after it reached LLVM's verifier, or folded into a silently wrong constant). A value of one
+    branch is not visible in the next branch either."""
+    from simgrad.passes.manager import run_pipeline
+
+    monkeypatch.setenv("SIMGRAD_VERIFY", "0")
+    k, b = new_kernel("bad_scope")
+    loop = serial_for(b, b.const(0, dt.i32), b.const(4, dt.i32))
+    with b.inside(loop.blocks[0]):
+        inner = b.binary(Op.MUL, b.const(3, dt.i32), b.const(2, dt.i32))
+    b.emit(Op.RET_STORE, None, (inner,), {"slot": 0})
+    with pytest.raises(IRVerifyError, match="outside its scope"):
+        run_pipeline(k)
+
+    k, b = new_kernel("sibling")
+    cond = b.binary(Op.LT, b.const(0, dt.i32), b.const(1, dt.i32))
+    branch = b.emit(Op.IF, None, (cond,), {}, nblocks=2)
+    with b.inside(branch.blocks[0]):
+        then = b.binary(Op.MUL, cond, cond)
+    with b.inside(branch.blocks[1]):
+        b.emit(Op.RET_STORE, None, (then,), {"slot": 0})
+    with pytest.raises(IRVerifyError, match="outside its scope"):
         verify(k)
 
 
@@ -226,7 +253,8 @@ def _access_kernel():
 
 
 def test_lower_access_expands_fields_into_offsets(golden):
-    from simgrad.passes.lower_access import indices_of, lower_access
+    from simgrad.ir.nodes import indices_of
+    from simgrad.passes.lower_access import lower_access
 
     k, loop = _access_kernel()
     parallel_strategy(k)

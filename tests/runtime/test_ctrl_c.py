@@ -1,5 +1,6 @@
 """Ctrl-C stops a running kernel within a second and raises KeyboardInterrupt: a native SIGINT handler sets
-the cancel flag (then chains to Python's), while loops and the pool's chunk loop look at it, and the
+the cancel flag (then chains to Python's), while loops, long or unbounded serial for loops (every 2**16
+iterations) and the pool's chunk loop look at it, and the
 program stays usable. Run in a child process that signals itself."""
 
 from __future__ import annotations
@@ -38,13 +39,20 @@ SCRIPT = textwrap.dedent("""
             x[i % 4] += 1
 
     @ti.kernel
+    def inner():
+        for i in range(4):  # each element's time goes into a long serial loop
+            for j in range(2000000000):
+                x[i] = (x[i] * 31 + j) % 1000003
+
+    @ti.kernel
     def count() -> ti.i32:
         s = 0
         for i in range(100):
             s += 1
         return s
 
-    kernel = {"while": endless, "serial": serial_endless, "range": lambda: huge(10 ** 13)}[sys.argv[1]]
+    kernel = {"while": endless, "serial": serial_endless, "range": lambda: huge(10 ** 13),
+              "inner": inner}[sys.argv[1]]
     threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
     t = time.perf_counter()
     try:
@@ -57,7 +65,7 @@ SCRIPT = textwrap.dedent("""
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("kind", ["while", "serial", "range"])
+@pytest.mark.parametrize("kind", ["while", "serial", "range", "inner"])
 def test_ctrl_c_stops_a_running_kernel(tmp_path, kind, threads):
     script = tmp_path / "endless.py"
     script.write_text(SCRIPT)

@@ -2,6 +2,7 @@
 (read and assigned), ti.grouped(ti.ndrange(...)); each against numpy / plain Python."""
 
 import numpy as np
+import pytest
 
 import simgrad as ti
 
@@ -103,3 +104,44 @@ def test_forms_taichi_refuses_run_with_python_semantics():
     np.testing.assert_array_equal(a.to_numpy(), [0, 0, 0, 7, 0, 7, 0, 7, 0, 0])
     assert static_list() == 8
     assert reassign() == 22
+
+
+def test_list_elements_are_variables_assigned_under_runtime_control_flow():
+    # Taichi's expr_init makes each element of a list bound in a kernel a local variable, so `v[1] = v[2]`
+    # under a run-time `if` happens only where the condition holds (implicit_fem.py swaps triangle corners so)
+    V = ti.Vector.field(4, ti.i32, shape=3)
+    out = ti.field(ti.i32, shape=(3, 3))
+    flag = ti.field(ti.f32, shape=3)
+
+    @ti.kernel
+    def k():
+        for c in V:
+            verts = [V[c][j] for j in range(3)]
+            if flag[c] < 0:
+                tmp = verts[1]
+                verts[1] = verts[2]
+                verts[2] = tmp
+            a, b, d = verts
+            out[c, 0], out[c, 1], out[c, 2] = a, b, d
+
+    V.from_numpy(np.array([[10, 11, 12, 13], [20, 21, 22, 23], [30, 31, 32, 33]], np.int32))
+    flag.from_numpy(np.array([1.0, -1.0, 0.0], np.float32))
+    k()
+    assert out.to_numpy().tolist() == [[10, 11, 12], [20, 22, 21], [30, 31, 32]]
+    assert V[1][1] == 21  # the field itself is untouched
+
+
+def test_python_values_in_a_list_assigned_under_runtime_control_flow_are_an_error():
+    x = ti.field(ti.i32, shape=2)
+
+    @ti.kernel
+    def k():
+        counts = [0, 0]
+        for i in x:
+            if x[i] > 0:
+                counts[0] = x[i]
+        x[0] = counts[0]
+
+    with pytest.raises(ti.SimgradSyntaxError, match="run-time control flow") as e:
+        k()
+    assert "counts[0] = x[i]" in str(e.value)

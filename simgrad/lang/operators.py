@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import builtins
 import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
 from simgrad.ir import context, numeric
-from simgrad.ir.ops import Op
+from simgrad.ir.opdefs import OpDef
+from simgrad.ir.ops import OPS, Op
 from simgrad.lang.expr import Expr
 
 _PY_NUM = (int, float, bool)
@@ -124,12 +127,6 @@ def _binary(pyfn, irfn):
     return op
 
 
-def _c_div(a: int, b: int) -> int:
-    """C division (toward zero), exact for any Python ints (int(a / b) rounds through a float)."""
-    q = builtins.abs(a) // builtins.abs(b)
-    return q if (a < 0) == (b < 0) else -q
-
-
 def _py_div(a, b):
     return a / b
 
@@ -214,7 +211,7 @@ mul = _binary(lambda a, b: a * b, lambda a, b: _emit2(Op.MUL, a, b))
 truediv = _binary(_py_div, _ir_truediv)
 floordiv = _binary(lambda a, b: a // b, _ir_floordiv)
 mod = _binary(lambda a, b: a % b, _ir_mod)
-raw_div = _binary(lambda a, b: _c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
+raw_div = _binary(lambda a, b: numeric.c_div(a, b) if isinstance(a, int) and isinstance(b, int) else a / b,
                   lambda a, b: _emit2(Op.RAW_DIV if not a.dtype.is_float else Op.DIV, a, b))
 raw_mod = _binary(lambda a, b: math.fmod(a, b) if isinstance(a, float) or isinstance(b, float)
                   else int(math.fmod(a, b)), lambda a, b: _emit2(Op.RAW_MOD, a, b))
@@ -318,18 +315,42 @@ def logical_or(a, b):
     return bit_or(ne(a, 0), ne(b, 0))
 
 
-def _math(op: Op, pyfn, keep_int: bool = False):
-    def f(x):
-        if is_matrix(x):
-            return _elementwise(f, x)
-        if not isinstance(x, Expr):
-            return pyfn(x)
-        if not x.dtype.is_float and not keep_int:
-            x = cast_expr(x, dt.Defaults.fp)
-        return _emit1(op, x)
+def _math_function(d: OpDef):
+    """ti.<name> / ti.math.<name> of a registry math function (ir/opdefs.py): elementwise on matrices, the
+    Python value on Python numbers, else the op on the operands promoted together (integers to default_fp)."""
 
-    f.__name__ = op.name.lower()
+    def f(*args):
+        if len(args) != d.arity:
+            raise SimgradTypeError(f"{d.name}() takes {d.arity} argument{'s' if d.arity > 1 else ''}, got "
+                                   f"{len(args)}", context.current_loc())
+        if builtins.any(is_matrix(a) for a in args):
+            return _elementwise(f, *args)
+        if not builtins.any(isinstance(a, Expr) for a in args):
+            assert d.python is not None
+            return d.python(*args)
+        xs = list(_pair(*args)) if d.arity == 2 else [to_expr(args[0])]
+        if not xs[0].dtype.is_float:
+            xs = [cast_expr(x, dt.Defaults.fp) for x in xs]
+        b = context.builder()
+        return Expr(b.binary(d.op, xs[0].stmt, xs[1].stmt) if d.arity == 2 else b.unary(d.op, xs[0].stmt))
+
+    f.__name__ = f.__qualname__ = d.name  # the kernel cache names library functions by qualified name
     return f
+
+
+# every math function of the registry, by name (simgrad/__init__.py and lang/mathlib.py export them)
+MATH = {d.name: _math_function(d) for d in OPS.values() if d.export}
+globals().update(MATH)
+
+
+def math_functions(namespace: str) -> dict[str, Callable[..., Any]]:
+    """The registry's math functions that `namespace` ("ti": ti.*, "math": ti.math) exports."""
+    return {d.name: MATH[d.name] for d in OPS.values() if namespace in d.export}
+
+
+if TYPE_CHECKING:
+    def __getattr__(name: str) -> Callable[..., Any]:
+        """The functions of MATH (ops.sin, ops.atan2, ...) for the type checker."""
 
 
 def _py_round(x):
@@ -337,18 +358,6 @@ def _py_round(x):
     if not isinstance(x, float):
         return x
     return float(math.copysign(math.floor(abs(x) + 0.5), x))
-
-
-sqrt = _math(Op.SQRT, math.sqrt)
-sin = _math(Op.SIN, math.sin)
-cos = _math(Op.COS, math.cos)
-tan = _math(Op.TAN, math.tan)
-asin = _math(Op.ASIN, math.asin)
-acos = _math(Op.ACOS, math.acos)
-exp = _math(Op.EXP, math.exp)
-log = _math(Op.LOG, math.log)
-tanh = _math(Op.TANH, math.tanh)
-rsqrt = _math(Op.RSQRT, lambda x: 1.0 / math.sqrt(x))
 
 
 def _rounding(op: Op, pyfn):
@@ -370,17 +379,6 @@ def _rounding(op: Op, pyfn):
 floor = _rounding(Op.FLOOR, math.floor)
 ceil = _rounding(Op.CEIL, math.ceil)
 round = _rounding(Op.ROUND, _py_round)  # noqa: A001
-
-
-def atan2(y, x):
-    if is_matrix(y) or is_matrix(x):
-        return _elementwise(atan2, y, x)
-    if not isinstance(y, Expr) and not isinstance(x, Expr):
-        return math.atan2(y, x)
-    y, x = _pair(y, x)
-    if not y.dtype.is_float:
-        y, x = cast_expr(y, dt.Defaults.fp), cast_expr(x, dt.Defaults.fp)
-    return _emit2(Op.ATAN2, y, x)
 
 
 def select(cond, a, b):
@@ -427,8 +425,8 @@ def randn(dtype=None):
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
     u1 = random(t)
     u2 = random(t)
-    r = sqrt(mul(-2.0, log(sub(1.0, u1))))
-    return mul(r, cos(mul(2.0 * math.pi, u2)))
+    r = MATH["sqrt"](mul(-2.0, MATH["log"](sub(1.0, u1))))
+    return mul(r, MATH["cos"](mul(2.0 * math.pi, u2)))
 
 
 def zero(x):
@@ -475,3 +473,6 @@ def global_thread_idx():
     """The index of the thread running this iteration (the pool's thread id on the CPU; 0 outside a
     parallel loop)."""
     return Expr(context.builder().emit(Op.THREAD_INDEX, dt.i32))
+
+
+dt.cast_hook = cast  # `ti.f32(x)` (dtypes.DataType.__call__) casts through lang

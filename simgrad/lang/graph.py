@@ -1,0 +1,126 @@
+"""``ti.graph``: Taichi's compute graphs, replayed in Python.
+
+Taichi records kernel launches over symbolic arguments (``Arg``) and runs the recorded list with concrete
+ndarrays and scalars bound by name; its point is AOT deployment, which simgrad has not. Here a compiled
+graph is that list: ``run(args)`` checks the bound values against their ``Arg`` declarations and calls the
+kernels in order, so a program written against the graph API computes what its eager version computes.
+Textures have no simgrad counterpart: their kinds are located errors.
+"""
+
+from __future__ import annotations
+
+import enum
+
+from simgrad.errors import SimgradError, SimgradNotSupportedError, caller_loc
+
+__all__ = ["Arg", "ArgKind", "Graph", "GraphBuilder"]
+
+
+class ArgKind(enum.Enum):
+    SCALAR = 0
+    NDARRAY = 1
+    MATRIX = 2
+    TEXTURE = 3
+    RWTEXTURE = 4
+
+
+_POSITIONAL = ("tag", "name", "dtype", "ndim", "field_dim", "element_shape")
+
+
+class Arg:
+    """A named placeholder for a kernel argument: ``Arg(ArgKind.NDARRAY, "x", dtype=ti.math.vec2, ndim=1)``."""
+
+    def __init__(self, *args, **kwargs):
+        if len(args) > len(_POSITIONAL):
+            raise SimgradError(f"ti.graph.Arg: unexpected {len(args)}th positional argument", caller_loc())
+        kwargs.update(zip(_POSITIONAL, args))
+        tag, name = kwargs.pop("tag", None), kwargs.pop("name", None)
+        if not isinstance(tag, ArgKind):
+            raise SimgradError(f"ti.graph.Arg: tag must be a ti.graph.ArgKind, got {tag!r}", caller_loc())
+        if tag in (ArgKind.TEXTURE, ArgKind.RWTEXTURE):
+            raise SimgradNotSupportedError("ti.graph.Arg: textures are a GPU rendering feature simgrad does not have",
+                                           caller_loc())
+        if not isinstance(name, str):
+            raise SimgradError(f"ti.graph.Arg: name must be a string, got {name!r}", caller_loc())
+        if "field_dim" in kwargs:  # Taichi's deprecated spelling of ndim
+            kwargs["ndim"] = kwargs.pop("field_dim")
+        allowed = {ArgKind.SCALAR: {"dtype"}, ArgKind.MATRIX: {"dtype"}, ArgKind.NDARRAY: {"dtype", "ndim"}}[tag]
+        extra = sorted(set(kwargs) - allowed)
+        if extra:
+            raise SimgradError(f"ti.graph.Arg({tag.name}): unexpected arguments {extra}", caller_loc())
+        dtype = kwargs.get("dtype")
+        shape = tuple(getattr(dtype, "shape", ()) or ())  # vector / matrix element types
+        if tag == ArgKind.SCALAR and shape:
+            raise SimgradError(f"ti.graph.Arg: a SCALAR needs a scalar type, got {dtype}", caller_loc())
+        if tag == ArgKind.MATRIX and not shape:
+            raise SimgradError(f"ti.graph.Arg: a MATRIX needs a vector or matrix type, got {dtype}", caller_loc())
+        self.tag, self.name, self.dtype = tag, name, dtype
+        self.ndim = int(kwargs.get("ndim", 0))
+        self.element_shape = shape
+
+    def check(self, value, loc):
+        """Raise a located error where ``value`` cannot stand for this argument."""
+        if self.tag != ArgKind.NDARRAY:
+            return
+        arr_shape = getattr(value, "shape", None)
+        if arr_shape is None or not hasattr(value, "element_shape"):
+            raise SimgradError(f"graph argument {self.name!r}: expected a ti.ndarray, got {type(value).__name__}", loc)
+        if len(arr_shape) != self.ndim:
+            raise SimgradError(f"graph argument {self.name!r}: expected {self.ndim} dimensions, got an ndarray of "
+                               f"shape {tuple(arr_shape)}", loc)
+        if tuple(value.element_shape) != self.element_shape:
+            raise SimgradError(f"graph argument {self.name!r}: expected elements of shape {self.element_shape}, got "
+                               f"{tuple(value.element_shape)}", loc)
+
+    def __repr__(self):
+        return f"Arg({self.tag.name}, {self.name!r})"
+
+
+class Sequential:
+    """An ordered list of launches that a builder appends, possibly several times."""
+
+    def __init__(self):
+        self.launches: list = []
+
+    def dispatch(self, kernel_fn, *args):
+        self.launches.append((kernel_fn, args))
+
+
+class GraphBuilder:
+    def __init__(self):
+        self._nodes: list = []  # (kernel, args) launches and Sequentials, in order
+
+    def dispatch(self, kernel_fn, *args):
+        self._nodes.append((kernel_fn, args))
+
+    def create_sequential(self):
+        return Sequential()
+
+    def append(self, node):
+        if not isinstance(node, Sequential):
+            raise SimgradError("GraphBuilder.append takes what create_sequential() made", caller_loc())
+        self._nodes.append(node)
+
+    def compile(self):
+        launches = []
+        for node in self._nodes:
+            launches += node.launches if isinstance(node, Sequential) else [node]
+        return Graph(launches)
+
+
+class Graph:
+    """What ``GraphBuilder.compile()`` gives: ``run({name: value})`` launches the kernels in order."""
+
+    def __init__(self, launches):
+        self.launches = list(launches)
+        self.args = {a.name: a for _, args in self.launches for a in args if isinstance(a, Arg)}
+
+    def run(self, args):
+        loc = caller_loc()
+        missing = sorted(set(self.args) - set(args))
+        if missing:
+            raise SimgradError(f"graph run: no value for the arguments {missing}", loc)
+        for name, arg in self.args.items():
+            arg.check(args[name], loc)
+        for kernel, kargs in self.launches:
+            kernel(*(args[a.name] if isinstance(a, Arg) else a for a in kargs))

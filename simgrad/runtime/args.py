@@ -1,0 +1,249 @@
+"""How the arguments of one kernel instantiation reach its context buffer: a *packing* per parameter (the
+kind of parameter picks it, compiler/params.py) writes the launcher lines that store the argument's words,
+and the run-time checks those lines call. The launcher (runtime/launch.py) only concatenates what the
+packings give it, so a new argument kind needs no edit there; packings are pickled with the kernel cache's
+metadata (plain attributes, classes importable by name).
+
+A packing has `name` (the launch function's parameter), `launch_code(gen, src)` (source lines; `src` is the
+Python expression holding the argument) and `slot_values(value)` (the context slot -> value of the scalar
+words it fills from `value`, for the Tape's slice watching; {} when it has none)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simgrad import dtypes as dt
+from simgrad.errors import SimgradRuntimeError, SimgradTypeError, caller_loc
+from simgrad.runtime.abi import CTX_ARGS
+
+
+class LaunchCode:
+    """What a packing writes launcher lines with: the generated function's globals (`env`), the typed views of
+    the context buffer, the kernel's name (for messages) and the lines that run after the native call."""
+
+    def __init__(self, kernel_name: str, env: dict, views: dict):
+        self.kernel_name = kernel_name
+        self.env = env
+        self.views = views
+        self.after: list[str] = []
+
+    @staticmethod
+    def word(slot: int) -> int:
+        """The index in the launcher's `_buf` (the context as 64-bit words) of argument slot `slot`."""
+        return CTX_ARGS + slot
+
+    def view(self, t: dt.DataType) -> tuple[str, int]:
+        """(name in the launcher, words per 8-byte slot) of the buffer's view as type `t`."""
+        self.env[f"_v_{t.name}"] = self.views[t.name]
+        return f"_v_{t.name}", 8 // t.nbytes
+
+
+class Packing:
+    """A parameter that fills no context slot (a ti.template(): its value was compiled in)."""
+
+    def __init__(self, name: str, path: tuple = ()):
+        self.name = name
+        # a leaf of a struct argument (or of any object): its value is `arg.path[0].path[1]...`
+        self.path = path
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        return []
+
+    def slot_values(self, value) -> dict:
+        return {}
+
+    def _leaf(self, gen: LaunchCode, src: str) -> tuple[str, list[str]]:
+        """(local name, lines) of the value this packing reads: `src` itself, or its member at `path`."""
+        if not self.path:
+            return src, []
+        gen.env["_member"] = member
+        local = f"{src}__{'__'.join(self.path)}"
+        return local, [f"{local} = _member({src}, {self.path!r})"]
+
+
+class ScalarPacking(Packing):
+    """One scalar in one slot, checked as Taichi checks it (no None/str/array for a float, no float of any
+    kind for an integer)."""
+
+    def __init__(self, name: str, slot: int, dtype: dt.DataType, path: tuple = ()):
+        super().__init__(name, path)
+        self.slot, self.dtype = slot, dtype
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        v, lines = self._leaf(gen, src)
+        t = self.dtype
+        view, scale = gen.view(t)
+        kernel = gen.kernel_name
+        # exact Python numbers pass with one class test; anything else is checked
+        exact, check = ("float", "_check_float") if t.is_float else ("int", "_check_int")
+        gen.env[check] = check_float if t.is_float else check_int
+        gen.env["_bad"] = bad_arg
+        return lines + [f"if {v}.__class__ is not {exact}: {check}({kernel!r}, {v!r}, {v}, {t.name!r})",
+                        f"try: {view}[{gen.word(self.slot) * scale}] = {v}",
+                        f"except (TypeError, ValueError, OverflowError): _bad({kernel!r}, {v!r}, {v}, {t.name!r})"]
+
+    def slot_values(self, value) -> dict:
+        return {self.slot: member(value, self.path)}
+
+
+class MatrixPacking(Packing):
+    """A vector or matrix argument: its `count` entries, row-major, in consecutive slots."""
+
+    def __init__(self, name: str, slot: int, dtype: dt.DataType, count: int, path: tuple = ()):
+        super().__init__(name, path)
+        self.slot, self.dtype, self.count = slot, dtype, count
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        v, lines = self._leaf(gen, src)
+        t = self.dtype
+        view, scale = gen.view(t)
+        gen.env["_np_flat"] = flat_matrix if t.is_float else flat_matrix_int
+        lines.append(f"_m = _np_flat({v}, {self.count}, {gen.kernel_name!r}, {v!r})")
+        lines += [f"{view}[{gen.word(self.slot + k) * scale}] = _m[{k}]" for k in range(self.count)]
+        return lines
+
+
+class StructPacking(Packing):
+    """A struct argument: its leaves (scalar and matrix packings with their member paths), in order."""
+
+    def __init__(self, name: str, leaves: list[Packing]):
+        super().__init__(name)
+        self.leaves = leaves
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        return [ln for leaf in self.leaves for ln in leaf.launch_code(gen, src)]
+
+    def slot_values(self, value) -> dict:
+        return {k: v for leaf in self.leaves for k, v in leaf.slot_values(value).items()}
+
+
+class ArrayPacking(Packing):
+    """An ndarray argument by reference: its base pointer, one extent per array axis (the element axes are
+    compiled in), and its gradient's base pointer when the kernel sees one (`grad_slot`, else -1)."""
+
+    def __init__(self, name: str, slot: int, dtype: dt.DataType, ndim: int, ndim_total: int, grad_slot: int = -1):
+        super().__init__(name)
+        self.slot, self.dtype, self.ndim, self.ndim_total, self.grad_slot = slot, dtype, ndim, ndim_total, grad_slot
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        kernel = gen.kernel_name
+        gen.env["_array"] = array_info
+        lines = [f"_p, _s = _array({src}, {kernel!r}, {self.name!r}, {self.ndim_total})",
+                 f"_buf[{gen.word(self.slot)}] = _p"]
+        lines += [f"_buf[{gen.word(self.slot + 1 + d)}] = _s[{d}]" for d in range(self.ndim)]
+        if self.grad_slot >= 0:
+            gen.env["_grad_of"] = grad_info
+            lines.append(f"_buf[{gen.word(self.grad_slot)}] = _grad_of({src}, _s, {kernel!r}, {self.name!r}, "
+                         f"{self.ndim_total})")
+        return lines
+
+
+class BuilderPacking(Packing):
+    """A ti.linalg.SparseMatrixBuilder: (pointer, extent) of its triplet count, rows, columns and values in 8
+    slots; after the call, a count past the capacity is an error (the excess was never stored)."""
+
+    def __init__(self, name: str, slot: int, dtype: dt.DataType):
+        super().__init__(name)
+        self.slot, self.dtype = slot, dtype
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        kernel = gen.kernel_name
+        gen.env["_builder"], gen.env["_builder_done"] = builder_info, builder_done
+        gen.after.append(f"_builder_done({src}, {kernel!r}, {self.name!r})")
+        return [f"_buf[{gen.word(self.slot)}:{gen.word(self.slot + 8)}] = _builder({src}, {kernel!r}, "
+                f"{self.name!r}, {self.dtype.name!r})"]
+
+
+# -- run-time checks and conversions the launchers call ---------------------------------------------------
+def bad_arg(kernel, param, value, type_name):
+    if isinstance(value, int):
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' = {value} is out of range for {type_name}",
+                               caller_loc())
+    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a {type_name} scalar, got "
+                           f"{type(value).__name__}", caller_loc())
+
+
+def check_float(kernel, param, value, type_name):
+    if not isinstance(value, (int, float, np.integer, np.floating)):  # bool is an int
+        bad_arg(kernel, param, value, type_name)
+
+
+def check_int(kernel, param, value, type_name):
+    if not isinstance(value, (int, np.integer)):
+        bad_arg(kernel, param, value, type_name)
+
+
+def flat_matrix(value, count, kernel, param):
+    a = np.asarray(value.to_numpy() if hasattr(value, "to_numpy") else value).reshape(-1)
+    if a.size != count:
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects {count} entries, got {a.size}")
+    return a.tolist()
+
+
+def flat_matrix_int(value, count, kernel, param):
+    vals = flat_matrix(value, count, kernel, param)
+    if any(isinstance(v, float) for v in vals):
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects integer entries, got floats")
+    return vals
+
+
+def member(value, path):
+    """value.a.b for a struct argument's leaf (struct values, struct field elements and dicts)."""
+    for name in path:
+        value = value[name] if isinstance(value, dict) else getattr(value, name)
+    return value
+
+
+def grad_info(a, shape, kernel, param, ndim):
+    """The base address of the gradient of ndarray argument `a` (a ti.ndarray's .grad, a tensor's .grad, made
+    zero when the tensor has none yet, as Taichi does)."""
+    grad = getattr(a, "grad", None)
+    if grad is None and hasattr(a, "data_ptr") and getattr(a, "requires_grad", False):
+        import torch
+
+        grad = a.grad = torch.zeros_like(a)
+    if grad is None:
+        raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' has no gradient")
+    ptr, gshape = array_info(grad, kernel, param + ".grad", ndim)
+    if tuple(gshape) != tuple(shape):
+        raise SimgradTypeError(f"kernel {kernel}: the gradient of '{param}' has shape {tuple(gshape)}, "
+                               f"its array {tuple(shape)}")
+    return ptr
+
+
+def array_info(a, kernel, param, ndim):
+    """(base address, shape) of an ndarray argument: a numpy array, a CPU torch tensor or a ti.ndarray."""
+    if isinstance(a, np.ndarray):
+        if not a.flags.c_contiguous:
+            raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' must be C-contiguous "
+                                   "(use np.ascontiguousarray)")
+        return a.ctypes.data, a.shape
+    if hasattr(a, "data_ptr") and hasattr(a, "is_contiguous"):  # a torch tensor
+        if a.device.type != "cpu" or not a.is_contiguous():
+            raise SimgradTypeError(f"kernel {kernel}: tensor argument '{param}' must be a contiguous CPU tensor")
+        return a.data_ptr(), tuple(a.shape)
+    if hasattr(a, "_ndarray"):
+        return array_info(a._ndarray, kernel, param, ndim)
+    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")
+
+
+def builder_info(a, kernel, param, type_name):
+    """The context slots of a sparse matrix builder argument: (pointer, extent) of its triplet count, rows,
+    columns and values (lang: simgrad/linalg/sparse_matrix.py TripletStore)."""
+    t = getattr(a, "_triplets", None)
+    if t is None or t.dtype.name != type_name:
+        got = type(a).__name__ if t is None else f"a builder of {t.dtype.name}"
+        raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a ti.linalg.SparseMatrixBuilder of "
+                               f"{type_name}, got {got}", caller_loc())
+    cap = t.capacity
+    return (t.count.ctypes.data, 1, t.rows.ctypes.data, cap, t.cols.ctypes.data, cap, t.values.ctypes.data, cap)
+
+
+def builder_done(a, kernel, param):
+    """After the launch: a builder whose count passed its capacity dropped the triplets past it; say so."""
+    t = a._triplets
+    n = int(t.count[0])
+    if n > t.capacity:
+        raise SimgradRuntimeError(f"kernel {kernel}: sparse matrix builder '{param}' was given {n} triplets, more "
+                                  f"than its max_num_triplets={t.capacity}; the {n - t.capacity} past it were not "
+                                  "stored (create the builder with a larger max_num_triplets)", caller_loc())

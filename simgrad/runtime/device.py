@@ -1,0 +1,228 @@
+"""The device interface of arch=cuda (issue 22): memory, copies, modules, launches, events, errors.
+
+Two implementations of one small interface: `CudaDriver` on the CUDA driver API through cuda-python
+(`cuda.bindings.driver`, imported only when a GPU is asked for: the optional extra `simgrad[cuda]`), and
+`HostDriver`, the simulated GPU (SIMGRAD_GPU_SIM=1): host memory, and a launch runs the grid's blocks x
+threads on the CPU, each thread with its own special registers `{tid, ntid, ctaid, nctaid}` (the layout
+codegen/nvptx.py reads with `sim=True`). Driver errors become located Python errors (`DeviceError` and its
+subclasses, at the user's line).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from simgrad.errors import SimgradError, caller_loc
+
+# The launcher of real-GPU kernels (device memory for SNode trees, the context copy, result read-back) is the
+# next stage of issue 22: until it exists a present GPU is not used, ti.init(arch=ti.cuda) falls back (or
+# runs on the simulated GPU with SIMGRAD_GPU_SIM=1).
+CUDA_RUNTIME_READY = False
+
+
+class DeviceError(SimgradError, RuntimeError):
+    """A failure the device reported (a bad launch, a faulting kernel), at the user's line."""
+
+
+class DeviceMemoryError(DeviceError, MemoryError):
+    """The device is out of memory."""
+
+
+def sim_requested() -> bool:
+    return os.environ.get("SIMGRAD_GPU_SIM", "") not in ("", "0")
+
+
+def cuda_available() -> bool:
+    """A CUDA driver that initialises and at least one device (cuda-python installed)."""
+    try:
+        from cuda.bindings import driver as cu  # type: ignore[import-not-found]
+    except Exception:
+        return False
+    try:
+        (err,) = cu.cuInit(0)
+        if int(err) != 0:
+            return False
+        err, n = cu.cuDeviceGetCount()
+        return int(err) == 0 and n > 0
+    except Exception:
+        return False
+
+
+class Device:
+    """What the GPU runtime needs of a device. Pointers are ints (device addresses)."""
+
+    name = "device"
+
+    def alloc(self, nbytes: int) -> int:
+        raise NotImplementedError
+
+    def free(self, ptr: int) -> None:
+        raise NotImplementedError
+
+    def to_device(self, dst: int, src: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def to_host(self, dst: np.ndarray, src: int) -> None:
+        raise NotImplementedError
+
+    def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
+        """Load a module (PTX text on the GPU, native function addresses on the host): symbol -> function."""
+        raise NotImplementedError
+
+    def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
+        """Run `fn(ctx)` on grid x block threads (asynchronously on the GPU)."""
+        raise NotImplementedError
+
+    def synchronize(self) -> None:
+        raise NotImplementedError
+
+    def event(self) -> Any:
+        """A timing event recorded now (in stream order)."""
+        raise NotImplementedError
+
+    def elapsed_ms(self, start: Any, end: Any) -> float:
+        raise NotImplementedError
+
+
+_SIM_FN = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
+
+
+class HostDriver(Device):
+    """The simulated GPU: host memory; a launch runs blocks one after another and, in a block, threads one
+    after another (the generated sim entry of codegen/nvptx.py does the same natively, blocks on the pool)."""
+
+    name = "simulated GPU (host)"
+
+    def __init__(self) -> None:
+        self._blocks: dict[int, np.ndarray] = {}
+
+    def alloc(self, nbytes: int) -> int:
+        buf = np.zeros(max(int(nbytes), 1) + 64, dtype=np.uint8)
+        ptr = (buf.ctypes.data + 63) & ~63
+        self._blocks[ptr] = buf
+        return ptr
+
+    def free(self, ptr: int) -> None:
+        if self._blocks.pop(ptr, None) is None:
+            raise DeviceError(f"free of an address this device did not allocate: {ptr:#x}", caller_loc())
+
+    def to_device(self, dst: int, src: np.ndarray) -> None:
+        src = np.ascontiguousarray(src)
+        ctypes.memmove(dst, src.ctypes.data, src.nbytes)
+
+    def to_host(self, dst: np.ndarray, src: int) -> None:
+        if not dst.flags.c_contiguous:
+            raise ValueError("to_host needs a C-contiguous array")
+        ctypes.memmove(dst.ctypes.data, src, dst.nbytes)
+
+    def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
+        """`image` maps symbols to native addresses of `void fn(ptr ctx, ptr sreg)` (already linked)."""
+        missing = [s for s in symbols if not image.get(s)]
+        if missing:
+            raise DeviceError(f"module has no functions {missing}", caller_loc())
+        return {s: _SIM_FN(image[s]) for s in symbols}
+
+    def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
+        if grid < 1 or block < 1 or block > 1024:
+            raise DeviceError(f"invalid launch configuration: grid={grid}, block={block} (block must be 1..1024)",
+                              caller_loc())
+        sreg = (ctypes.c_int32 * 4)(0, block, 0, grid)
+        for b in range(grid):
+            sreg[2] = b
+            for t in range(block):
+                sreg[0] = t
+                fn(ctx, ctypes.addressof(sreg))
+
+    def synchronize(self) -> None:
+        pass
+
+    def event(self) -> float:
+        return time.perf_counter()
+
+    def elapsed_ms(self, start: float, end: float) -> float:
+        return (end - start) * 1e3
+
+
+class CudaDriver(Device):
+    """The CUDA driver API through cuda-python: the primary context of device `ordinal`, one stream (the
+    default). Written against the documented API; exercised only on a machine with a GPU."""
+
+    name = "CUDA"
+
+    def __init__(self, ordinal: int = 0) -> None:
+        from cuda.bindings import driver as cu  # type: ignore[import-not-found]
+
+        self.cu = cu
+        self._check(cu.cuInit(0))
+        self.device = self._check(cu.cuDeviceGet(ordinal))
+        self.context = self._check(cu.cuDevicePrimaryCtxRetain(self.device))
+        self._check(cu.cuCtxSetCurrent(self.context))
+        major = self._check(cu.cuDeviceGetAttribute(
+            cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_COMPUTE_CAPABILITY_MAJOR, self.device))
+        minor = self._check(cu.cuDeviceGetAttribute(
+            cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_COMPUTE_CAPABILITY_MINOR, self.device))
+        self.compute_capability = (int(major), int(minor))
+        self.sm_count = int(self._check(cu.cuDeviceGetAttribute(
+            cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT, self.device)))
+        self.modules: list[Any] = []
+
+    def _check(self, result):
+        """cuda-python returns (CUresult, values...): raise a located error for a failure, else the values."""
+        err, *vals = result if isinstance(result, tuple) else (result,)
+        code = int(err)
+        if code != 0:
+            _, name = self.cu.cuGetErrorName(err)
+            _, text = self.cu.cuGetErrorString(err)
+            name = name.decode() if isinstance(name, bytes) else str(name)
+            text = text.decode() if isinstance(text, bytes) else str(text)
+            cls = DeviceMemoryError if code == 2 else DeviceError  # CUDA_ERROR_OUT_OF_MEMORY
+            extra = " (a device-side assertion failed)" if code == 710 else ""  # CUDA_ERROR_ASSERT
+            raise cls(f"CUDA error {name} ({code}): {text}{extra}", caller_loc())
+        return vals[0] if len(vals) == 1 else (tuple(vals) if vals else None)
+
+    def alloc(self, nbytes: int) -> int:
+        return int(self._check(self.cu.cuMemAlloc(max(int(nbytes), 1))))
+
+    def free(self, ptr: int) -> None:
+        self._check(self.cu.cuMemFree(ptr))
+
+    def to_device(self, dst: int, src: np.ndarray) -> None:
+        src = np.ascontiguousarray(src)
+        self._check(self.cu.cuMemcpyHtoD(dst, src.ctypes.data, src.nbytes))
+
+    def to_host(self, dst: np.ndarray, src: int) -> None:
+        self._check(self.cu.cuMemcpyDtoH(dst.ctypes.data, src, dst.nbytes))
+
+    def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
+        data = image.encode() + b"\0" if isinstance(image, str) else image
+        module = self._check(self.cu.cuModuleLoadData(data))
+        self.modules.append(module)
+        return {s: self._check(self.cu.cuModuleGetFunction(module, s.encode())) for s in symbols}
+
+    def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
+        arg = np.array([ctx], dtype=np.uint64)  # the kernel's one parameter: the context's device address
+        params = np.array([arg.ctypes.data], dtype=np.uint64)
+        self._check(self.cu.cuLaunchKernel(fn, grid, 1, 1, block, 1, 1, 0, 0, params.ctypes.data, 0))
+
+    def synchronize(self) -> None:
+        self._check(self.cu.cuCtxSynchronize())
+
+    def event(self) -> Any:
+        e = self._check(self.cu.cuEventCreate(0))
+        self._check(self.cu.cuEventRecord(e, 0))
+        return e
+
+    def elapsed_ms(self, start: Any, end: Any) -> float:
+        self._check(self.cu.cuEventSynchronize(end))
+        return float(self._check(self.cu.cuEventElapsedTime(start, end)))
+
+
+def saturating_grid(device: Device, block: int) -> int:
+    """Blocks for a loop whose count is known only at run time: enough to fill the device (grid-stride)."""
+    sm = getattr(device, "sm_count", 1)
+    return max(1, sm * max(1, 2048 // max(block, 1)))

@@ -1,0 +1,161 @@
+; The allocator every kernel module that activates or frees sparse cells gets (codegen/sparse.py):
+; @sg_sparse_alloc, @sg_sparse_free and their pool helpers. They call @sg_report (codegen/llvm.py) and
+; @llvm.memset, declared by the kernel module. Parameters (substituted by runtime/ll/__init__.py `load`):
+; CTX_SPARSE (runtime/abi.py), the pool table's row layout POOL_* and BATCH (runtime/sparse.py).
+
+define internal ptr @sg_pool(ptr %ctx, i64 %pool) alwaysinline {
+  %tp = getelementptr i64, ptr %ctx, i64 ${CTX_SPARSE}
+  %table = load ptr, ptr %tp
+  %off = mul i64 %pool, ${POOL_WORDS}
+  %row = getelementptr i64, ptr %table, i64 %off
+  ret ptr %row
+}
+
+define internal void @sg_pool_lock(ptr %row) {
+entry:
+  br label %try
+try:
+  %old = atomicrmw xchg ptr %row, i64 1 acquire
+  %free = icmp eq i64 %old, 0
+  br i1 %free, label %done, label %spin
+spin:
+  br label %try
+done:
+  ret void
+}
+
+define internal void @sg_pool_unlock(ptr %row) {
+  store atomic i64 0, ptr %row release, align 8
+  ret void
+}
+
+; the block behind *slot, allocating it (zeroed) when the slot is still null. Without freed blocks to reuse,
+; a fresh block is bumped off the pool and installed by compare-and-swap, with no lock (the common case:
+; many threads activating at once); a block that lost the race goes to the free list. Freed blocks are
+; reused under the pool's lock. A pool that has run out reports error `code` and hands out the discard block.
+define internal ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code, i32 %tid) noinline {
+entry:
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %fp = getelementptr i64, ptr %row, i64 ${POOL_FREE}
+  %free0 = load atomic ptr, ptr %fp monotonic, align 8
+  %has_free0 = icmp ne ptr %free0, null
+  %cp = getelementptr i64, ptr %row, i64 ${POOL_CAPACITY}
+  %cap = load i64, ptr %cp
+  br i1 %has_free0, label %locked, label %bump
+bump:                      ; this thread's batch of fresh blocks: one shared atomic add per BATCH blocks
+  %tp = getelementptr i64, ptr %row, i64 ${POOL_BATCHES}
+  %tbase = load ptr, ptr %tp
+  %t64 = zext i32 %tid to i64
+  %toff = mul i64 %t64, 8
+  %mine = getelementptr i64, ptr %tbase, i64 %toff          ; [next, end] of this thread, a cache line apart
+  %endp = getelementptr i64, ptr %mine, i64 1
+  %bn = load i64, ptr %mine
+  %be = load i64, ptr %endp
+  %have_b = icmp ult i64 %bn, %be
+  br i1 %have_b, label %from_batch, label %refill
+from_batch:
+  %bn1 = add i64 %bn, 1
+  store i64 %bn1, ptr %mine
+  br label %take_n
+refill:
+  %np = getelementptr i64, ptr %row, i64 ${POOL_NEXT}
+  %r = atomicrmw add ptr %np, i64 ${BATCH} monotonic
+  %full = icmp uge i64 %r, %cap
+  br i1 %full, label %exhausted, label %refilled
+refilled:
+  %re0 = add i64 %r, ${BATCH}
+  %over = icmp ugt i64 %re0, %cap
+  %re = select i1 %over, i64 %cap, i64 %re0
+  %r1 = add i64 %r, 1
+  store i64 %r1, ptr %mine
+  store i64 %re, ptr %endp
+  br label %take_n
+take_n:
+  %n = phi i64 [ %bn, %from_batch ], [ %r, %refilled ]
+  br label %fresh
+fresh:
+  %bp = getelementptr i64, ptr %row, i64 ${POOL_BASE}
+  %base = load ptr, ptr %bp
+  %szp = getelementptr i64, ptr %row, i64 ${POOL_BLOCK}
+  %sz = load i64, ptr %szp
+  %boff = mul i64 %n, %sz
+  %blk = getelementptr i8, ptr %base, i64 %boff
+  store i64 0, ptr %blk  ; after a pool restart the first word may still hold a free-list link
+  %cas = cmpxchg ptr %slot, ptr null, ptr %blk acq_rel monotonic
+  %won = extractvalue { ptr, i1 } %cas, 1
+  br i1 %won, label %done_fresh, label %lost
+done_fresh:
+  ret ptr %blk
+lost:
+  %other = extractvalue { ptr, i1 } %cas, 0
+  call void @sg_pool_push(ptr %row, ptr %blk, i64 1)
+  ret ptr %other
+locked:
+  call void @sg_pool_lock(ptr %row)
+  %cur = load atomic ptr, ptr %slot acquire, align 8
+  %have = icmp ne ptr %cur, null
+  br i1 %have, label %unlock_cur, label %take
+unlock_cur:
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %cur
+take:
+  %free = load ptr, ptr %fp
+  %has_free = icmp ne ptr %free, null
+  br i1 %has_free, label %reuse, label %unlock_bump
+unlock_bump:
+  call void @sg_pool_unlock(ptr %row)
+  br label %bump
+reuse:
+  ; a lock-free bump elsewhere may install a block meanwhile: install by compare-and-swap here too
+  %cas2 = cmpxchg ptr %slot, ptr null, ptr %free acq_rel monotonic
+  %won2 = extractvalue { ptr, i1 } %cas2, 1
+  br i1 %won2, label %popped, label %kept
+popped:
+  %next = load ptr, ptr %free
+  store ptr %next, ptr %fp
+  store i64 0, ptr %free
+  %cnp2 = getelementptr i64, ptr %row, i64 ${POOL_FREECOUNT}
+  %d1 = load i64, ptr %cnp2
+  %d2 = sub i64 %d1, 1
+  store i64 %d2, ptr %cnp2
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %free
+kept:
+  %other2 = extractvalue { ptr, i1 } %cas2, 0
+  call void @sg_pool_unlock(ptr %row)
+  ret ptr %other2
+exhausted:
+  call void @sg_report(ptr %ctx, i64 %code, i64 %cap)
+  %dp = getelementptr i64, ptr %row, i64 ${POOL_DISCARD}
+  %discard = load ptr, ptr %dp
+  ret ptr %discard
+}
+
+; put a zeroed block on its pool's free list (%lost: 1 for a block that lost the race to install, counted)
+define internal void @sg_pool_push(ptr %row, ptr %blk, i64 %lost) {
+  call void @sg_pool_lock(ptr %row)
+  %fp = getelementptr i64, ptr %row, i64 ${POOL_FREE}
+  %free = load ptr, ptr %fp
+  store ptr %free, ptr %blk
+  store atomic ptr %blk, ptr %fp release, align 8
+  %cnp = getelementptr i64, ptr %row, i64 ${POOL_FREECOUNT}
+  %c1 = load i64, ptr %cnp
+  %c2 = add i64 %c1, 1
+  store i64 %c2, ptr %cnp
+  %lsp = getelementptr i64, ptr %row, i64 ${POOL_LOST}
+  %l1 = load i64, ptr %lsp
+  %l2 = add i64 %l1, %lost
+  store i64 %l2, ptr %lsp
+  call void @sg_pool_unlock(ptr %row)
+  ret void
+}
+
+; zero a block and give it back to its pool
+define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %szp = getelementptr i64, ptr %row, i64 ${POOL_BLOCK}
+  %sz = load i64, ptr %szp
+  call void @llvm.memset.p0.i64(ptr %blk, i8 0, i64 %sz, i1 false)
+  call void @sg_pool_push(ptr %row, ptr %blk, i64 0)
+  ret void
+}

@@ -1,0 +1,86 @@
+"""The device interface (runtime/device.py): the host implementation, and the CUDA one where cuda-python and
+a GPU exist."""
+
+import numpy as np
+import pytest
+
+from simgrad.runtime import device
+
+
+def test_host_driver_memory_and_copies():
+    d = device.HostDriver()
+    p = d.alloc(64)
+    assert p % 64 == 0
+    a = np.arange(16, dtype=np.float32)
+    d.to_device(p, a)
+    b = np.zeros(16, np.float32)
+    d.to_host(b, p)
+    assert (a == b).all()
+    d.free(p)
+    with pytest.raises(device.DeviceError, match="did not allocate"):
+        d.free(p)
+    e0 = d.event()
+    d.synchronize()
+    assert d.elapsed_ms(e0, d.event()) >= 0
+
+
+def test_host_driver_bad_launch_is_located():
+    d = device.HostDriver()
+    with pytest.raises(device.DeviceError, match="invalid launch configuration") as e:
+        d.launch(None, 1, 2048, 0)
+    assert "test_device.py" in str(e.value)
+
+
+@pytest.mark.skipif(not device.cuda_available(), reason="no CUDA driver/device (cuda-python) on this machine")
+def test_cuda_driver_roundtrip_and_oom():
+    d = device.CudaDriver()
+    p = d.alloc(1024)
+    a = np.arange(256, dtype=np.float32)
+    d.to_device(p, a)
+    b = np.zeros_like(a)
+    d.to_host(b, p)
+    assert (a == b).all()
+    d.free(p)
+    with pytest.raises(device.DeviceMemoryError):
+        d.alloc(1 << 50)
+
+
+def test_host_driver_runs_a_kernels_launch_sequence():
+    """The flow the CUDA runtime will follow: a kernel's segments loaded as a module, its context buffer with
+    the argument words, each Launch run with its grid (or a saturating one) and block, errors read back."""
+    import simgrad as ti
+    from simgrad.codegen import nvptx
+    from simgrad.compiler.driver import compile_kernel
+    from simgrad.lang.program import get_program
+    from simgrad.runtime import abi
+
+    @ti.kernel
+    def k(a: ti.f32, x: ti.types.ndarray(dtype=ti.f32, ndim=1), s: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        b = a * 2.0
+        for i in range(x.shape[0]):
+            x[i] = x[i] * b
+        for i in range(x.shape[0]):
+            s[0] += x[i]
+
+    prog = get_program()
+    x, s = np.arange(1000, dtype=np.float32), np.zeros(1, np.float32)
+    ck = compile_kernel(k, prog, (1.5, x.copy(), s.copy()))
+    cg = nvptx.GpuCodegen(ck.ir, "hd", sim=True, export=True)
+    text = cg.generate()
+    names = [ln.symbol for ln in cg.launches]
+    addrs = prog.jit.code.link(prog.jit.object_for(text), names)
+    d = device.HostDriver()
+    fns = d.load_module(addrs, names)
+    ck.launch(1.5, x, s)  # fills the launcher's context words for these arrays (and computes the CPU result)
+    x_cpu, s_cpu = x.copy(), s.copy()
+    x[:] = np.arange(1000, dtype=np.float32)
+    s[:] = 0
+    ctx = np.concatenate([ck.launcher.buf, np.zeros(cg.scratch_slots + 1, np.int64)])
+    err = np.zeros(abi.ERR_WORDS, np.int64)
+    ctx[abi.CTX_ERR] = err.ctypes.data
+    for ln in cg.launches:
+        d.launch(fns[ln.symbol], ln.grid or device.saturating_grid(d, ln.block), ln.block, ctx.ctypes.data)
+    d.synchronize()
+    assert err[0] == 0
+    np.testing.assert_array_equal(x, x_cpu)
+    np.testing.assert_allclose(s, s_cpu, rtol=1e-5)
