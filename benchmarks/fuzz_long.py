@@ -1,11 +1,14 @@
-"""The long run of the differential fuzzer (tests/fuzz/gen.py): N random kernels, half forward programs
-against the numpy reference, half differentiable programs against finite differences.
+"""The long run of the differential fuzzers (tests/fuzz/gen.py, tests/fuzz/shapes.py): N random programs,
+half forward programs against the Python/numpy reference, half differentiable programs against finite
+differences (and, for the shapes generator, forward mode against reverse mode).
 
-    python benchmarks/fuzz_long.py --cases 10000 [--start 0] [--batch 250] [--jobs 2]
+    python benchmarks/fuzz_long.py --cases 10000 [--gen shapes|flat] [--start 0] [--batch 250] [--jobs 2]
+                                   [--log results.jsonl]
 
 Cases run in child processes, a batch each, so a crash (segfault, abort) is counted, not fatal: a batch
 that dies is re-run one case per process to name the case. Prints the counts (cases, crashes, mismatches,
-errors = valid programs that failed to compile or run) and every failing case's seed, kind and message.
+errors = valid programs that failed to compile or run) and every failing case's seed, kind and message;
+--log appends each case's result as it comes (a long run stopped early keeps what it did).
 """
 
 from __future__ import annotations
@@ -25,12 +28,16 @@ CHILD = r"""
 import json, pathlib, sys, tempfile, traceback
 sys.path.insert(0, sys.argv[1])
 import gen
+import shapes
+RUN = {"fwd": [gen.run_forward], "grad": [gen.run_gradient], "sfwd": [shapes.run_forward],
+       "sgrad": [shapes.run_gradient, shapes.run_forward_mode]}
 for spec in sys.argv[2:]:
     kind, seed, size = spec.split(":")
     seed, size = int(seed), int(size)
     with tempfile.TemporaryDirectory() as d:
         try:
-            (gen.run_forward if kind == "fwd" else gen.run_gradient)(seed, size, pathlib.Path(d))
+            for run in RUN[kind]:
+                run(seed, size, pathlib.Path(d))
             status, msg = "ok", ""
         except gen.Inconclusive as e:
             status, msg = "inconclusive", str(e)[-300:]
@@ -42,11 +49,13 @@ for spec in sys.argv[2:]:
 """
 
 
-def specs(start: int, cases: int) -> list[str]:
+def specs(start: int, cases: int, generator: str = "flat") -> list[str]:
     out = []
     for c in range(start, start + cases):
         kind = "fwd" if c % 2 == 0 else "grad"
         size = 1 + (c // 2) % (8 if kind == "fwd" else 5)
+        if generator == "shapes":
+            kind = "s" + kind
         out.append(f"{kind}:{c}:{size}")
     return out
 
@@ -54,6 +63,7 @@ def specs(start: int, cases: int) -> list[str]:
 def run_batch(batch: list[str]) -> list[dict]:
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env.setdefault("SIMGRAD_VERIFY", "1")  # the IR verifier after every pass, as in the tests (LLVM's always runs)
     with tempfile.TemporaryDirectory() as cache:
         env["SIMGRAD_CACHE_DIR"] = cache
         proc = subprocess.run([sys.executable, "-c", CHILD, FUZZ, *batch], capture_output=True, text=True,
@@ -77,13 +87,19 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=250)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", help="write all results here")
+    ap.add_argument("--gen", choices=("flat", "shapes"), default="shapes",
+                    help="flat: gen.py's kernels; shapes: shapes.py's programs of real shapes")
+    ap.add_argument("--log", help="append each case's result here as a JSON line")
     args = ap.parse_args()
-    todo = specs(args.start, args.cases)
+    todo = specs(args.start, args.cases, args.gen)
     batches = [todo[k:k + args.batch] for k in range(0, len(todo), args.batch)]
     results: list[dict] = []
     with ThreadPoolExecutor(args.jobs) as ex:
         for k, res in enumerate(ex.map(run_batch, batches)):
             results += res
+            if args.log:
+                with open(args.log, "a") as fh:
+                    fh.writelines(json.dumps(r) + "\n" for r in res)
             bad = [r for r in res if r["status"] not in ("ok", "inconclusive")]
             print(f"batch {k + 1}/{len(batches)}: {len(res)} cases, {len(bad)} failing", flush=True)
     counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "inconclusive", "mismatch", "error", "crash")}

@@ -66,10 +66,20 @@ class _Gen:
         self.counter = 0
 
     # -- expressions ---------------------------------------------------------------------------
+    def int_leaf(self) -> str:
+        """An i32 operand (tests/fuzz/shapes.py overrides the leaves and keeps the operators)."""
+        r = self.r
+        return r.choice([f"a{r.randrange(N_INT)}", str(r.randint(-9, 9)), "t", f"ai[{r.randrange(T)}]"])
+
+    def f64_leaf(self) -> str:
+        r = self.r
+        return r.choice([f"x{r.randrange(N_F64)}", f"{r.uniform(-3, 3):.3f}", f"af[{r.randrange(T)}]",
+                         "ti.cast(t, ti.f64)"])
+
     def int_expr(self, d: int) -> str:
         r = self.r
         if d <= 0 or r.random() < 0.25:
-            return r.choice([f"a{r.randrange(N_INT)}", str(r.randint(-9, 9)), "t", f"ai[{r.randrange(T)}]"])
+            return self.int_leaf()
         k = r.randrange(12)
         a, b = self.int_expr(d - 1), self.int_expr(d - 1)
         if k == 11:
@@ -99,8 +109,7 @@ class _Gen:
     def f64_expr(self, d: int) -> str:
         r = self.r
         if d <= 0 or r.random() < 0.25:
-            return r.choice([f"x{r.randrange(N_F64)}", f"{r.uniform(-3, 3):.3f}", f"af[{r.randrange(T)}]",
-                             "ti.cast(t, ti.f64)"])
+            return self.f64_leaf()
         k = r.randrange(13)
         a, b = self.f64_expr(d - 1), self.f64_expr(d - 1)
         if k == 12:
@@ -408,26 +417,30 @@ def run_forward(seed: int, size: int, path) -> None:
                              f"{kernel_src}\n{e}") from None
 
 
-def run_gradient(seed: int, size: int, path, n: int = 3) -> None:
-    """The Tape gradient of a random differentiable program against central finite differences."""
+def run_gradient(seed: int, size: int, path, n: int = 3, case=None) -> None:
+    """The Tape gradient of a random differentiable program against central finite differences. `case`
+    (seed, size) -> source makes the program (default gradient_case); `make(x, y, loss, n)` gets a y of 2n
+    cells (shapes.py accumulates into y[n:] with atomics), zeroed before every run."""
     import simgrad as ti
 
-    src = gradient_case(seed, size)
+    src = (case or gradient_case)(seed, size)
     ti.init(arch=ti.cpu, default_fp=ti.f64)
     x = ti.field(ti.f64, n, needs_grad=True)
-    y = ti.field(ti.f64, n, needs_grad=True)
+    y = ti.field(ti.f64, 2 * n, needs_grad=True)
     loss = ti.field(ti.f64, (), needs_grad=True)
     x0 = np.random.default_rng(seed).uniform(-1.5, 1.5, n)
     x.from_numpy(x0)
-    first, second = _load(path, f"fuzz_g{seed}_{size}", src).make(x, y, loss, n)
+    first, second = _load(path, f"fuzz_g{'s' if case else ''}{seed}_{size}", src).make(x, y, loss, n)
 
     def value(v):
         x.from_numpy(v)
+        y.fill(0)
         loss[None] = 0
         first()
         second()
         return loss[None]
 
+    y.fill(0)
     with ti.ad.Tape(loss=loss):
         first()
         second()
@@ -458,24 +471,26 @@ def run_gradient(seed: int, size: int, path, n: int = 3) -> None:
     raise AssertionError(text)
 
 
-def run_forward_mode(seed: int, size: int, path, n: int = 3) -> None:
+def run_forward_mode(seed: int, size: int, path, n: int = 3, case=None) -> None:
     """FwdMode against reverse mode on a random differentiable program: loss.dual (= J v) must equal
     <x.grad, v> (= (J^T 1) . v) for a random direction v; no finite differences, so no tolerance games."""
     import simgrad as ti
 
-    src = gradient_case(seed, size)
+    src = (case or gradient_case)(seed, size)
     ti.init(arch=ti.cpu, default_fp=ti.f64)
     x = ti.field(ti.f64, n, needs_grad=True, needs_dual=True)
-    y = ti.field(ti.f64, n, needs_grad=True, needs_dual=True)
+    y = ti.field(ti.f64, 2 * n, needs_grad=True, needs_dual=True)
     loss = ti.field(ti.f64, (), needs_grad=True, needs_dual=True)
     rng = np.random.default_rng(seed)
     x.from_numpy(rng.uniform(-1.5, 1.5, n))
     v = rng.standard_normal(n)
-    first, second = _load(path, f"fuzz_f{seed}_{size}", src).make(x, y, loss, n)
+    first, second = _load(path, f"fuzz_f{'s' if case else ''}{seed}_{size}", src).make(x, y, loss, n)
+    y.fill(0)
     with ti.ad.Tape(loss=loss):
         first()
         second()
     reverse = float(np.dot(x.grad.to_numpy(), v))
+    y.fill(0)
     with ti.ad.FwdMode(loss=loss, param=x, seed=list(v)):
         loss[None] = 0
         first()
