@@ -123,3 +123,20 @@ def test_every_taichi_name_exists_or_says_it_is_not_supported():
             unsupported.append(name)
     assert not missing, missing
     assert "data_oriented" not in unsupported and "ndarray" not in unsupported and len(unsupported) <= 27
+
+
+def test_taichi_lang_ops_answers_under_its_taichi_name():
+    """Taichi's own tests call `ti.lang.ops.add(u, v)` in kernels; simgrad's module is lang/operators.py."""
+    ti.init(arch=ti.cpu)
+    x = ti.Vector.field(3, dtype=int, shape=(16, 16))
+    offsets = [ti.Vector([1, 2]), ti.Vector([2, 3])]
+
+    @ti.kernel
+    def k():
+        vec = ti.Vector([4, 5])
+        x[ti.lang.ops.add(vec, ti.static(offsets)[1])] = [1, 10, 100]
+        x[ti.lang.ops.sub(vec, ti.static(offsets)[0])] = [7, 8, 9]
+
+    k()
+    assert x[6, 8].to_numpy().tolist() == [1, 10, 100]
+    assert x[3, 3].to_numpy().tolist() == [7, 8, 9]
