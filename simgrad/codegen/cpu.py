@@ -9,7 +9,7 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 
 from __future__ import annotations
 
-from simgrad.codegen.llvm import FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
+from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
 from simgrad.codegen.privatize import emit_private_launch, slice_shift
 from simgrad.ir.nodes import Stmt, walk
 from simgrad.ir.ops import Op
@@ -90,21 +90,9 @@ class CpuCodegen(KernelCodegen):
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
         t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
-        for _place, adds in plan.reductions.values():  # each thread sums into its own variable first
-            acc = t.tmp("red")
-            rty = llvm_type(adds[0].vtype)
-            t.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].vtype)}, ptr {acc}"]
-            for a in adds:
-                t.reduction_of[id(a)] = acc
+        self.open_reductions(t, plan)  # per-thread sums, added once per chunk
         self.serial_loop(t, s, lo, hi)
-        for place, adds in plan.reductions.values():  # ... and adds it to the shared place once per chunk
-            rty = llvm_type(adds[0].vtype)
-            total = t.tmp("sum")
-            t.emit(f"{total} = load {rty}, ptr {t.reduction_of[id(adds[0])]}")
-            if place.op is Op.GLOBAL_PTR:
-                lower_global_ptr(self, t, place)
-            op = "fadd" if adds[0].vtype.is_float else "add"
-            t.emit(f"{t.tmp('old')} = atomicrmw {op} ptr {t.v(place)}, {rty} {total} monotonic")
+        self.flush_reductions(t, plan)
         t.emit("ret void")
         self.module.functions.append(t.text())
 

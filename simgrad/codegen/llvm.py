@@ -291,6 +291,27 @@ class KernelCodegen:
             LOWERING[s.op](self, f, s)
             k += 1
 
+    def open_reductions(self, f: FunctionText, plan) -> None:
+        """Each thread of a parallel loop sums its `+=` updates of a shared place (plan.reductions, decided by
+        passes/parallel_strategy.py) into a variable of its own first (every target: a CPU chunk, a GPU thread)."""
+        for _place, adds in plan.reductions.values():
+            acc = f.tmp("red")
+            rty = llvm_type(adds[0].vtype)
+            f.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].vtype)}, ptr {acc}"]
+            for a in adds:
+                f.reduction_of[id(a)] = acc
+
+    def flush_reductions(self, f: FunctionText, plan) -> None:
+        """... and adds each sum to the shared place once, atomically, at the end of the thread's work."""
+        for place, adds in plan.reductions.values():
+            rty = llvm_type(adds[0].vtype)
+            total = f.tmp("sum")
+            f.emit(f"{total} = load {rty}, ptr {f.reduction_of[id(adds[0])]}")
+            if place.op is Op.GLOBAL_PTR:
+                lower_global_ptr(self, f, place)
+            op = "fadd" if adds[0].vtype.is_float else "add"
+            f.emit(f"{f.tmp('old')} = atomicrmw {op} ptr {f.v(place)}, {rty} {total} monotonic")
+
     def serial_loop(self, f: FunctionText, s: Stmt, begin: str, end: str, cancel: bool = False) -> None:
         """`for i in [begin, end)`; with `cancel`, in strips of CANCEL_STRIDE iterations with a Ctrl-C check
         before each strip, so the inner loop stays a clean counted loop (LLVM still vectorises it)."""

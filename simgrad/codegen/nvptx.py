@@ -23,7 +23,7 @@ import tempfile
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from simgrad.codegen.llvm import LOWERING, FunctionText, KernelCodegen, const_text, llvm_type, lower_global_ptr
+from simgrad.codegen.llvm import LOWERING, FunctionText, KernelCodegen, const_text, llvm_type
 from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.opdefs import OPS, Libm
 from simgrad.ir.ops import Op
@@ -266,12 +266,7 @@ class GpuCodegen(KernelCodegen):
                        f"  {stride} = mul i32 {ntid}, {nctaid}", f"  {gid64} = zext i32 {gid}.t to i64",
                        f"  {stride64} = zext i32 {stride} to i64"]
         f.tid = f"{gid}.t"  # ti.global_thread_idx
-        for _place, adds in plan.reductions.values():  # each thread sums into its own variable first
-            acc = f.tmp("red")
-            rty = llvm_type(adds[0].vtype)
-            f.prologue += [f"  {acc} = alloca {rty}", f"  store {rty} {const_text(0, adds[0].vtype)}, ptr {acc}"]
-            for a in adds:
-                f.reduction_of[id(a)] = acc
+        self.open_reductions(f, plan)  # per-thread sums, added once per thread
         ty = llvm_type(s.vtype)
         b64, e64 = f.tmp("b"), f.tmp("e")
         for dst, src in ((b64, s.operands[0]), (e64, s.operands[1])):
@@ -302,14 +297,7 @@ class GpuCodegen(KernelCodegen):
         f.emit(f"{nxt} = add i64 {i}, {stride64}")
         f.emit(f"br label %{head}")
         f.start_block(done)
-        for place, adds in plan.reductions.values():  # ... and adds it to the shared place once per thread
-            rty = llvm_type(adds[0].vtype)
-            total = f.tmp("sum")
-            f.emit(f"{total} = load {rty}, ptr {f.reduction_of[id(adds[0])]}")
-            if place.op is Op.GLOBAL_PTR:
-                lower_global_ptr(self, f, place)
-            op = "fadd" if adds[0].vtype.is_float else "add"
-            f.emit(f"{f.tmp('old')} = atomicrmw {op} ptr {f.v(place)}, {rty} {total} monotonic")
+        self.flush_reductions(f, plan)
         f.emit("ret void")
         self.module.functions.append(f.text())
         block = int(s.attrs.get("block_dim") or DEFAULT_BLOCK)
