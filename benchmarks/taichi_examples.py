@@ -595,13 +595,15 @@ WHY = {
     "features/io/export_ply.py": _RANDOM,
     "features/io/export_videos.py": "taichi fails here: no ffmpeg (simgrad writes the GIF, warns about the MP4)",
     "graph/texture_graph.py": "textures: taichi aborts here (no Vulkan); simgrad: located not-supported error",
-    "machine_learning/differential_evolution.py": "simgrad defect: SIGSEGV, known (defects helper)",
+    "machine_learning/differential_evolution.py": _RANDOM + " (populations drawn in kernels); it writes one row past "
+                                                  "two fields, which crashed simgrad (SIGSEGV) until fields got their "
+                                                  "own mappings",
     "real_func/algorithm/poisson_disk_sampling.py": _VULKAN,
-    "real_func/rendering/cornell_box.py": "simgrad defect: invalid IR (does not dominate all uses), known (defects "
-                                          "helper); taichi: GGUI needs Vulkan",
+    "real_func/rendering/cornell_box.py": "taichi: GGUI needs Vulkan; simgrad runs it (its invalid IR, a struct "
+                                          "ti.func parameter rebound in a loop, is fixed)",
     "real_func/rendering/taichi_ngp.py": "needs cv2, wget, scipy and downloaded weights: both fail alike",
-    "rendering/cornell_box.py": "simgrad defect: invalid IR (does not dominate all uses), known (defects helper); "
-                                "taichi: GGUI needs Vulkan",
+    "rendering/cornell_box.py": "taichi: GGUI needs Vulkan; simgrad runs it (its invalid IR, a struct ti.func "
+                                "parameter rebound in a loop, is fixed)",
     "rendering/simple_texture.py": "textures and GGUI: taichi needs Vulkan; simgrad: located not-supported error",
     "rendering/taichi_ngp.py": "needs cv2, wget, scipy and downloaded weights: both fail alike",
     "simulation/euler.py": "matplotlib 3.9 removed cm.get_cmap: both fail alike",
@@ -611,7 +613,7 @@ WHY = {
                                                   "stable_fluid_ggui")},
     "graph/mpm88_graph.py": _RANDOM,
     "rendering/oit_renderer.py": _RANDOM + "; simgrad peaks at 2.3 GB, taichi at 0.9 GB (its 1000^2 dynamic "
-                                           "lists; the known SIGKILL was an endless headless loop, fixed on main)",
+                                           "lists; the SIGKILL was an endless headless loop, fixed)",
     "rendering/sdf_renderer.py": _RANDOM + "; taichi differs from itself as much (path tracing)",
     "simulation/implicit_fem.py": "close in state (positions 6e-8, velocities 2e-6, picture 2e-5); the CG "
                                   "residual/direction fields at convergence are rounding noise (1e-8 absolute)",
