@@ -53,8 +53,12 @@ def test_half_ll_verifies():
     assert sorted(f.name for f in mod.functions) == sorted(half.SYMBOLS)
 
 
+def test_sim_blocks_ll_verifies():
+    _verify(ll.load("sim_blocks", symbol="sg_kernel_blocks"))
+
+
 def test_every_ll_file_is_loaded_and_checked_here():
-    assert sorted(p.stem for p in LL_DIR.glob("*.ll")) == ["half", "sparse_alloc", "threadpool"]
+    assert sorted(p.stem for p in LL_DIR.glob("*.ll")) == ["half", "sim_blocks", "sparse_alloc", "threadpool"]
 
 
 def test_load_refuses_missing_and_unknown_parameters():
