@@ -44,6 +44,7 @@ class Frame:
         self.return_value = None
         self.has_returned = False
         self.dynamic_depth = 0  # run-time control flow nesting inside this frame
+        self.guard_depth = 0  # of which return guards (`if not returned:`), transparent to ti.static jumps
         # early returns from run-time control flow in a ti.func: the value and a flag live in locals declared
         # at the function's entry (entry_block/entry_index); the rest of the body is guarded by the flag
         self.entry_block: Block | None = None

@@ -6,6 +6,7 @@ indices by division, so the outermost loop of a kernel is always one parallel ra
 from __future__ import annotations
 
 import ast
+import contextlib
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradSyntaxError
@@ -279,22 +280,26 @@ class StaticJump(Exception):
 
 def _unroll(comp, node: ast.For) -> None:
     seq = comp.eval(node.iter)
-    # where a jump must be to belong to this loop: same frame, no run-time loop or branch opened since
-    comp.static_loops.append((comp.frame, len(comp.loop_stack), comp.frame.dynamic_depth))
+    frame = comp.frame
+    comp.static_loops.append(comp.static_jump_target())
     try:
-        for item in seq:
-            comp.frame.scopes.append({})
-            try:
-                if isinstance(node.target, ast.Name):
-                    comp.bind(node.target.id, item)
-                else:
-                    comp._bind_target(node.target, item)
-                comp.visit_block(node.body)
-            except StaticJump as jump:
-                if jump.is_break:
-                    break
-            finally:
-                comp.frame.scopes.pop()
+        with contextlib.ExitStack() as guards:
+            for item in seq:
+                returns = frame.dynamic_returns
+                frame.scopes.append({})
+                try:
+                    if isinstance(node.target, ast.Name):
+                        comp.bind(node.target.id, item)
+                    else:
+                        comp._bind_target(node.target, item)
+                    comp.visit_block(node.body)
+                except StaticJump as jump:
+                    if jump.is_break:
+                        break
+                finally:
+                    frame.scopes.pop()
+                if frame.dynamic_returns != returns:  # this iteration may have returned: guard the next ones
+                    guards.enter_context(comp.unless_returned())
     finally:
         comp.static_loops.pop()
 

@@ -177,10 +177,17 @@ class KernelLowering:
                         self._loop_jump(s, Op.BREAK)
                 rest = stmts[k + 1:]
                 if rest:
-                    guard = self.builder.emit(Op.IF, None, (operators.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
-                    with self.dynamic(guard.blocks[0]):
+                    with self.unless_returned():
                         self.visit_block(rest)
                 return
+
+    def unless_returned(self):
+        """Enter `if not returned:` (after an early return inside run-time control flow of a ti.func), for
+        the code that follows it. A ti.static loop's break/continue still belongs to that loop inside it."""
+        frame = self.frame
+        assert frame.ret_flag is not None
+        guard = self.builder.emit(Op.IF, None, (operators.eq(frame.ret_flag.load(), 0).stmt,), nblocks=2)
+        return self.dynamic(guard.blocks[0], return_guard=True)
 
     def _entry_var(self, dtype) -> VarRef:
         """A local of the current ti.func declared (zeroed) at its entry, whatever block we are in now."""
@@ -375,19 +382,22 @@ class KernelLowering:
             with self.dynamic(block):
                 self.visit_block(body)
 
-    def dynamic(self, block):
+    def dynamic(self, block, return_guard: bool = False):
         """Enter a run-time block: a new scope, one more level of run-time nesting."""
         compiler = self
+        guards = int(return_guard)
 
         class _Ctx:
             def __enter__(self):
                 compiler.builder.blocks.append(block)
                 compiler.frame.scopes.append({})
                 compiler.frame.dynamic_depth += 1
+                compiler.frame.guard_depth += guards
                 compiler.depth += 1
 
             def __exit__(self, *exc):
                 compiler.depth -= 1
+                compiler.frame.guard_depth -= guards
                 compiler.frame.dynamic_depth -= 1
                 compiler.frame.scopes.pop()
                 compiler.builder.blocks.pop()
@@ -412,6 +422,12 @@ class KernelLowering:
         finally:
             self.loop_stack.pop()
 
+    def static_jump_target(self) -> tuple:
+        """Where a break/continue is: the frame, the run-time loops and the run-time branches open (return
+        guards not counted). It belongs to the innermost ti.static loop if that loop was entered here."""
+        frame = self.frame
+        return frame, len(self.loop_stack), frame.dynamic_depth - frame.guard_depth
+
     def visit_Break(self, node) -> None:
         self._loop_jump(node, Op.BREAK)
 
@@ -419,8 +435,7 @@ class KernelLowering:
         self._loop_jump(node, Op.CONTINUE)
 
     def _loop_jump(self, node, op: Op) -> None:
-        if self.static_loops and self.static_loops[-1] == (self.frame, len(self.loop_stack),
-                                                           self.frame.dynamic_depth):
+        if self.static_loops and self.static_loops[-1] == self.static_jump_target():
             from simgrad.frontend.loops import StaticJump
 
             raise StaticJump(op is Op.BREAK)

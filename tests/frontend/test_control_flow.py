@@ -579,6 +579,88 @@ def test_early_returns_from_ti_func_inside_runtime_control_flow():
         assert par(limit) == sum(first_over_py(n, limit) + (n + 1) * 100 for n in range(8))
 
 
+def test_early_return_inside_a_ti_static_loop_skips_the_later_iterations():
+    """A run-time `return` in one unrolled iteration of a ti.static loop (here inside a while, inside an if)
+    ends the function: the later iterations are guarded by the returned flag (fuzz case sfwd:11816:5 returned
+    from the last iteration instead), and a ti.static break/continue after the guard is still the static
+    loop's."""
+    ti.init(arch=ti.cpu)
+    a = ti.field(ti.i32, shape=4)
+    a.from_numpy(np.array([30, -7, 23, 19], np.int32))
+    out = ti.field(ti.i32, shape=(3, 8))
+
+    @ti.func
+    def in_while(c):
+        for k in ti.static(range(3)):
+            w = 0
+            while w < 1:
+                w += 1
+                if c > k:
+                    return a[k]
+        return 1000
+
+    @ti.func
+    def then_static_jumps(c):
+        acc = 0
+        for k in ti.static(range(4)):
+            if c == k:
+                return acc * 10 + k
+            if ti.static(k == 1):
+                continue
+            acc += a[k] // 10
+            if ti.static(k == 2):
+                break
+        return acc + 500
+
+    @ti.func
+    def in_serial_loop(c):
+        s = 0
+        for j in range(2):
+            for k in ti.static(range(2)):
+                if c + j > k + 1:
+                    return s * 100 + j * 10 + k
+                s += 1
+        return s
+
+    @ti.kernel
+    def run():
+        for c in range(8):
+            out[0, c] = in_while(c)
+            out[1, c] = then_static_jumps(c)
+            out[2, c] = in_serial_loop(c)
+
+    def in_while_py(c):
+        for k in range(3):
+            if c > k:
+                return int(a[k])
+        return 1000
+
+    def then_static_jumps_py(c):
+        acc = 0
+        for k in range(4):
+            if c == k:
+                return acc * 10 + k
+            if k == 1:
+                continue
+            acc += int(a[k]) // 10
+            if k == 2:
+                break
+        return acc + 500
+
+    def in_serial_loop_py(c):
+        s = 0
+        for j in range(2):
+            for k in range(2):
+                if c + j > k + 1:
+                    return s * 100 + j * 10 + k
+                s += 1
+        return s
+
+    run()
+    want = [[f(c) for c in range(8)] for f in (in_while_py, then_static_jumps_py, in_serial_loop_py)]
+    np.testing.assert_array_equal(out.to_numpy(), want)
+
+
 def test_returns_at_compile_time_and_their_errors():
     """A return in a taken ti.static branch or unrolled loop ends the function there; a bare return ends a
     kernel without a value; a kernel or ti.func annotated with a return type must return (Taichi's words)."""
