@@ -111,6 +111,10 @@ def _shift(f, s, t: dt.DataType, x: str, y: str) -> str:
     return r
 
 
+def _power_of_two(v) -> bool:
+    return isinstance(v, int) and v > 0 and v & (v - 1) == 0
+
+
 def _int_div(f, s, t: dt.DataType, x: str, y: str) -> str:
     """Integer // and % (Python's: FLOORDIV, MOD) and C's (RAW_DIV, RAW_MOD), never trapping."""
     a, b = s.operands
@@ -122,6 +126,11 @@ def _int_div(f, s, t: dt.DataType, x: str, y: str) -> str:
     if not t.is_signed:
         d = _safe_divisor(f, y, ty)
         f.emit(f"{r} = {'udiv' if op in (Op.FLOORDIV, Op.RAW_DIV) else 'urem'} {ty} {x}, {d}")
+        return r
+    if op in (Op.FLOORDIV, Op.MOD) and b.op is Op.CONST and _power_of_two(b.attrs["value"]):
+        # Python's floor semantics on two's complement: x // 2**k is x >> k, x % 2**k is x & (2**k - 1)
+        k = int(b.attrs["value"]).bit_length() - 1
+        f.emit(f"{r} = ashr {ty} {x}, {k}" if op is Op.FLOORDIV else f"{r} = and {ty} {x}, {(1 << k) - 1}")
         return r
     d, minus_one = _safe_signed_divisor(f, y, ty)
     if op is Op.RAW_DIV:

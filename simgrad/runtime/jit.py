@@ -15,6 +15,7 @@ import llvmlite
 import llvmlite.binding as llvm
 
 from simgrad.debug import debug_level
+from simgrad.runtime.isel_guard import merge_same_address_loads
 
 _COMPILER_VERSION = "simgrad-jit-1"
 
@@ -76,6 +77,11 @@ class Jit:
             return path.read_bytes()
         context = llvm.create_context()  # constants and types LLVM interns die with it, not with the process
         module = self._optimized(ir_text, level, context)
+        guarded = merge_same_address_loads(str(module)) if self.triple.startswith("x86_64") else None
+        if guarded is not None:
+            module.close()
+            module = llvm.parse_assembly(guarded, context=context)
+            module.verify()
         obj = self.target_machine.emit_object(module)
         module.close()
         del module, context

@@ -611,3 +611,29 @@ def test_int_literals_promote_like_taichi():
 
     k(3, 3, 3, 1.0, 3, 3)
     assert o.to_numpy().tolist() == [30000, 3000, 40003, 2**24, -1, 2**32 - 1, 603, 1, 3 * 2**31, 47]
+
+
+@pytest.mark.parametrize("t", [ti.i32, ti.i64])
+def test_floordiv_mod_by_constant_powers_of_two_are_python_floor(t):
+    """x // 2**k and x % 2**k by a literal compile to a shift and a mask: Python's values for negative x
+    and at the type's extremes, as numpy computes them."""
+    bits = 32 if t == ti.i32 else 64
+    np_t = np.int32 if t == ti.i32 else np.int64
+    xs = np.array([-(2 ** (bits - 1)), -(2 ** (bits - 1)) + 1, -9, -8, -7, -5, -4, -3, -1, 0, 1, 3, 4, 7, 8, 9,
+                   2 ** (bits - 1) - 1], np_t)
+    x = ti.field(t, shape=len(xs))
+    out = ti.field(t, shape=(len(xs), 10))
+    x.from_numpy(xs)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            out[i, 0], out[i, 1] = x[i] // 1, x[i] % 1
+            out[i, 2], out[i, 3] = x[i] // 4, x[i] % 4
+            out[i, 4], out[i, 5] = x[i] // 8, x[i] % 8
+            out[i, 6], out[i, 7] = x[i] // 1024, x[i] % 1024
+            out[i, 8], out[i, 9] = x[i] // (2 ** 30), x[i] % (2 ** 30)
+
+    k()
+    want = np.stack([f(xs, np_t(d)) for d in (1, 4, 8, 1024, 2 ** 30) for f in (np.floor_divide, np.mod)], 1)
+    np.testing.assert_array_equal(out.to_numpy(), want)

@@ -7,18 +7,18 @@ entry:
   %hi.2 = trunc i64 %hi to i32
   %red.3 = alloca float
   store float 0x0000000000000000, ptr %red.3
-  %cp.28 = getelementptr i64, ptr %ctx, i64 0
-  %cv.29 = load ptr, ptr %cp.28
-  %rp.30 = getelementptr ptr, ptr %cv.29, i64 0
-  %root.31 = load ptr, ptr %rp.30, !invariant.load !0
-  %cp.53 = getelementptr i64, ptr %ctx, i64 0
-  %cv.54 = load ptr, ptr %cp.53
-  %rp.55 = getelementptr ptr, ptr %cv.54, i64 1
-  %root.56 = load ptr, ptr %rp.55, !invariant.load !0
-  %cp.59 = getelementptr i64, ptr %ctx, i64 0
-  %cv.60 = load ptr, ptr %cp.59
-  %rp.61 = getelementptr ptr, ptr %cv.60, i64 2
-  %root.62 = load ptr, ptr %rp.61, !invariant.load !0
+  %cp.16 = getelementptr i64, ptr %ctx, i64 0
+  %cv.17 = load ptr, ptr %cp.16
+  %rp.18 = getelementptr ptr, ptr %cv.17, i64 0
+  %root.19 = load ptr, ptr %rp.18, !invariant.load !0
+  %cp.41 = getelementptr i64, ptr %ctx, i64 0
+  %cv.42 = load ptr, ptr %cp.41
+  %rp.43 = getelementptr ptr, ptr %cv.42, i64 1
+  %root.44 = load ptr, ptr %rp.43, !invariant.load !0
+  %cp.47 = getelementptr i64, ptr %ctx, i64 0
+  %cv.48 = load ptr, ptr %cp.47
+  %rp.49 = getelementptr ptr, ptr %cv.48, i64 2
+  %root.50 = load ptr, ptr %rp.49, !invariant.load !0
   br label %pre.4
 pre.4:
   br label %head.5
@@ -27,59 +27,47 @@ head.5:
   %c.11 = icmp slt i32 %i.9, %hi.2
   br i1 %c.11, label %body.6, label %done.8
 body.6:
-  %m1.13 = icmp eq i32 8, -1
-  %z.14 = icmp eq i32 8, 0
-  %bad.15 = or i1 %m1.13, %z.14
-  %d.16 = select i1 %bad.15, i32 1, i32 8
-  %q.17 = sdiv i32 %i.9, %d.16
-  %m.18 = srem i32 %i.9, %d.16
-  %t.19 = icmp ne i32 %m.18, 0
-  %t.20 = icmp slt i32 %m.18, 0
-  %t.21 = icmp slt i32 %d.16, 0
-  %t.22 = xor i1 %t.20, %t.21
-  %t.23 = and i1 %t.19, %t.22
-  %t.24 = select i1 %t.23, i32 %d.16, i32 0
-  %v.12 = add i32 %m.18, %t.24
-  %cv.25 = sext i32 %v.12 to i64
-  %v.26 = mul nuw nsw i64 %cv.25, 8
-  %ptr.27 = getelementptr inbounds i8, ptr %root.31, i64 %v.26
-  %cv.32 = sext i32 %v.12 to i64
-  %v.33 = mul nuw nsw i64 %cv.32, 8
-  %v.34 = add nuw nsw i64 4, %v.33
-  %ptr.35 = getelementptr inbounds i8, ptr %root.31, i64 %v.26
-  %pv.36 = insertelement <2 x float> poison, float 0x3FF0000000000000, i32 0
-  %pv.37 = insertelement <2 x float> %pv.36, float 0x4000000000000000, i32 1
-  %pinc.38 = bitcast <2 x float> %pv.37 to i64
-  %cur.42 = load atomic i64, ptr %ptr.35 monotonic, align 8
-  br label %cas.39
-cas.39:
-  br label %casloop.40
-casloop.40:
-  %c.43 = phi i64 [%cur.42, %cas.39], [%c.48, %casloop.40]
-  %c.44 = bitcast i64 %c.43 to <2 x float>
-  %c.46 = fadd <2 x float> %c.44, %pv.37
-  %c.45 = bitcast <2 x float> %c.46 to i64
-  %c.47 = cmpxchg ptr %ptr.35, i64 %c.43, i64 %c.45 monotonic monotonic, align 8
-  %c.48 = extractvalue { i64, i1 } %c.47, 0
-  %c.49 = extractvalue { i64, i1 } %c.47, 1
-  br i1 %c.49, label %casdone.41, label %casloop.40
-casdone.41:
-  %cv.50 = sext i32 %v.12 to i64
-  %v.51 = mul nuw nsw i64 %cv.50, 4
-  %ptr.52 = getelementptr inbounds i8, ptr %root.56, i64 %v.51
-  %old.57 = atomicrmw fadd ptr %ptr.52, float 0x3FF0000000000000 monotonic
-  %ptr.58 = getelementptr inbounds i8, ptr %root.62, i64 0
-  %old.63 = load float, ptr %red.3
-  %new.64 = fadd nsz float %old.63, 0x3FF0000000000000
-  store float %new.64, ptr %red.3
+  %v.12 = and i32 %i.9, 7
+  %cv.13 = sext i32 %v.12 to i64
+  %v.14 = mul nuw nsw i64 %cv.13, 8
+  %ptr.15 = getelementptr inbounds i8, ptr %root.19, i64 %v.14
+  %cv.20 = sext i32 %v.12 to i64
+  %v.21 = mul nuw nsw i64 %cv.20, 8
+  %v.22 = add nuw nsw i64 4, %v.21
+  %ptr.23 = getelementptr inbounds i8, ptr %root.19, i64 %v.14
+  %pv.24 = insertelement <2 x float> poison, float 0x3FF0000000000000, i32 0
+  %pv.25 = insertelement <2 x float> %pv.24, float 0x4000000000000000, i32 1
+  %pinc.26 = bitcast <2 x float> %pv.25 to i64
+  %cur.30 = load atomic i64, ptr %ptr.23 monotonic, align 8
+  br label %cas.27
+cas.27:
+  br label %casloop.28
+casloop.28:
+  %c.31 = phi i64 [%cur.30, %cas.27], [%c.36, %casloop.28]
+  %c.32 = bitcast i64 %c.31 to <2 x float>
+  %c.34 = fadd <2 x float> %c.32, %pv.25
+  %c.33 = bitcast <2 x float> %c.34 to i64
+  %c.35 = cmpxchg ptr %ptr.23, i64 %c.31, i64 %c.33 monotonic monotonic, align 8
+  %c.36 = extractvalue { i64, i1 } %c.35, 0
+  %c.37 = extractvalue { i64, i1 } %c.35, 1
+  br i1 %c.37, label %casdone.29, label %casloop.28
+casdone.29:
+  %cv.38 = sext i32 %v.12 to i64
+  %v.39 = mul nuw nsw i64 %cv.38, 4
+  %ptr.40 = getelementptr inbounds i8, ptr %root.44, i64 %v.39
+  %old.45 = atomicrmw fadd ptr %ptr.40, float 0x3FF0000000000000 monotonic
+  %ptr.46 = getelementptr inbounds i8, ptr %root.50, i64 0
+  %old.51 = load float, ptr %red.3
+  %new.52 = fadd nsz float %old.51, 0x3FF0000000000000
+  store float %new.52, ptr %red.3
   br label %latch.7
 latch.7:
   %inext.10 = add i32 %i.9, 1
   br label %head.5
 done.8:
-  %sum.65 = load float, ptr %red.3
-  %ptr.66 = getelementptr inbounds i8, ptr %root.62, i64 0
-  %old.67 = atomicrmw fadd ptr %ptr.66, float %sum.65 monotonic
+  %sum.53 = load float, ptr %red.3
+  %ptr.54 = getelementptr inbounds i8, ptr %root.50, i64 0
+  %old.55 = atomicrmw fadd ptr %ptr.54, float %sum.53 monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
@@ -103,10 +91,10 @@ entry:
   %hi.16 = trunc i64 %hi to i32
   %red.17 = alloca float
   store float 0x0000000000000000, ptr %red.17
-  %cp.56 = getelementptr i64, ptr %ctx, i64 0
-  %cv.57 = load ptr, ptr %cp.56
-  %rp.58 = getelementptr ptr, ptr %cv.57, i64 2
-  %root.59 = load ptr, ptr %rp.58, !invariant.load !0
+  %cp.44 = getelementptr i64, ptr %ctx, i64 0
+  %cv.45 = load ptr, ptr %cp.44
+  %rp.46 = getelementptr ptr, ptr %cv.45, i64 2
+  %root.47 = load ptr, ptr %rp.46, !invariant.load !0
   br label %pre.18
 pre.18:
   br label %head.19
@@ -115,50 +103,38 @@ head.19:
   %c.25 = icmp slt i32 %i.23, %hi.16
   br i1 %c.25, label %body.20, label %done.22
 body.20:
-  %m1.27 = icmp eq i32 8, -1
-  %z.28 = icmp eq i32 8, 0
-  %bad.29 = or i1 %m1.27, %z.28
-  %d.30 = select i1 %bad.29, i32 1, i32 8
-  %q.31 = sdiv i32 %i.23, %d.30
-  %m.32 = srem i32 %i.23, %d.30
-  %t.33 = icmp ne i32 %m.32, 0
-  %t.34 = icmp slt i32 %m.32, 0
-  %t.35 = icmp slt i32 %d.30, 0
-  %t.36 = xor i1 %t.34, %t.35
-  %t.37 = and i1 %t.33, %t.36
-  %t.38 = select i1 %t.37, i32 %d.30, i32 0
-  %v.26 = add i32 %m.32, %t.38
-  %cv.39 = sext i32 %v.26 to i64
-  %v.40 = mul nuw nsw i64 %cv.39, 8
-  %ptr.41 = getelementptr i8, ptr %pr.6, i64 %v.40
-  %old.42 = load float, ptr %ptr.41
-  %new.43 = fadd nsz float %old.42, 0x3FF0000000000000
-  store float %new.43, ptr %ptr.41
-  %cv.44 = sext i32 %v.26 to i64
-  %v.45 = mul nuw nsw i64 %cv.44, 8
-  %v.46 = add nuw nsw i64 4, %v.45
-  %ptr.47 = getelementptr i8, ptr %pr.6, i64 %v.46
-  %old.48 = load float, ptr %ptr.47
-  %new.49 = fadd nsz float %old.48, 0x4000000000000000
-  store float %new.49, ptr %ptr.47
-  %cv.50 = sext i32 %v.26 to i64
-  %v.51 = mul nuw nsw i64 %cv.50, 4
-  %ptr.52 = getelementptr i8, ptr %pr.13, i64 %v.51
-  %old.53 = load float, ptr %ptr.52
-  %new.54 = fadd nsz float %old.53, 0x3FF0000000000000
-  store float %new.54, ptr %ptr.52
-  %ptr.55 = getelementptr inbounds i8, ptr %root.59, i64 0
-  %old.60 = load float, ptr %red.17
-  %new.61 = fadd nsz float %old.60, 0x3FF0000000000000
-  store float %new.61, ptr %red.17
+  %v.26 = and i32 %i.23, 7
+  %cv.27 = sext i32 %v.26 to i64
+  %v.28 = mul nuw nsw i64 %cv.27, 8
+  %ptr.29 = getelementptr i8, ptr %pr.6, i64 %v.28
+  %old.30 = load float, ptr %ptr.29
+  %new.31 = fadd nsz float %old.30, 0x3FF0000000000000
+  store float %new.31, ptr %ptr.29
+  %cv.32 = sext i32 %v.26 to i64
+  %v.33 = mul nuw nsw i64 %cv.32, 8
+  %v.34 = add nuw nsw i64 4, %v.33
+  %ptr.35 = getelementptr i8, ptr %pr.6, i64 %v.34
+  %old.36 = load float, ptr %ptr.35
+  %new.37 = fadd nsz float %old.36, 0x4000000000000000
+  store float %new.37, ptr %ptr.35
+  %cv.38 = sext i32 %v.26 to i64
+  %v.39 = mul nuw nsw i64 %cv.38, 4
+  %ptr.40 = getelementptr i8, ptr %pr.13, i64 %v.39
+  %old.41 = load float, ptr %ptr.40
+  %new.42 = fadd nsz float %old.41, 0x3FF0000000000000
+  store float %new.42, ptr %ptr.40
+  %ptr.43 = getelementptr inbounds i8, ptr %root.47, i64 0
+  %old.48 = load float, ptr %red.17
+  %new.49 = fadd nsz float %old.48, 0x3FF0000000000000
+  store float %new.49, ptr %red.17
   br label %latch.21
 latch.21:
   %inext.24 = add i32 %i.23, 1
   br label %head.19
 done.22:
-  %sum.62 = load float, ptr %red.17
-  %ptr.63 = getelementptr inbounds i8, ptr %root.59, i64 0
-  %old.64 = atomicrmw fadd ptr %ptr.63, float %sum.62 monotonic
+  %sum.50 = load float, ptr %red.17
+  %ptr.51 = getelementptr inbounds i8, ptr %root.47, i64 0
+  %old.52 = atomicrmw fadd ptr %ptr.51, float %sum.50 monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private_sum0(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {

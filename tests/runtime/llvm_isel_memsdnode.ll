@@ -1,4 +1,4 @@
-; sfwd:750:8 (tests/fuzz/reproducers.py), the task function after simgrad's -O3 pipeline with loop unrolling,
+; sfwd:750:8 (benchmarks/fuzz_long.py --gen shapes), the task function after simgrad's -O3 pipeline with loop unrolling,
 ; reduced (definitions replaced by poison while the crash stays). LLVM 22.1 (llvmlite 0.50.0, assertions on)
 ; aborts in X86 instruction selection: cast<MemSDNode>(SDNode*) assertion. Emit it with llvmlite:
 ;   tm = Target.from_default_triple().create_target_machine(opt=3); tm.emit_object(parse_assembly(text))
