@@ -110,7 +110,7 @@ from simgrad.lang.atomics import (
     atomic_xor,
 )
 from simgrad.lang.linalg import eig, polar_decompose, solve, svd, sym_eig
-from simgrad.lang.sparse import activate, append, deactivate, deactivate_all_snodes, is_active, length
+from simgrad.lang.sparse import activate, append, deactivate, deactivate_all_snodes, get_addr, is_active, length
 from simgrad.lang import profiler
 from simgrad.lang.program import init, reset
 
@@ -139,7 +139,6 @@ _NOT_SUPPORTED = {
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
     "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",
     "BitpackedFields": "quantized types are not built yet",
-    "get_addr": "raw field addresses are not exposed",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",

@@ -605,7 +605,10 @@ def lower_cast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 def lower_bitcast(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("bc")
     (a,) = s.operands
-    f.emit(f"{r} = bitcast {llvm_type(a.type)} {f.v(a)} to {llvm_type(s.vtype)}")
+    if a.op is Op.GLOBAL_PTR:  # ti.get_addr: the element's address as an integer
+        f.emit(f"{r} = ptrtoint ptr {f.v(a)} to {llvm_type(s.vtype)}")
+    else:
+        f.emit(f"{r} = bitcast {llvm_type(a.type)} {f.v(a)} to {llvm_type(s.vtype)}")
     f.names[s] = r
 
 

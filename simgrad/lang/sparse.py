@@ -1,6 +1,6 @@
-"""Sparse SNode operations as Taichi names them: ti.activate / deactivate / is_active / append / length
-inside kernels (each emits one SNODE_OP that passes/lower_access.py expands), and deactivate_all in
-Python scope (a compiled struct-for over the node, lang/scope_hooks.py)."""
+"""SNode operations as Taichi names them: ti.activate / deactivate / is_active / append / length inside
+kernels (each emits one SNODE_OP that passes/lower_access.py expands), deactivate_all in Python scope (a
+compiled struct-for over the node, lang/scope_hooks.py), and ti.get_addr (an element's address)."""
 
 from __future__ import annotations
 
@@ -189,3 +189,24 @@ def deactivate_all_snodes() -> None:
 
     for tree in get_program().trees:
         tree.root.deactivate_all()
+
+
+def get_addr(f, indices):
+    """The address (u64) of the element of field `f` (or of its place SNode, `f.snode`) at `indices`, in
+    this process's memory (a device address on the GPU): differences between addresses show the layout."""
+    from simgrad.lang.field import Field, ScalarField
+
+    if context.current() is None:
+        raise SimgradError("ti.get_addr can only be called inside a kernel", caller_loc())
+    node = f.snode if isinstance(f, Field) else f
+    field = node.field if isinstance(node, SNode) and node.kind == "place" else None
+    if not isinstance(field, ScalarField):
+        raise SimgradSyntaxError(f"ti.get_addr expects a scalar field or its place SNode (x.snode), got "
+                                 f"{type(f).__name__}", context.current_loc())
+    field.check_alive(context.current_loc())
+    idx = _indices(node, indices, "get_addr", len(field.shape))
+    if field.offset:
+        idx = [operators.sub(i, o) for i, o in zip(idx, field.offset)]
+    b = context.builder()
+    ptr = b.emit(Op.GLOBAL_PTR, field.dtype, tuple(i.stmt for i in idx), {"target": field.ref()})
+    return Expr(b.emit(Op.BITCAST, dt.u64, (ptr,)))

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import simgrad as ti
+from simgrad.errors import SimgradError
 
 
 @pytest.mark.parametrize("t", [ti.i8, ti.i16, ti.i32, ti.i64, ti.u8, ti.u16, ti.u32, ti.u64, ti.f32, ti.f64],
@@ -396,3 +397,33 @@ def test_vector_and_matrix_to_from_numpy_through_packed_views_and_soa():
     u.from_numpy(c)
     np.testing.assert_array_equal(u.to_numpy(), c)
     assert u[2][1] == 5
+
+
+def test_get_addr_shows_the_layout():
+    """ti.get_addr(x.snode or x, indices): the element's address (u64); differences follow the SNode layout
+    (here the hierarchical one of Taichi's print_offset example, and a field with offsets), as in taichi."""
+    ti.init(arch=ti.cpu)
+    a = ti.field(ti.i32)
+    ti.root.dense(ti.ij, (1, 2)).dense(ti.ij, 2).dense(ti.ij, 2).place(a)
+    b = ti.field(ti.f64, shape=(3, 5), offset=(-1, 2))
+
+    @ti.kernel
+    def fill():
+        for i, j in a:
+            a[i, j] = int(ti.get_addr(a.snode, [i, j]) - ti.get_addr(a.snode, [0, 0])) // 4
+        for i, j in b:
+            b[i, j] = ti.cast(ti.get_addr(b, [i, j]) - ti.get_addr(b, ti.Vector([-1, 2])), ti.f64)
+
+    fill()
+    i, j = np.meshgrid(np.arange(4), np.arange(8), indexing="ij")
+    want = (j // 4) * 16 + ((i // 2) % 2 * 2 + (j // 2) % 2) * 4 + (i % 2) * 2 + j % 2
+    np.testing.assert_array_equal(a.to_numpy(), want)
+    np.testing.assert_array_equal(b.to_numpy(), np.arange(15).reshape(3, 5) * 8.0)
+    with pytest.raises(ti.TaichiSyntaxError, match="get_addr expects a scalar field"):
+        @ti.kernel
+        def bad():
+            print(ti.get_addr(3, [0]))
+
+        bad()
+    with pytest.raises(SimgradError, match="get_addr can only be called inside a kernel"):
+        ti.get_addr(a, [0, 0])
