@@ -7,8 +7,9 @@ scratch words of the context (spills: locals, loads, anything with an effect) or
 consumer (pure arithmetic, arguments, addresses): a serial run of pure statements launches nothing.
 
 One switch, `sim`, picks how a thread learns where it is: on the GPU from `llvm.nvvm.read.ptx.sreg.*`, on the
-simulated GPU (SIMGRAD_GPU_SIM=1) from a per-thread struct `{tid, ntid, ctaid, nctaid}` that a generated host
-entry fills while it runs blocks (on the thread pool) x threads (serially); everything else is identical.
+simulated GPU (SIMGRAD_GPU_SIM=1) from a per-thread struct `{tid, ntid, ctaid, nctaid}` that the host device
+(runtime/device.py HostDriver) fills while it runs blocks (on the thread pool) x threads (serially); everything
+else is identical, and both are launched by runtime/gpu_launch.py through the same device interface.
 The tape (adstack) is per-thread local memory (an alloca); math goes through libdevice (`__nv_*`) on the GPU.
 Imports nothing from codegen/cpu.py.
 """
@@ -28,14 +29,13 @@ from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.opdefs import OPS, Libm
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
-from simgrad.runtime import abi, ll
+from simgrad.runtime import abi
 
 if TYPE_CHECKING:
     from simgrad.errors import Loc
 
 TRIPLE = "nvptx64-nvidia-cuda"
 DEFAULT_BLOCK = 128
-SIM_GRID = 4  # blocks of the simulated GPU when the count is not known at compile time
 LIBDEVICE_CANDIDATES = ("/usr/local/cuda/nvvm/libdevice/libdevice.10.bc",
                         "/usr/local/cuda-13.0/nvvm/libdevice/libdevice.10.bc")
 
@@ -120,15 +120,14 @@ class GpuCodegen(KernelCodegen):
     with an entry `void symbol(ptr ctx)` that the CPU launcher calls unchanged)."""
 
     def __init__(self, kernel: Kernel, symbol: str, *, sim: bool, tape_entries: int = 256, debug: bool = False,
-                 fast_math: bool = True, export: bool = False):
+                 fast_math: bool = True):
         super().__init__(kernel, symbol, debug=debug, fast_math=fast_math)
         self.sim = sim
-        self.export = export  # sim: the segment functions visible, for runtime/device.py HostDriver launches
         self.tape_entries = min(max(int(tape_entries), 1), GPU_TAPE_LIMIT)
         self.launches: list[Launch] = []
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
         self.scratch_slots = 0
-        self.tape_top_slot: int | None = None  # the runtime zeroes this word before each launch
+        self.tape_top_slot: int | None = None  # 0 in the host context each launch copies to the device
         self._serial = False  # emitting a one-thread kernel
 
     def serial_tape_top(self) -> int:
@@ -217,7 +216,7 @@ class GpuCodegen(KernelCodegen):
 
     def _params(self, name: str) -> str:
         if self.sim:
-            return f"{'' if self.export else 'internal '}void @{name}(ptr %ctx, ptr %sreg)"
+            return f"void @{name}(ptr %ctx, ptr %sreg)"  # launched by runtime/device.py HostDriver
         return f"ptx_kernel void @{name}(ptr %ctx)"
 
     def generate(self) -> str:
@@ -230,8 +229,6 @@ class GpuCodegen(KernelCodegen):
             elif not all(s.op in PURE for s in stmts):
                 self._serial_kernel(name, stmts)
         self.module.globals.append("!0 = !{}")
-        if self.sim:
-            self._sim_entry()
         return self.module.text()
 
     def _serial_kernel(self, name: str, stmts: list[Stmt]) -> None:
@@ -307,25 +304,6 @@ class GpuCodegen(KernelCodegen):
             n = max(int(hi.attrs["value"]) - int(lo.attrs["value"]), 0)
             grid = max(1, min(-(-n // block), 65535))
         self.launches.append(Launch(name, grid, block))
-
-    # -- the simulated GPU's host side -----------------------------------------------------------------
-    def _sim_entry(self) -> None:
-        """`void symbol(ptr ctx)`: each launch in order, its blocks spread over the thread pool (parallel_for
-        over block indices), each block's threads one after another, each with its own special registers."""
-        lines = [f"define void @{self.symbol}(ptr %ctx) {{", "entry:",
-                 f"  %pfp = getelementptr i64, ptr %ctx, i64 {abi.CTX_PFOR}", "  %pfor = load ptr, ptr %pfp",
-                 "  %clo = alloca [4 x i64], align 8", "  store ptr %ctx, ptr %clo"]
-        if self.tape_top_slot is not None:
-            lines += [f"  %ttp = getelementptr i64, ptr %ctx, i64 {self.tape_top_slot}", "  store i64 0, ptr %ttp"]
-        for k, ln in enumerate(self.launches):
-            grid = ln.grid if ln.grid is not None else SIM_GRID
-            lines += [f"  %fp{k} = getelementptr i64, ptr %clo, i64 1", f"  store ptr @{ln.symbol}, ptr %fp{k}",
-                      f"  %bp{k} = getelementptr i64, ptr %clo, i64 2", f"  store i64 {ln.block}, ptr %bp{k}",
-                      f"  %gp{k} = getelementptr i64, ptr %clo, i64 3", f"  store i64 {grid}, ptr %gp{k}",
-                      f"  call void %pfor(ptr @{self.symbol}_blocks, ptr %clo, i64 0, i64 {grid}, i64 1)"]
-        lines += ["  ret void", "}"]
-        self.module.functions.append("\n".join(lines))
-        self.module.functions.append(ll.load("sim_blocks", symbol=f"{self.symbol}_blocks"))
 
 
 # -- PTX -----------------------------------------------------------------------------------------------

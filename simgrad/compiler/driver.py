@@ -88,25 +88,43 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
         entry = _read_entry(prog, key)
         if entry is not None:
             meta, obj = entry
-            launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
+            launcher = _make_launcher(prog, meta, obj)
             light = tuple(np.empty((0,) * a.ndim, a.dtype) if isinstance(a, np.ndarray) else a for a in args)
             return CompiledKernel(launcher, None, None, meta["ret_matrix"],
                                   rebuild=lambda: _build(kernel, prog, light, transform, name_suffix),
                                   in_place=meta.get("in_place", False))
     ir, text, meta = _build(kernel, prog, args, transform, name_suffix, guard)
-    obj = prog.jit.object_for(text)
+    obj = _object(prog, text, meta)
     if key is not None and guard is not None and guard.reason is None:
         try:
             prog.jit.write_entry(key, pickle.dumps((meta, obj), protocol=pickle.HIGHEST_PROTOCOL))
         except (pickle.PicklingError, TypeError, AttributeError):
             pass  # metadata that does not pickle only costs us the cache
-    launcher = _make_launcher(prog, meta, prog.link(obj, ["sg_kernel"]))
+    launcher = _make_launcher(prog, meta, obj)
     return CompiledKernel(launcher, ir, text, meta["ret_matrix"], in_place=meta["in_place"])
 
 
 def _on_gpu(prog: Program) -> bool:
     arch = prog.config.arch
     return arch is not None and arch.name == "cuda"
+
+
+def _object(prog: Program, text: str, meta: dict) -> bytes:
+    """What the kernel runs as: native code (the CPU, the simulated GPU) or PTX for the device's compute
+    capability."""
+    if not _on_gpu(prog) or prog.gpu_sim:
+        return prog.jit.object_for(text)
+    from simgrad.codegen import nvptx
+
+    major, minor = prog.device.compute_capability
+    return nvptx.compile_ptx(text, {s for s, _, _ in meta["launches"]}, f"sm_{major}{minor}").encode()
+
+
+def _target_id(prog: Program) -> tuple:
+    """What compiled code depends on besides the kernel: the host target, and the GPU's compute capability."""
+    if _on_gpu(prog) and not prog.gpu_sim:
+        return (*prog.jit.target_id(), "cuda", prog.device.compute_capability)
+    return prog.jit.target_id()
 
 
 def ptx_check_enabled() -> bool:
@@ -145,7 +163,7 @@ def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix
                           if k not in ("offline_cache", "offline_cache_file_path")))
     step = None if transform is None else f"{transform.__module__}.{transform.__qualname__}"
     try:
-        parts = (environment(), prog.jit.target_id(), config, dt.Defaults.fp.name, dt.Defaults.ip.name,
+        parts = (environment(), _target_id(prog), config, dt.Defaults.fp.name, dt.Defaults.ip.name,
                  name_suffix, step, kb.function(kernel.func), kb.signature(kernel.signature),
                  tuple(p.fingerprint(a, kb) for p, a in zip(kernel.params, args)))
     except Exception:  # Unkeyable, or e.g. a function without source: compiling reports it (or never needs it)
@@ -171,11 +189,11 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
         else 1
     cg: KernelCodegen
-    if _on_gpu(prog):  # arch=cuda: today the simulated GPU (codegen/nvptx.py with sim=True)
+    if _on_gpu(prog):  # arch=cuda: the GPU's PTX, or the same segments on the host for the simulated GPU
         from simgrad.codegen import nvptx
 
         _refuse_on_gpu(ir)
-        cg = nvptx.GpuCodegen(ir, symbol, sim=True, tape_entries=tape_entries, debug=prog.config.debug,
+        cg = nvptx.GpuCodegen(ir, symbol, sim=prog.gpu_sim, tape_entries=tape_entries, debug=prog.config.debug,
                               fast_math=prog.config.fast_math)
     else:
         from simgrad.codegen.cpu import CpuCodegen  # loaded when first needed
@@ -192,7 +210,9 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
             "private_slots": cg.private_slots, "scratch_slots": getattr(cg, "scratch_slots", 0),
             # the forward reads fields it overwrites: a Tape keeps their values from before each launch
             "in_place": transform is None and bool(in_place_targets(ir)),
-            "tape_bound": ir.tape_bound if uses_tape else None}
+            "tape_bound": ir.tape_bound if uses_tape else None,
+            "launches": [(ln.symbol.replace(symbol, "sg_kernel"), ln.grid, ln.block)
+                         for ln in getattr(cg, "launches", ())]}
     return ir, stable, meta
 
 
@@ -228,11 +248,22 @@ def _bind_params(kernel: KernelSource, comp: KernelLowering, args) -> tuple[tupl
     return (out, slots.count), ret_matrix
 
 
-def _make_launcher(prog: Program, meta: dict, entries: dict) -> Launcher:
-    """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept)."""
-    launcher = Launcher(meta["name"], meta["params"], entries["sg_kernel"], meta["nslots"], meta["returns"],
-                        meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),
-                        meta.get("scratch_slots", 0))
+def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
+    """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept) and its
+    code (linked into the program, or loaded on the device)."""
+    launcher: Launcher
+    if _on_gpu(prog):
+        from simgrad.runtime.gpu_launch import GpuLauncher
+
+        names = [s for s, _, _ in meta["launches"]]
+        fns = prog.device.load_module(prog.link(obj, names) if prog.gpu_sim else obj.decode(), names)
+        launcher = GpuLauncher(prog.device, [(fns[s], grid, block) for s, grid, block in meta["launches"]],
+                               meta["name"], meta["params"], meta["nslots"], meta["returns"], meta["errors"], prog,
+                               meta["ret_matrix"], meta.get("scratch_slots", 0))
+    else:
+        launcher = Launcher(meta["name"], meta["params"], prog.link(obj, ["sg_kernel"])["sg_kernel"], meta["nslots"],
+                            meta["returns"], meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),
+                            meta.get("scratch_slots", 0))
     if meta["uses_tape"]:
         # the size proven by the bounds when they are static, else ti.init(ad_stack_size=...)
         bound = meta["tape_bound"]

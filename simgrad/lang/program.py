@@ -79,6 +79,7 @@ class Program:
         self.instantiations = 0  # kernel instances made (compiled or taken from the kernel cache)
         self.error = np.zeros(abi.ERR_WORDS, dtype=np.int64)
         self._pool = None
+        self._device = None
         self._rng: np.ndarray | None = None
         from simgrad.runtime.jit import get_jit
 
@@ -129,6 +130,22 @@ class Program:
             self._code.close()
             self._code = None
         self.sparse.release()
+
+    @property
+    def gpu_sim(self) -> bool:
+        """arch=cuda runs on the simulated GPU (SIMGRAD_GPU_SIM=1, or no usable GPU runtime)."""
+        from simgrad.lang.archs import gpu_mode
+
+        return gpu_mode() != "cuda"
+
+    @property
+    def device(self):
+        """The device arch=cuda launches on (runtime/device.py): the GPU, or the simulated one on the host."""
+        if self._device is None:
+            from simgrad.runtime import device
+
+            self._device = device.HostDriver() if self.gpu_sim else device.CudaDriver()
+        return self._device
 
     @property
     def pool(self):

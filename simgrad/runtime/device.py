@@ -89,17 +89,21 @@ class Device:
         raise NotImplementedError
 
 
-_SIM_FN = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
+_GRID_FN = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64)
 
 
 class HostDriver(Device):
-    """The simulated GPU: host memory; a launch runs blocks one after another and, in a block, threads one
-    after another (the generated sim entry of codegen/nvptx.py does the same natively, blocks on the pool)."""
+    """The simulated GPU: host memory; a launch runs the grid's blocks on the thread pool and, in a block, its
+    threads one after another, each with its own special registers (runtime/ll/sim_grid.ll). Launches are
+    synchronous: the host sees their effects at once, as after a cuCtxSynchronize."""
 
     name = "simulated GPU (host)"
+    compute_capability = (0, 0)
 
     def __init__(self) -> None:
         self._blocks: dict[int, np.ndarray] = {}
+        self._grid: Any = None
+        self.launches = 0  # kernels launched (tests count them)
 
     def alloc(self, nbytes: int) -> int:
         buf = np.zeros(max(int(nbytes), 1) + 64, dtype=np.uint8)
@@ -125,18 +129,22 @@ class HostDriver(Device):
         missing = [s for s in symbols if not image.get(s)]
         if missing:
             raise DeviceError(f"module has no functions {missing}", caller_loc())
-        return {s: _SIM_FN(image[s]) for s in symbols}
+        return {s: int(image[s]) for s in symbols}
 
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
+        """`fn` is the native address of `void fn(ptr ctx, ptr sreg)`; `ctx` a context whose header holds the
+        thread pool's parallel_for (runtime/abi.py CTX_PFOR), as every kernel context does."""
         if grid < 1 or block < 1 or block > 1024:
             raise DeviceError(f"invalid launch configuration: grid={grid}, block={block} (block must be 1..1024)",
                               caller_loc())
-        sreg = (ctypes.c_int32 * 4)(0, block, 0, grid)
-        for b in range(grid):
-            sreg[2] = b
-            for t in range(block):
-                sreg[0] = t
-                fn(ctx, ctypes.addressof(sreg))
+        if self._grid is None:
+            from simgrad.runtime import abi, ll
+            from simgrad.runtime.jit import get_jit
+
+            text = ll.load("sim_grid", pfor_slot=abi.CTX_PFOR) + ll.load("sim_blocks", symbol="simgrad_sim_blocks")
+            self._grid = _GRID_FN(get_jit().load(text, ["simgrad_sim_grid"])["simgrad_sim_grid"])
+        self.launches += 1
+        self._grid(ctx, fn, block, grid)
 
     def synchronize(self) -> None:
         pass

@@ -61,8 +61,12 @@ class Launcher:
         self.tape: np.ndarray | None = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
-        self.entry = ctypes.CFUNCTYPE(None, ctypes.c_void_p)(entry_address)
+        self.entry = self.native_entry(entry_address)
         self.launch = self._generate(params, returns)
+
+    def native_entry(self, address: int):
+        """What the generated launch calls with the context's address: the kernel's native entry."""
+        return ctypes.CFUNCTYPE(None, ctypes.c_void_p)(address)
 
     def __del__(self):
         """Free the private copies the native code allocated (calloc) into this launcher's context."""

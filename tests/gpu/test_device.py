@@ -65,7 +65,7 @@ def test_host_driver_runs_a_kernels_launch_sequence():
     prog = get_program()
     x, s = np.arange(1000, dtype=np.float32), np.zeros(1, np.float32)
     ck = compile_kernel(k, prog, (1.5, x.copy(), s.copy()))
-    cg = nvptx.GpuCodegen(ck.ir, "hd", sim=True, export=True)
+    cg = nvptx.GpuCodegen(ck.ir, "hd", sim=True)
     text = cg.generate()
     names = [ln.symbol for ln in cg.launches]
     addrs = prog.jit.code.link(prog.jit.object_for(text), names)

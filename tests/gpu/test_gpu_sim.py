@@ -23,7 +23,7 @@ def test_cases_on_simulated_gpu(sim, case):
 
 
 def test_grid_stride_covers_every_index_once(sim):
-    """More iterations than simulated threads (run-time count: grid of SIM_GRID blocks x 128): each index once."""
+    """More iterations than simulated threads (run-time count: a saturating grid of 128-thread blocks): each index once."""
     c = ti.field(ti.i32, shape=5000)
 
     @ti.kernel
@@ -152,3 +152,31 @@ def test_serial_tape_spans_kernels(sim):
     for av in (0.8, 0.3):
         a[None] = av
         check_grads(f, [x, a], [y, total], rtol=1e-6, atol=1e-10)
+
+
+def test_kernels_launch_through_the_device_interface(sim):
+    """A kernel runs as its segments launched on the program's device (the HostDriver here, CudaDriver on a
+    GPU): the context is copied to device memory each launch (so a later write to the host copy cannot reach a
+    running kernel) and return values come back from the device's copy."""
+    from simgrad.lang.program import get_program
+    from simgrad.runtime.gpu_launch import GpuLauncher
+
+    x = ti.field(ti.f32, shape=1000)
+
+    @ti.kernel
+    def k(a: ti.f32) -> ti.f32:
+        b = a * 2.0  # a serial segment, then a loop over the field, then the sum and return
+        for i in range(1000):
+            x[i] = i * b
+        s = 0.0
+        for i in range(1000):
+            s += x[i]
+        return s
+
+    dev = get_program().device
+    before = dev.launches
+    assert k(1.5) == pytest.approx(3.0 * 999 * 1000 / 2, rel=1e-6)
+    assert dev.launches - before >= 3  # the serial part and the two loops are separate launches
+    inst = k.instance((1.5,))
+    assert isinstance(inst.launcher, GpuLauncher) and inst.launcher.dctx != inst.launcher.buf.ctypes.data
+    assert k(0.5) == pytest.approx(999 * 1000 / 2, rel=1e-6)  # the new argument reached the device copy

@@ -1,0 +1,57 @@
+"""The launcher of a kernel on a device (arch=cuda: the GPU through cuda-python, or the simulated GPU).
+
+The arguments are packed into the host context exactly as on the CPU (runtime/launch.py); a launch then copies
+the context to the device, runs the kernel's segments in order (codegen/nvptx.py `Launch`: grid, block), and,
+when the kernel returns values or can report an error, waits for the device and reads the return words back.
+A kernel without either stays asynchronous: the host meets the device at the next such launch, at Python-scope
+access to fields, or at ti.sync()."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from simgrad.runtime.abi import CTX_TAPE_CAP, CTX_TAPE_SERIAL
+from simgrad.runtime.device import Device, saturating_grid
+from simgrad.runtime.launch import Launcher
+
+
+class GpuLauncher(Launcher):
+    """`launches`: (function handle, grid or None for a saturating grid, block) in launch order."""
+
+    def __init__(self, device: Device, launches: list[tuple[Any, int | None, int]], kernel_name: str, params: list,
+                 nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
+                 scratch_slots: int = 0):
+        self.device = device
+        self.launches = [(fn, grid or saturating_grid(device, block), block) for fn, grid, block in launches]
+        self.dctx = self.dtape = 0
+        super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
+        self.dctx = device.alloc(self.buf.nbytes)
+        self.waits = bool(returns) or bool(error_table)  # values to read back, or an error to report at its line
+        self._ret = self.buf[self.ret_slot:self.ret_slot + len(returns)]
+
+    def native_entry(self, address: int):
+        return self.run
+
+    def run(self, _addr: int) -> None:
+        d = self.device
+        d.to_device(self.dctx, self.buf)
+        for fn, grid, block in self.launches:
+            d.launch(fn, grid, block, self.dctx)
+        if self.waits:
+            d.synchronize()
+            if len(self._ret):
+                d.to_host(self._ret, self.dctx + 8 * self.ret_slot)
+
+    def attach_tape(self, entries: int) -> None:
+        """The serial part's tape in device memory (the parallel segments keep theirs in local memory)."""
+        self.dtape = self.device.alloc(8 * entries)
+        self.buf[CTX_TAPE_SERIAL] = self.dtape
+        self.buf[CTX_TAPE_CAP] = entries
+
+    def __del__(self):
+        try:
+            for p in (self.dctx, self.dtape):
+                if p:
+                    self.device.free(p)
+        except Exception:  # interpreter shutdown
+            pass
