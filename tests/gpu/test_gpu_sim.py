@@ -23,7 +23,8 @@ def test_cases_on_simulated_gpu(sim, case):
 
 
 def test_grid_stride_covers_every_index_once(sim):
-    """More iterations than simulated threads (run-time count: a saturating grid of 128-thread blocks): each index once."""
+    """More iterations than simulated threads (a run-time count: a saturating grid of 128-thread blocks): each
+    index once."""
     c = ti.field(ti.i32, shape=5000)
 
     @ti.kernel
