@@ -121,7 +121,12 @@ uint1 = u1
 
 
 def sync():
-    """Kernels finish before their launch returns on the CPU; nothing to wait for."""
+    """Wait for the kernels launched so far (on the CPU they finish before their launch returns)."""
+    from simgrad.lang.program import get_program
+
+    prog = get_program()
+    if getattr(prog.config.arch, "name", None) == "cuda":
+        prog.device.synchronize()
 
 
 def get_runtime():

@@ -53,7 +53,7 @@ def gpu_mode() -> str | None:
     """How arch=cuda can run here: "cuda" (a GPU and the runtime), "sim" (SIMGRAD_GPU_SIM=1) or None."""
     from simgrad.runtime import device
 
-    if device.CUDA_RUNTIME_READY and device.cuda_available():
+    if device.cuda_runtime_enabled() and device.cuda_available():
         return "cuda"
     if device.sim_requested():
         return "sim"

@@ -9,6 +9,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.lang.field import FieldElement
+from simgrad.lang.program import get_program
 from simgrad.lang.types import MatrixType
 
 
@@ -41,7 +42,7 @@ class Ndarray:
         self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
         self.ncols = self.m  # what element views read (0: vectors)
         self.name = "ndarray"
-        self._ndarray = np.zeros(self.shape + self.element_shape, dtype=self.dtype.np)
+        self._ndarray = get_program().zeros(self.shape + self.element_shape, self.dtype.np)
         self.comps = [_Component(self, e) for e in np.ndindex(*self.element_shape)] if self.element_shape else []
         self.grad: Ndarray | None = None
         if needs_grad:

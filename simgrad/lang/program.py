@@ -68,8 +68,11 @@ class Program:
         Program.generation += 1
         self.generation = Program.generation
         self.config = Config(**kw)
+        self._pool = None
+        self._device = None
         self.set_default_types(self.config.default_fp, self.config.default_ip)
-        self.memory = Memory()
+        on_device = getattr(self.config.arch, "name", None) == "cuda"
+        self.memory = Memory(self.device.alloc_shared) if on_device else Memory()
         gb = kw.get("device_memory_GB")
         self.sparse = SparseMemory(int(gb * 2**30) if gb else MAX_RESERVE)
         self.trees: list = []
@@ -77,9 +80,7 @@ class Program:
         self.profiler = Profiler()
         self.compile_seconds = 0.0  # time spent instantiating kernels (compiles and kernel-cache hits)
         self.instantiations = 0  # kernel instances made (compiled or taken from the kernel cache)
-        self.error = np.zeros(abi.ERR_WORDS, dtype=np.int64)
-        self._pool = None
-        self._device = None
+        self.error = self.zeros(abi.ERR_WORDS, np.int64)
         self._rng: np.ndarray | None = None
         from simgrad.runtime.jit import get_jit
 
@@ -161,8 +162,17 @@ class Program:
         if self._rng is None:
             n = max(self.pool.num_threads, 1) + 1
             gen = np.random.default_rng(self.config.random_seed)
-            self._rng = gen.integers(1, 2**32 - 1, size=(n, 4), dtype=np.uint32)
+            self._rng = self.zeros((n, 4), np.uint32)
+            self._rng[:] = gen.integers(1, 2**32 - 1, size=(n, 4), dtype=np.uint32)
         return self._rng
+
+    def zeros(self, shape, dtype) -> np.ndarray:
+        """A zeroed array kernels can use: host memory, or the device's shared memory on arch=cuda."""
+        if getattr(self.config.arch, "name", None) != "cuda":
+            return np.zeros(shape, dtype)
+        shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+        return self.device.alloc_shared(n).view(dtype).reshape(shape)
 
     def context_header(self) -> list[int]:
         """The header slots of every kernel context (abi.HEADER_SLOTS; the tape slots belong to each launcher)."""

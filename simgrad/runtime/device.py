@@ -19,10 +19,15 @@ import numpy as np
 
 from simgrad.errors import SimgradError, caller_loc
 
-# The launcher of real-GPU kernels (device memory for SNode trees, the context copy, result read-back) is the
-# next stage of issue 22: until it exists a present GPU is not used, ti.init(arch=ti.cuda) falls back (or
-# runs on the simulated GPU with SIMGRAD_GPU_SIM=1).
+# The real-GPU runtime (runtime/gpu_launch.py over CudaDriver, fields in managed memory) is written but has not
+# run on a GPU yet: a present GPU is used only with SIMGRAD_CUDA_RUNTIME=1 (the device check's switch, benchmarks/
+# gpu/run_on_device.sh); otherwise ti.init(arch=ti.cuda) falls back (or runs on the simulated GPU with
+# SIMGRAD_GPU_SIM=1). True once a device run has shown it.
 CUDA_RUNTIME_READY = False
+
+
+def cuda_runtime_enabled() -> bool:
+    return CUDA_RUNTIME_READY or os.environ.get("SIMGRAD_CUDA_RUNTIME", "") not in ("", "0")
 
 
 class DeviceError(SimgradError, RuntimeError):
@@ -57,11 +62,17 @@ class Device:
     """What the GPU runtime needs of a device. Pointers are ints (device addresses)."""
 
     name = "device"
+    asynchronous = False  # launches return before the kernel ends (the host must synchronize to see results)
 
     def alloc(self, nbytes: int) -> int:
         raise NotImplementedError
 
     def free(self, ptr: int) -> None:
+        raise NotImplementedError
+
+    def alloc_shared(self, nbytes: int) -> np.ndarray:
+        """Zeroed memory the host reads and writes as this array and kernels use at the same address (CUDA
+        managed memory): field trees, ndarrays, the roots table, the error buffer, random states."""
         raise NotImplementedError
 
     def to_device(self, dst: int, src: np.ndarray) -> None:
@@ -115,6 +126,14 @@ class HostDriver(Device):
         if self._blocks.pop(ptr, None) is None:
             raise DeviceError(f"free of an address this device did not allocate: {ptr:#x}", caller_loc())
 
+    def alloc_shared(self, nbytes: int) -> np.ndarray:
+        ptr = self.alloc(nbytes)
+        return np.ctypeslib.as_array((ctypes.c_uint8 * max(int(nbytes), 1)).from_address(ptr))[:nbytes]
+
+    def owns(self, ptr: int) -> bool:
+        """Whether `ptr` lies in memory this device allocated (tests check kernels see only device memory)."""
+        return any(base <= ptr < base + len(buf) - 64 for base, buf in self._blocks.items())
+
     def to_device(self, dst: int, src: np.ndarray) -> None:
         src = np.ascontiguousarray(src)
         ctypes.memmove(dst, src.ctypes.data, src.nbytes)
@@ -161,6 +180,7 @@ class CudaDriver(Device):
     default). Written against the documented API; exercised only on a machine with a GPU."""
 
     name = "CUDA"
+    asynchronous = True
 
     def __init__(self, ordinal: int = 0) -> None:
         from cuda.bindings import driver as cu  # type: ignore[import-not-found]
@@ -178,6 +198,7 @@ class CudaDriver(Device):
         self.sm_count = int(self._check(cu.cuDeviceGetAttribute(
             cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT, self.device)))
         self.modules: list[Any] = []
+        self.shared: list[int] = []
 
     def _check(self, result):
         """cuda-python returns (CUresult, values...): raise a located error for a failure, else the values."""
@@ -198,6 +219,14 @@ class CudaDriver(Device):
 
     def free(self, ptr: int) -> None:
         self._check(self.cu.cuMemFree(ptr))
+
+    def alloc_shared(self, nbytes: int) -> np.ndarray:
+        n = max(int(nbytes), 1)
+        ptr = int(self._check(self.cu.cuMemAllocManaged(n, self.cu.CUmemAttach_flags.CU_MEM_ATTACH_GLOBAL)))
+        self._check(self.cu.cuMemsetD8(ptr, 0, n))
+        self._check(self.cu.cuCtxSynchronize())
+        self.shared.append(ptr)  # freed with the context (the program's memory lives as long as the process)
+        return np.ctypeslib.as_array((ctypes.c_uint8 * n).from_address(ptr))[:nbytes]
 
     def to_device(self, dst: int, src: np.ndarray) -> None:
         src = np.ascontiguousarray(src)

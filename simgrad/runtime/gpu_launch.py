@@ -3,8 +3,9 @@
 The arguments are packed into the host context exactly as on the CPU (runtime/launch.py); a launch then copies
 the context to the device, runs the kernel's segments in order (codegen/nvptx.py `Launch`: grid, block), and,
 when the kernel returns values or can report an error, waits for the device and reads the return words back.
-A kernel without either stays asynchronous: the host meets the device at the next such launch, at Python-scope
-access to fields, or at ti.sync()."""
+On an asynchronous device (the GPU) every launch waits for now: fields live in managed memory that Python-scope
+access reads directly, and that access does not synchronize by itself yet (the next step: launches stay
+asynchronous and field access, ti.sync() and the next waiting launch meet the device)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,9 @@ class GpuLauncher(Launcher):
         self.dctx = self.dtape = 0
         super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
         self.dctx = device.alloc(self.buf.nbytes)
-        self.waits = bool(returns) or bool(error_table)  # values to read back, or an error to report at its line
+        # values to read back, or an error to report at its line; and, until Python-scope access to fields
+        # synchronizes by itself, every launch on an asynchronous device (the GPU): the host sees its results
+        self.waits = bool(returns) or bool(error_table) or device.asynchronous
         self._ret = self.buf[self.ret_slot:self.ret_slot + len(returns)]
 
     def native_entry(self, address: int):

@@ -10,8 +10,8 @@ collected garbage). A chunk is unmapped when the program's memory is released.""
 
 from __future__ import annotations
 
-import ctypes
 import mmap
+from collections.abc import Callable
 
 import numpy as np
 
@@ -34,10 +34,21 @@ def _mapping(n: int) -> mmap.mmap:
     return m
 
 
+def _host_chunk(n: int) -> np.ndarray:
+    return np.frombuffer(_mapping(n), dtype=np.uint8)  # zeroed, page aligned
+
+
 class Memory:
-    def __init__(self) -> None:
-        self.roots = (ctypes.c_void_p * MAX_TREES)()
-        self.roots_address = ctypes.addressof(self.roots)
+    """`chunk(n)`: n zeroed bytes as a uint8 array; anonymous host mappings by default, a device's shared
+    memory on arch=cuda (runtime/device.py alloc_shared), where the roots table lives too."""
+
+    def __init__(self, chunk: Callable[[int], np.ndarray] = _host_chunk) -> None:
+        self._new_chunk = chunk
+        if chunk is _host_chunk:
+            self.roots = np.zeros(MAX_TREES, dtype=np.uint64)
+        else:
+            self.roots = chunk(8 * MAX_TREES).view(np.uint64)
+        self.roots_address = self.roots.ctypes.data
         self._buffers: dict[int, np.ndarray] = {}
         self._chunk: np.ndarray | None = None
         self._used = 0
@@ -46,7 +57,7 @@ class Memory:
         size = -(-nbytes // 64) * 64
         if self._chunk is None or self._used + size + SLACK > len(self._chunk):
             n = max(CHUNK, -(-(size + SLACK) // mmap.PAGESIZE) * mmap.PAGESIZE)
-            self._chunk = np.frombuffer(_mapping(n), dtype=np.uint8)  # zeroed, page aligned
+            self._chunk = self._new_chunk(n)
             self._used = 0
         buf = self._chunk[self._used : self._used + nbytes]
         self._used += size

@@ -50,10 +50,11 @@ def test_real_gpu_waits_for_the_runtime(no_gpu, monkeypatch):
     monkeypatch.setattr(device, "CUDA_RUNTIME_READY", False)
     with pytest.warns(UserWarning, match="falling back"):
         ti.init(arch=ti.cuda)
+    monkeypatch.setenv("SIMGRAD_CUDA_RUNTIME", "1")  # the device check's switch
+    assert ti.lang.archs.gpu_mode() == "cuda"
+    monkeypatch.delenv("SIMGRAD_CUDA_RUNTIME")
     monkeypatch.setattr(device, "CUDA_RUNTIME_READY", True)
-    ti.init(arch=ti.cuda)
-    assert ti.lang.impl.current_cfg().arch is ti.cuda
-    ti.init(arch=ti.cpu)
+    assert ti.lang.archs.gpu_mode() == "cuda"
 
 
 def test_arch_list_takes_the_first_available(no_gpu, monkeypatch):

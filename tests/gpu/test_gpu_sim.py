@@ -181,3 +181,31 @@ def test_kernels_launch_through_the_device_interface(sim):
     inst = k.instance((1.5,))
     assert isinstance(inst.launcher, GpuLauncher) and inst.launcher.dctx != inst.launcher.buf.ctypes.data
     assert k(0.5) == pytest.approx(999 * 1000 / 2, rel=1e-6)  # the new argument reached the device copy
+
+
+def test_what_kernels_read_is_device_memory(sim):
+    """On arch=cuda the SNode trees, the roots table, the error buffer, the random states, ndarrays and each
+    launcher's context copy are the device's memory (managed memory on a GPU), never host-only buffers."""
+    from simgrad.lang.program import get_program
+
+    x = ti.field(ti.f32, shape=100)
+    a = ti.ndarray(ti.i32, 10)
+
+    @ti.kernel
+    def k(a: ti.types.ndarray()) -> ti.f32:
+        for i in range(10):
+            a[i] = i
+        for i in x:
+            x[i] = 2.0
+        return x[3]
+
+    assert k(a) == 2.0
+    prog = get_program()
+    dev = prog.device
+    pointers = {"roots table": prog.memory.roots_address, "x's tree": int(prog.memory.roots[0]),
+                "error buffer": prog.error.ctypes.data, "random states": prog.rng_states.ctypes.data,
+                "ndarray": a._ndarray.ctypes.data, "context copy": k.instance((a,)).launcher.dctx}
+    assert {name: dev.owns(p) for name, p in pointers.items()} == {name: True for name in pointers}
+    assert not dev.owns(np.zeros(4).ctypes.data)
+    assert (a.to_numpy() == np.arange(10)).all() and (x.to_numpy() == 2).all()
+    ti.sync()
