@@ -43,16 +43,19 @@ timeout 120 $PY benchmarks/gpu/ptx_on_device.py 2>&1 | tee "$OUT/ptx_on_device.t
 log "ptx_on_device rc=${PIPESTATUS[0]}"
 
 # 2. tests/gpu (the CudaDriver test runs here), then the PTX check over a part of the suite
-timeout 150 $PY -m pytest -q -x -p no:cacheprovider tests/gpu 2>&1 | tee "$OUT/tests_gpu.txt" | tail -3
+timeout 100 $PY -m pytest -q -x -p no:cacheprovider tests/gpu 2>&1 | tee "$OUT/tests_gpu.txt" | tail -3
 log "tests/gpu rc=${PIPESTATUS[0]}"
-SIMGRAD_PTX_CHECK=1 timeout 150 $PY -m pytest -q -n 8 -p no:cacheprovider tests/autodiff tests/codegen \
+SIMGRAD_PTX_CHECK=1 timeout 100 $PY -m pytest -q -n 8 -p no:cacheprovider tests/autodiff tests/codegen \
   2>&1 | tee "$OUT/ptx_check.txt" | tail -3
 log "ptx check rc=${PIPESTATUS[0]}"
 
-# 3. the suite with arch=cuda (the simulated GPU until runtime/device.py CUDA_RUNTIME_READY is True)
-SIMGRAD_GPU_SIM=1 TI_ARCH=cuda timeout 120 $PY -m pytest -q -n 8 -p no:cacheprovider tests/gpu tests/autodiff \
-  2>&1 | tee "$OUT/sim_suite.txt" | tail -3
-log "arch=cuda suite rc=${PIPESTATUS[0]}"
+# 3. the real-GPU runtime (runtime/gpu_launch.py over CudaDriver; SIMGRAD_CUDA_RUNTIME=1 enables it until
+#    runtime/device.py CUDA_RUNTIME_READY is True): its checks and timings, then a part of the suite on it
+SIMGRAD_CUDA_RUNTIME=1 timeout 120 $PY benchmarks/gpu/runtime_on_device.py 2>&1 | tee "$OUT/runtime_on_device.txt"
+log "runtime_on_device rc=${PIPESTATUS[0]}"
+SIMGRAD_CUDA_RUNTIME=1 TI_ARCH=cuda timeout 150 $PY -m pytest -q -n 4 -p no:cacheprovider tests/gpu tests/autodiff \
+  2>&1 | tee "$OUT/cuda_suite.txt" | tail -3
+log "arch=cuda suite on the GPU rc=${PIPESTATUS[0]}"
 
 # 4. taichi 1.7.4's CUDA backend on the same GPU, for the side-by-side figures (launch overhead, a saxpy)
 timeout 60 $PY - <<'PYEOF' 2>&1 | tee "$OUT/taichi_cuda.txt"

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+from simgrad.errors import SimgradNotSupportedError, caller_loc
 from simgrad.runtime.abi import CTX_TAPE_CAP, CTX_TAPE_SERIAL
 from simgrad.runtime.device import Device, saturating_grid
 from simgrad.runtime.launch import Launcher
@@ -31,6 +34,18 @@ class GpuLauncher(Launcher):
         # synchronizes by itself, every launch on an asynchronous device (the GPU): the host sees its results
         self.waits = bool(returns) or bool(error_table) or device.asynchronous
         self._ret = self.buf[self.ret_slot:self.ret_slot + len(returns)]
+        if device.asynchronous:  # a GPU: host arrays are not its memory
+            self.launch = self._device_arrays_only(self.launch)
+
+    def _device_arrays_only(self, launch):
+        def checked(*args):
+            if any(isinstance(a, np.ndarray) for a in args):
+                raise SimgradNotSupportedError(
+                    f"kernel {self.kernel_name}: a numpy array argument on arch=cuda (its memory is the host's); "
+                    "pass a ti.ndarray (device memory) and copy with from_numpy/to_numpy", caller_loc())
+            return launch(*args)
+
+        return checked
 
     def native_entry(self, address: int):
         return self.run

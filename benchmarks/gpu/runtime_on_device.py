@@ -1,0 +1,113 @@
+"""The real-GPU runtime of arch=cuda (runtime/gpu_launch.py over CudaDriver, fields in managed memory), run on a
+GPU by benchmarks/gpu/run_on_device.sh with SIMGRAD_CUDA_RUNTIME=1: a few kernels against numpy (fields, an
+ndarray, a returned reduction, a Tape gradient), then launch overhead and a 1M-element saxpy in us per launch,
+the figures to put beside taichi's CUDA backend. Prints one line per check; exits non-zero on any failure."""
+
+from __future__ import annotations
+
+import sys
+import time
+import traceback
+
+import numpy as np
+
+import simgrad as ti
+
+N = 1 << 20
+
+
+def checks() -> list[tuple[str, bool, str]]:
+    out = []
+    x = ti.field(ti.f32, shape=N)
+    y = ti.field(ti.f32, shape=N)
+    loss = ti.field(ti.f32, shape=(), needs_grad=True)
+    w = ti.field(ti.f32, shape=1000, needs_grad=True)
+    a = ti.ndarray(ti.f32, 1000)
+
+    @ti.kernel
+    def saxpy(s: ti.f32):
+        for i in x:
+            y[i] = s * x[i] + y[i]
+
+    @ti.kernel
+    def total() -> ti.f32:
+        t = 0.0
+        for i in y:
+            t += y[i]
+        return t
+
+    @ti.kernel
+    def fill_nd(arr: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(1000):
+            arr[i] = ti.sin(ti.cast(i, ti.f32))
+
+    @ti.kernel
+    def energy():
+        for i in w:
+            loss[None] += w[i] * w[i] * 0.5 + ti.exp(0.001 * w[i])
+
+    xs = np.random.default_rng(0).random(N).astype(np.float32)
+    x.from_numpy(xs)
+    y.fill(1.0)
+    saxpy(2.0)
+    out.append(("saxpy on fields", np.allclose(y.to_numpy(), 2 * xs + 1, rtol=1e-6), ""))
+    got, want = total(), float((2 * xs.astype(np.float64) + 1).sum())
+    out.append(("returned reduction", abs(got - want) / want < 1e-4, f"{got} vs {want}"))
+    fill_nd(a)
+    out.append(("ndarray argument", np.allclose(a.to_numpy(), np.sin(np.arange(1000, dtype=np.float32)), atol=1e-6),
+                ""))
+    ws = np.linspace(-1, 1, 1000).astype(np.float32)
+    w.from_numpy(ws)
+    with ti.ad.Tape(loss=loss):
+        energy()
+    out.append(("Tape gradient", np.allclose(w.grad.to_numpy(), ws + 0.001 * np.exp(0.001 * ws), rtol=1e-5), ""))
+    return out
+
+
+def timings() -> list[str]:
+    x = ti.field(ti.f32, shape=N)
+    y = ti.field(ti.f32, shape=N)
+
+    @ti.kernel
+    def saxpy(s: ti.f32):
+        for i in x:
+            y[i] = s * x[i] + ti.sin(y[i])
+
+    @ti.kernel
+    def tiny():
+        y[0] += 1.0
+
+    lines = []
+    for k, args in ((saxpy, (2.0,)), (tiny, ())):
+        k(*args)
+        ti.sync()
+        t = time.perf_counter()
+        for _ in range(1000):
+            k(*args)
+        ti.sync()
+        lines.append(f"simgrad cuda {k.__name__}: {(time.perf_counter() - t) * 1e3:.4f} us/launch (1000 launches)")
+    return lines
+
+
+def main() -> int:
+    ti.init(arch=ti.cuda)
+    arch = ti.lang.impl.current_cfg().arch
+    print(f"arch: {arch}; device: {ti.lang.program.get_program().device.name}")
+    if arch is not ti.cuda:
+        print("FAIL: arch=cuda fell back (is SIMGRAD_CUDA_RUNTIME=1 set and cuda-python installed?)")
+        return 1
+    failed = 0
+    try:
+        for name, ok, detail in checks():
+            failed += not ok
+            print(f"{'ok  ' if ok else 'FAIL'} {name} {detail}")
+        for line in timings():
+            print(line)
+    except Exception:
+        traceback.print_exc()
+        return 1
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
