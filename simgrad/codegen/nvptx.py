@@ -40,7 +40,7 @@ LIBDEVICE_CANDIDATES = ("/usr/local/cuda/nvvm/libdevice/libdevice.10.bc",
                         "/usr/local/cuda-13.0/nvvm/libdevice/libdevice.10.bc")
 
 # constructs a first stage does not lower for arch=cuda: a located NotImplementedError, never a wrong result
-UNSUPPORTED = {Op.PRINT: "print", Op.RANDOM: "ti.random", Op.SNODE_OP: "sparse SNodes",
+UNSUPPORTED = {Op.PRINT: "print", Op.SNODE_OP: "sparse SNodes",
                Op.SPARSE_CELL: "sparse SNodes", Op.SPARSE_ACTION: "sparse SNodes", Op.TREE_ROOT: "sparse SNodes"}
 
 # statements without effects or memory reads: a later segment recomputes them instead of spilling them

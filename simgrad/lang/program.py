@@ -159,8 +159,13 @@ class Program:
     @property
     def rng_states(self) -> np.ndarray:
         """xorshift128 state per thread, seeded from random_seed."""
-        if self._rng is None:
-            n = max(self.pool.num_threads, 1) + 1
+        if self._rng is None:  # one per pool thread (the serial code: the last), one per GPU thread on arch=cuda
+            if getattr(self.config.arch, "name", None) == "cuda":
+                from simgrad.runtime.device import max_threads
+
+                n = max_threads(self.device) + 1
+            else:
+                n = max(self.pool.num_threads, 1) + 1
             gen = np.random.default_rng(self.config.random_seed)
             self._rng = self.zeros((n, 4), np.uint32)
             self._rng[:] = gen.integers(1, 2**32 - 1, size=(n, 4), dtype=np.uint32)

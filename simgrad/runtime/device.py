@@ -260,6 +260,12 @@ class CudaDriver(Device):
 
 
 def saturating_grid(device: Device, block: int) -> int:
-    """Blocks for a loop whose count is known only at run time: enough to fill the device (grid-stride)."""
+    """Blocks that fill the device (2048 resident threads per multiprocessor): the grid of every launch at most,
+    its grid-stride loop covering the rest, so a thread index stays below `max_threads` (random states)."""
     sm = getattr(device, "sm_count", 1)
     return max(1, sm * max(1, 2048 // max(block, 1)))
+
+
+def max_threads(device: Device) -> int:
+    """The most threads a launch has (saturating_grid x block for any block size)."""
+    return getattr(device, "sm_count", 1) * 2048

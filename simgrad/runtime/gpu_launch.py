@@ -26,7 +26,8 @@ class GpuLauncher(Launcher):
                  nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
                  scratch_slots: int = 0):
         self.device = device
-        self.launches = [(fn, grid or saturating_grid(device, block), block) for fn, grid, block in launches]
+        self.launches = [(fn, min(grid or (1 << 31), saturating_grid(device, block)), block)
+                         for fn, grid, block in launches]
         self.dctx = self.dtape = 0
         super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
         self.dctx = device.alloc(self.buf.nbytes)

@@ -229,3 +229,26 @@ def test_numpy_arguments_are_refused_on_an_asynchronous_device(sim, monkeypatch)
     a = ti.ndarray(ti.i32, 4)
     k(a)
     assert (a.to_numpy() == np.arange(4)).all()
+
+
+def test_random_numbers_on_the_gpu(sim):
+    """ti.random on arch=cuda: a state per GPU thread (grids are capped at the saturating size, so a thread
+    index has a state); uniform in [0, 1), integers over their range, independent across threads."""
+    n = 200_000
+    x = ti.field(ti.f32, shape=n)
+    u = ti.field(ti.i32, shape=n)
+
+    @ti.kernel
+    def draw():
+        for i in range(n):
+            x[i] = ti.random()
+            u[i] = ti.random(ti.i32) & 1023
+
+    draw()
+    xs, us = x.to_numpy(), u.to_numpy()
+    assert 0.0 <= xs.min() and xs.max() < 1.0
+    assert abs(xs.mean() - 0.5) < 0.005 and abs(xs.var() - 1 / 12) < 0.002
+    assert len(np.unique(xs)) > 0.99 * n  # not a few threads' streams repeated
+    counts = np.bincount(us, minlength=1024)
+    assert counts.min() > 100 and counts.max() < 300  # ~195 each
+    assert abs(np.corrcoef(xs[:-1], xs[1:])[0, 1]) < 0.01
