@@ -266,6 +266,13 @@ class KernelCodegen:
         self.module.globals.append("!0 = !{}")
         return self.module.text()
 
+    def emit_print(self, f: FunctionText, fmt: str, args: list[str]) -> None:
+        """printf(fmt, args...) on the host, flushed at once (a kernel's output interleaves with Python's)."""
+        self.module.declare("declare i32 @printf(ptr, ...)")
+        self.module.declare("declare i32 @fflush(ptr)")
+        f.emit(f"call i32 (ptr, ...) @printf(ptr {fmt}{''.join(', ' + a for a in args)})")
+        f.emit("call i32 @fflush(ptr null)")
+
     def error_code(self, kind: str, loc, detail) -> int:
         self.error_table.append((kind, loc, detail))
         return len(self.error_table)
@@ -622,8 +629,7 @@ def lower_select(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 # -- runtime services --------------------------------------------------------------------------------
 def lower_print(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    g.module.declare("declare i32 @printf(ptr, ...)")
-    g.module.declare("declare i32 @fflush(ptr)")
+    """printf's promotions (floats as double, small integers as i32); the target's emit_print makes the call."""
     fmt = g.module.string(s.attrs["format"])
     args = []
     for v in s.operands:
@@ -634,8 +640,7 @@ def lower_print(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
             args.append(f"i32 {arith.lower_cast(f, v, dt.i32 if t.is_signed else dt.u32)}")
         else:
             args.append(f"{llvm_type(t)} {f.v(v)}")
-    f.emit(f"call i32 (ptr, ...) @printf(ptr {fmt}{''.join(', ' + a for a in args)})")
-    f.emit("call i32 @fflush(ptr null)")
+    g.emit_print(f, fmt, args)
 
 
 def lower_assert(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

@@ -40,7 +40,7 @@ LIBDEVICE_CANDIDATES = ("/usr/local/cuda/nvvm/libdevice/libdevice.10.bc",
                         "/usr/local/cuda-13.0/nvvm/libdevice/libdevice.10.bc")
 
 # constructs a first stage does not lower for arch=cuda: a located NotImplementedError, never a wrong result
-UNSUPPORTED = {Op.PRINT: "print", Op.SNODE_OP: "sparse SNodes",
+UNSUPPORTED = {Op.SNODE_OP: "sparse SNodes",
                Op.SPARSE_CELL: "sparse SNodes", Op.SPARSE_ACTION: "sparse SNodes", Op.TREE_ROOT: "sparse SNodes"}
 
 # statements without effects or memory reads: a later segment recomputes them instead of spilling them
@@ -129,6 +129,24 @@ class GpuCodegen(KernelCodegen):
         self.scratch_slots = 0
         self.tape_top_slot: int | None = None  # 0 in the host context each launch copies to the device
         self._serial = False  # emitting a one-thread kernel
+
+    def emit_print(self, f: FunctionText, fmt: str, args: list[str]) -> None:
+        """On the GPU: vprintf(fmt, buffer) with the promoted arguments in a struct, each at its natural
+        alignment (the layout CUDA's device printf reads); the driver prints at the next synchronisation."""
+        if self.sim:
+            super().emit_print(f, fmt, args)
+            return
+        self.module.declare("declare i32 @vprintf(ptr, ptr)")
+        buf = "null"
+        if args:
+            ty = "{ " + ", ".join(a.split(" ", 1)[0] for a in args) + " }"
+            buf = f.tmp("pbuf")
+            f.emit(f"{buf} = alloca {ty}, align 8")
+            for k, a in enumerate(args):
+                p = f.tmp("parg")
+                f.emit(f"{p} = getelementptr {ty}, ptr {buf}, i32 0, i32 {k}")
+                f.emit(f"store {a}, ptr {p}")
+        f.emit(f"call i32 @vprintf(ptr {fmt}, ptr {buf})")
 
     def serial_tape_top(self) -> int:
         """The scratch word holding the serial tape's top (allocated on first use)."""

@@ -49,14 +49,34 @@ def test_global_thread_idx_is_the_grid_index(sim):
 
 
 def test_unsupported_is_located(sim):
+    x = ti.field(ti.f32)
+    ti.root.pointer(ti.i, 4).dense(ti.i, 4).place(x)
+
     @ti.kernel
     def k():
         for i in range(3):
-            print(i)
+            x[i] = 1.0
 
-    with pytest.raises(SimgradNotSupportedError, match="print is not supported with arch=cuda") as e:
+    with pytest.raises(SimgradNotSupportedError, match="sparse SNodes is not supported with arch=cuda") as e:
         k()
-    assert "test_gpu_sim.py" in str(e.value) and "print(i)" in str(e.value)
+    assert "test_gpu_sim.py" in str(e.value) and "x[i] = 1.0" in str(e.value)
+
+
+def test_print_in_parallel_and_serial_code(sim, capfd):
+    """print on arch=cuda (the host's printf on the simulated GPU, vprintf on the GPU: test_ptx.py)."""
+    x = ti.field(ti.f32, shape=3)
+
+    @ti.kernel
+    def k(a: ti.i64):
+        for i in range(3):
+            x[i] = i * 0.5
+            print("i =", i, x[i], a)
+        print(f"done {a + 1}")
+
+    k(7)
+    lines = capfd.readouterr().out.splitlines()
+    assert sorted(lines[:3]) == ["i = 0 0.000000 7", "i = 1 0.500000 7", "i = 2 1.000000 7"]
+    assert lines[3] == "done 8"
 
 
 def test_codegen_segments_and_spills(sim):

@@ -49,6 +49,21 @@ def test_ptx_shape(ptx_check):
     assert "sinf" not in ptx.split(".entry")[0] or "__nv_sinf" not in ptx  # inlined from libdevice
 
 
+def test_print_is_vprintf_with_its_argument_buffer(ptx_check):
+    x = ti.field(ti.f32, shape=4)
+
+    @ti.kernel
+    def k(a: ti.i64):
+        for i in range(4):
+            print("i =", i, x[i], a, ti.cast(i, ti.i8))
+
+    k(7)
+    (ptx,) = ptx_check
+    assert ".extern .func  (.param .b32 func_retval0) vprintf" in ptx and "call.uni (retval0), vprintf" in ptx
+    # the buffer holds i32, double (the promoted f32) and i64, each at its natural alignment, then an i32
+    assert ".local .align 8 .b8" in ptx
+
+
 def test_ptxas_error_raises():
     with pytest.raises(RuntimeError, match="ptxas -arch=sm_80 rejected"):
         nvptx.ptxas_check(".version 7.0\n.target sm_80\n.address_size 64\n.visible .entry k() { bogus; }\n")
