@@ -1,10 +1,13 @@
-"""``ti.graph``: Taichi's compute graphs, replayed in Python.
+"""``ti.graph``: Taichi's compute graphs, replayed as one native call.
 
 Taichi records kernel launches over symbolic arguments (``Arg``) and runs the recorded list with concrete
 ndarrays and scalars bound by name; its point is AOT deployment, which simgrad has not. Here a compiled
-graph is that list: ``run(args)`` checks the bound values against their ``Arg`` declarations and calls the
-kernels in order, so a program written against the graph API computes what its eager version computes.
-Textures have no simgrad counterpart: their kinds are located errors.
+graph is that list: ``run(args)`` checks the bound values against their ``Arg`` declarations and launches the
+kernels in order. The first run with some values launches them from Python (compiling what is new) and then
+captures the sequence (runtime/launch.py Sequence: each step's context packed once); later runs with the same
+values (the same ndarrays, equal scalars) replay it in one native call, no Python per kernel. Under a Tape or
+the forward mode, with the kernel profiler, on arch=cuda, or with a kernel that needs Python after its launch,
+every run launches from Python. Textures have no simgrad counterpart: their kinds are located errors.
 """
 
 from __future__ import annotations
@@ -114,6 +117,7 @@ class Graph:
     def __init__(self, launches):
         self.launches = list(launches)
         self.args = {a.name: a for _, args in self.launches for a in args if isinstance(a, Arg)}
+        self._captured = None  # (generation, key, Sequence) of the last capture
 
     def run(self, args):
         loc = caller_loc()
@@ -122,5 +126,53 @@ class Graph:
             raise SimgradError(f"graph run: no value for the arguments {missing}", loc)
         for name, arg in self.args.items():
             arg.check(args[name], loc)
-        for kernel, kargs in self.launches:
-            kernel(*(args[a.name] if isinstance(a, Arg) else a for a in kargs))
+        key = tuple((name, _identity(args[name])) for name in sorted(self.args))
+        from simgrad.lang.program import get_program
+
+        generation = get_program().generation
+        if self._captured is not None and self._captured[:2] == (generation, key) and _capturable():
+            self._captured[2].run()
+            return
+        bound = [tuple(args[a.name] if isinstance(a, Arg) else a for a in kargs) for _, kargs in self.launches]
+        for (kernel, _), values in zip(self.launches, bound):
+            kernel(*values)
+        sequence = _capture([k for k, _ in self.launches], bound) if _capturable() else None
+        self._captured = (generation, key, sequence, args) if sequence is not None else None
+
+
+def _identity(value):
+    """What must not change for a replay: an array's identity, a scalar's type and value."""
+    if hasattr(value, "shape") or hasattr(value, "__array_interface__"):
+        return ("array", id(value))
+    return (type(value).__name__, value)
+
+
+def _capturable() -> bool:
+    from simgrad.lang import ad_hooks
+    from simgrad.lang.program import get_program
+
+    prog = get_program()
+    return (ad_hooks.recorder is None and ad_hooks.forward_mode is None and not prog.config.kernel_profiler
+            and getattr(prog.config.arch, "name", None) != "cuda")
+
+
+def _capture(kernels: list, bound: list):
+    """The launches as a native Sequence, or None when a step cannot be replayed without Python."""
+    from simgrad.runtime.launch import Sequence
+
+    launchers, contexts = [], []
+    for kernel, values in zip(kernels, bound):
+        target = getattr(kernel, "kernel", kernel)  # a data_oriented object's kernel method
+        if hasattr(kernel, "obj"):
+            values = (kernel.obj, *values)
+        instance = getattr(target, "instance", None)
+        try:
+            launcher = instance(values).launcher if instance is not None else None
+        except SimgradError:  # e.g. arguments its defaults complete: it launches from Python
+            return None
+        if launcher is None or launcher.pack is None:
+            return None
+        launcher.pack(*values)
+        launchers.append(launcher)
+        contexts.append(launcher.buf.copy())
+    return Sequence(launchers, contexts)

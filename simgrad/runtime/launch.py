@@ -61,7 +61,9 @@ class Launcher:
         self.tape: np.ndarray | None = None
         self.ret_slot = CTX_ARGS + nslots
         self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
+        self.entry_address = entry_address
         self.entry = self.native_entry(entry_address)
+        self.pack = None  # pack(*args): the context words alone, when nothing but the native call follows them
         self.launch = self._generate(params, returns)
 
     def native_entry(self, address: int):
@@ -112,6 +114,10 @@ class Launcher:
                "    except KeyboardInterrupt:\n        _interrupted()\n        raise\n"
                "    finally:\n        _release()\n")
         exec(compile(src, f"<launcher {self.kernel_name}>", "exec"), env)
+        if not gen.after and not returns:
+            packing = "\n".join("    " + ln for p in params for ln in p.launch_code(gen, p.name)) or "    pass"
+            exec(compile(f"def pack({', '.join(names)}):\n{packing}\n", f"<packer {self.kernel_name}>", "exec"), env)
+            self.pack = env["pack"]
         return env["launch"]
 
     def clear_interrupt(self) -> None:
@@ -185,3 +191,39 @@ def assert_message(template: list, values: list) -> str:
             out.append((c[:-1] + "d" if c[-1] == "u" else c) % value)
     return "".join(out)
 
+
+
+_SEQUENCE = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p)
+_sequence_fn = None
+
+
+class Sequence:
+    """Launches captured for replay in one native call (lang/graph.py): each step's context is a copy of its
+    launcher's, packed with that step's arguments, so one kernel may appear with different arguments."""
+
+    def __init__(self, launchers: list[Launcher], contexts: list[np.ndarray]):
+        self.launchers = launchers
+        self.contexts = contexts  # kept alive: the steps point into them
+        self.steps = np.array([w for ln, c in zip(launchers, contexts) for w in (ln.entry_address, c.ctypes.data)],
+                              dtype=np.uint64)
+        self.error = launchers[0].program.error if launchers else None
+
+    def run(self) -> None:
+        global _sequence_fn
+        if not self.launchers:
+            return
+        if _sequence_fn is None:
+            from simgrad.runtime import ll
+            from simgrad.runtime.jit import get_jit
+
+            _sequence_fn = _SEQUENCE(get_jit().load(ll.load("sequence"), ["simgrad_run_sequence"])[
+                "simgrad_run_sequence"])
+        assert self.error is not None
+        with LAUNCH_LOCK:
+            try:
+                k = _sequence_fn(self.steps.ctypes.data, len(self.launchers), self.error.ctypes.data)
+            except KeyboardInterrupt:
+                self.launchers[0].clear_interrupt()
+                raise
+        if k < len(self.launchers):
+            self.launchers[k].fail()

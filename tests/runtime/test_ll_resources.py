@@ -57,13 +57,17 @@ def test_sim_blocks_ll_verifies():
     _verify(ll.load("sim_blocks", symbol="sg_kernel_blocks"))
 
 
+def test_sequence_ll_verifies():
+    _verify(ll.load("sequence"))
+
+
 def test_sim_grid_ll_verifies():
     _verify(ll.load("sim_grid", pfor_slot=3) + ll.load("sim_blocks", symbol="simgrad_sim_blocks"))
 
 
 def test_every_ll_file_is_loaded_and_checked_here():
-    assert sorted(p.stem for p in LL_DIR.glob("*.ll")) == ["half", "sim_blocks", "sim_grid", "sparse_alloc",
-                                                                 "threadpool"]
+    assert sorted(p.stem for p in LL_DIR.glob("*.ll")) == ["half", "sequence", "sim_blocks", "sim_grid",
+                                                                 "sparse_alloc", "threadpool"]
 
 
 def test_load_refuses_missing_and_unknown_parameters():
