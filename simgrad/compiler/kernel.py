@@ -141,6 +141,15 @@ class GradKernel:
         self.kernel = kernel
         self.name = kernel.name + ".grad"
 
+    def launcher(self, args):
+        """The adjoint's launcher for these (bound) arguments, compiled on first use: what a captured backward
+        pass replays (lang/tape.py)."""
+        k = self.kernel
+        prog = get_program()
+        if k._generation != prog.generation:
+            k._reset(prog)
+        return k._instance_for(args, "grad").launcher
+
     def in_place(self, *args) -> None:
         """The adjoint for ti.ad.checkpoint: launched on the state *before* the kernel ran, so reads of
         elements the kernel overwrites in place (owned) replay their old values."""

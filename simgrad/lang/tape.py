@@ -149,6 +149,12 @@ class Tape:
         # In-place kernels (reading what they overwrite) are rolled back before their adjoint, which then runs
         # on the values from before them; backward proceeds in reverse, so every earlier adjoint sees the state
         # it had too. The final values come back at the end.
+        if not self.rollback and not self.snapshots:
+            sequence = _backward_sequence(self.entries)
+            if sequence is not None:
+                sequence.run()
+                self.gradient_evaluated = True
+                return
         final = {id(f): (f, f.to_numpy()) for saved in self.rollback.values() for f, _ in saved}
         for k in range(len(self.entries) - 1, -1, -1):
             fn, args = self.entries[k]
@@ -172,6 +178,46 @@ class Tape:
         for f, values in final.values():
             f.from_numpy(values)
         self.gradient_evaluated = True
+
+
+# the last captured backward pass: (program generation, key of the recorded launches, their entries, Sequence)
+_backward: tuple | None = None
+
+
+def _backward_sequence(entries: list):
+    """The adjoints of `entries` in reverse as one native Sequence (runtime/launch.py), reused while a Tape
+    records the same launches with the same arguments (a training loop); None where a step needs Python (a
+    custom gradient, a launcher with Python after its call), under the forward mode or the profiler, or on
+    arch=cuda."""
+    global _backward
+    from simgrad.lang.program import get_program
+    from simgrad.runtime.launch import Sequence
+
+    prog = get_program()
+    if ad_hooks.forward_mode is not None or prog.config.kernel_profiler or \
+            getattr(prog.config.arch, "name", None) == "cuda":
+        return None
+    key = tuple((id(fn), tuple(_identity(a) for a in args)) for fn, args in entries)
+    if _backward is not None and _backward[:2] == (prog.generation, key):
+        return _backward[3]
+    launchers, contexts = [], []
+    for fn, args in reversed(entries):
+        make = getattr(getattr(fn, "grad", None), "launcher", None)
+        launcher = make(args) if make is not None else None
+        if launcher is None or launcher.pack is None:
+            return None
+        launcher.pack(*args)
+        launchers.append(launcher)
+        contexts.append(launcher.buf.copy())
+    _backward = (prog.generation, key, list(entries), Sequence(launchers, contexts))
+    return _backward[3]
+
+
+def _identity(value):
+    """What must not change for a replay: an array's or field's identity, a scalar's type and value."""
+    if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
+        return (type(value).__name__, value)
+    return ("object", id(value))
 
 
 def _in_place_fields(kernel, args) -> list:
