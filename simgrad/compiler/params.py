@@ -118,6 +118,9 @@ def _template_key(v, keep: list):
         return (type(v), tuple(_template_key(x, keep) for x in v))
     if isinstance(v, np.ndarray) and v.size <= 16:
         return ("nd", v.dtype.str, v.shape, v.tobytes())
+    if isinstance(v, Matrix) and all(isinstance(e, (int, float, bool)) for e in v.entries):
+        # by value, as its entries are compiled in: a new equal vector per call finds the same instance
+        return ("mat", v.n, v.m, tuple((type(e), e) for e in v.entries))
     keep.append(v)
     return ("id", id(v))
 

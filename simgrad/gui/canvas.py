@@ -31,7 +31,7 @@ def to_numpy(x):
 
 
 def cook_image(img) -> np.ndarray:
-    """Convert an image in Taichi's (W, H[, C]) layout to float32 RGB of shape (W, H, 3).
+    """Convert an image in Taichi's (W, H[, C]) layout to float32 RGB of shape (W, H, 3) (read-only).
 
     Follows ``ti.GUI.set_image``: unsigned integers are scaled by their maximum, floats are taken as
     [0, 1]; 1 channel is grey, 2 channels are RG (blue = 0), 4 channels drop alpha.
@@ -48,8 +48,8 @@ def cook_image(img) -> np.ndarray:
     if arr.ndim != 3 or arr.shape[2] not in (1, 2, 3, 4):
         raise ValueError(f"Image must be grayscale, RG, RGB or RGBA of shape (W, H[, C]); got {arr.shape}")
     channels = arr.shape[2]
-    if channels == 1:
-        return np.repeat(arr, 3, axis=2)
+    if channels == 1:  # a read-only view: the canvas copies it into its pixels by broadcasting
+        return np.broadcast_to(arr, arr.shape[:2] + (3,))
     if channels == 2:
         return np.concatenate([arr, np.zeros(arr.shape[:2] + (1,), np.float32)], axis=2)
     return np.ascontiguousarray(arr[..., :3])

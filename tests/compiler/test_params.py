@@ -222,3 +222,26 @@ def test_a_struct_leaf_index_watches_its_own_slice():
             read(S(t=0), 1)  # reads x[0]
             clobber()  # overwrites x[0]
             total()
+
+
+def test_a_constant_vector_template_is_keyed_by_value():
+    """`k(ti.Vector([1, 2]))` with a new but equal vector each call finds the same instance (it was keyed by
+    identity: a compile and a kept object per call, 2.8 ms per sparse to_numpy); another value compiles its own."""
+    ti.init(arch=ti.cpu)
+    out = ti.field(ti.i32, shape=2)
+
+    @ti.kernel
+    def k(v: ti.template()):
+        for i in range(2):
+            out[i] = v[i] * 10
+
+    for _ in range(5):
+        k(ti.Vector([1, 2]))
+    assert len(k._caches[""]) == 1 and out.to_numpy().tolist() == [10, 20]
+    k(ti.Vector([3, 4]))
+    assert len(k._caches[""]) == 2 and out.to_numpy().tolist() == [30, 40]
+    v = ti.Vector([5, 6])
+    k(v)
+    v[0] = 7  # changed after its instance was made: the new value compiles anew, never the stale constant
+    k(v)
+    assert out.to_numpy().tolist() == [70, 60]
