@@ -255,3 +255,27 @@ def test_algorithms_has_taichis_public_names():
     """Taichi 1.7.4's dir(taichi.algorithms) shows exactly these two public names (and its submodule)."""
     assert ti.algorithms.__all__ == ["parallel_sort", "PrefixSumExecutor"]
     assert callable(ti.algorithms.parallel_sort) and isinstance(ti.algorithms.PrefixSumExecutor, type)
+
+
+def test_on_the_simulated_gpu_and_through_ptxas(monkeypatch):
+    """arch=cuda (SIMGRAD_GPU_SIM=1): the kernels as grid-stride GPU kernels (a block's serial loops in one
+    thread), every one also assembled by ptxas for sm_80/sm_90 when ptxas is here (SIMGRAD_PTX_CHECK=1)."""
+    from simgrad.codegen import nvptx
+
+    monkeypatch.setenv("SIMGRAD_GPU_SIM", "1")
+    if nvptx.ptxas_path() is not None:
+        monkeypatch.setenv("SIMGRAD_PTX_CHECK", "1")
+    ti.init(arch=ti.cuda)
+    assert ti.lang.impl.current_cfg().arch is ti.cuda
+    n = 40000
+    a = _keys(np.float32, n, seed=11)
+    keys, values = ti.field(ti.f32, n, offset=-5), ti.ndarray(ti.i32, n)
+    keys.from_numpy(a)
+    values.from_numpy(np.arange(n, dtype=np.int32))
+    ti.algorithms.parallel_sort(keys, values)
+    _check(keys.to_numpy(), values.to_numpy(), a)
+    b = np.random.default_rng(2).integers(-9, 9, 70000, dtype=np.int32)
+    arr = ti.ndarray(ti.i32, 70000)
+    arr.from_numpy(b)
+    ti.algorithms.PrefixSumExecutor(70000).run(arr)
+    np.testing.assert_array_equal(arr.to_numpy(), np.cumsum(b, dtype=np.int32))
