@@ -279,3 +279,16 @@ def test_on_the_simulated_gpu_and_through_ptxas(monkeypatch):
     arr.from_numpy(b)
     ti.algorithms.PrefixSumExecutor(70000).run(arr)
     np.testing.assert_array_equal(arr.to_numpy(), np.cumsum(b, dtype=np.int32))
+
+
+def test_the_algorithms_are_kernels_not_numpy():
+    """The package imports no numpy: sorting and scanning happen in simgrad kernels (the brief of issue 23)."""
+    import ast
+    import pathlib
+
+    pkg = pathlib.Path(sort_module.__file__).parent
+    for path in pkg.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            assert not any(n.split(".")[0] == "numpy" for n in names), f"{path.name} imports numpy"
