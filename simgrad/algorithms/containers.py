@@ -4,7 +4,15 @@ scratch ndarray of the same element type, and copies between them. Fields are `t
 ndarrays `ti.types.ndarray()` ones, so every kernel that touches a user's container comes in both kinds."""
 
 import simgrad as ti
-from simgrad.errors import SimgradTypeError, caller_loc
+from simgrad import errors
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
+
+
+def python_scope(name: str) -> None:
+    """Refuse a call made while a kernel compiles (it would launch kernels from inside one, as Taichi refuses)."""
+    if errors.compiling():
+        raise SimgradSyntaxError(f"ti.algorithms.{name} launches kernels: call it in Python scope, not inside a "
+                                 "kernel or ti.func")
 
 
 class Array1D:
@@ -23,8 +31,9 @@ class Array1D:
                                    f"got {type(obj).__name__}", caller_loc())
         if len(obj.shape) != 1:
             raise SimgradTypeError(f"{what} must be one-dimensional, got shape {tuple(obj.shape)}", caller_loc())
-        if self.kind == "field":
-            self.offset = int((getattr(obj, "offset", None) or (0,))[0])
+        if self.kind == "field":  # a matrix field's offset is its components'
+            comps = obj._components() if isinstance(obj, ti.MatrixField) else [obj]
+            self.offset = int((comps[0].offset or (0,))[0])
         self.obj, self.n, self.dtype = obj, int(obj.shape[0]), obj.dtype
 
     def scratch(self, n: int):

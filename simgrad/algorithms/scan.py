@@ -8,7 +8,7 @@ targets. Like Taichi it takes i32 only (raising Taichi's RuntimeError for other 
 overflow as i32 addition does."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, annotation
+from simgrad.algorithms.containers import Array1D, annotation, python_scope
 from simgrad.errors import SimgradRuntimeError, SimgradTypeError, SimgradValueError, caller_loc
 
 _BLOCK = 65536  # elements per block, at most _MAX_BLOCKS blocks
@@ -61,6 +61,7 @@ class PrefixSumExecutor:
         self._sums = ti.ndarray(ti.i32, self._nb)
 
     def run(self, input_arr) -> None:
+        python_scope("PrefixSumExecutor.run")
         if getattr(input_arr, "dtype", None) != ti.i32:  # Taichi's check and message, made first as there
             raise SimgradRuntimeError("Only ti.i32 type is supported for prefix sum.", caller_loc())
         a = Array1D(input_arr, "PrefixSumExecutor.run's array")

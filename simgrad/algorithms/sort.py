@@ -15,7 +15,7 @@ flipped, floats by their bits with the negative ones inverted; -0.0 orders as 0.
 as numpy sorts them (Taichi's comparison network leaves NaNs anywhere)."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, copy
+from simgrad.algorithms.containers import Array1D, copy, python_scope
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 
 RADIX = 256  # 8-bit digits
@@ -138,6 +138,7 @@ def _kernels(kdt):
 def parallel_sort(keys, values=None) -> None:
     """Sort the 1-D field or ndarray `keys` ascending in place; when given, `values` (a 1-D field or ndarray
     of scalars, vectors or matrices, at least as long as keys) is permuted with them. Stable."""
+    python_scope("parallel_sort")
     k = Array1D(keys, "parallel_sort's keys")
     if k.entry_shape or k.dtype not in _KEY_TYPES:
         got = f"entries of shape {k.entry_shape}" if k.entry_shape else str(k.dtype)

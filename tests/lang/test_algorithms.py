@@ -141,6 +141,21 @@ def test_sort_moves_vector_and_matrix_values(kind):
         np.testing.assert_array_equal(values.to_numpy(), data[order])
 
 
+def test_sort_fields_placed_together_with_an_offset():
+    """Keys and vector values interleaved in one dense SNode with an index offset (a matrix field's offset is
+    its components')."""
+    n = 1000
+    keys, values = ti.field(ti.f32), ti.Vector.field(2, ti.i32)
+    ti.root.dense(ti.i, n).place(keys, values, offset=(-7,))
+    a = _keys(np.float32, n, seed=9)
+    keys.from_numpy(a)
+    values.from_numpy(np.stack([np.arange(n), -np.arange(n)], 1).astype(np.int32))
+    ti.algorithms.parallel_sort(keys, values)
+    order = np.argsort(a, kind="stable")
+    np.testing.assert_array_equal(keys.to_numpy(), a[order])
+    np.testing.assert_array_equal(values.to_numpy(), np.stack([order, -order], 1))
+
+
 def test_sort_is_stable_across_blocks_and_at_the_block_cap(monkeypatch):
     """Few distinct keys over many blocks: stability is the digit-major order of the block counts. With tiny
     blocks the count of blocks reaches its cap and blocks grow instead."""
@@ -188,6 +203,25 @@ def test_sort_errors_are_located():
         ti.algorithms.parallel_sort(ti.field(ti.i32, 8), ti.field(ti.i32, 4))
     with pytest.raises(ti.TaichiTypeError, match="values must be a field or an ndarray"):
         ti.algorithms.parallel_sort(ti.field(ti.i32, 8), ti.Struct.field({"a": ti.i32}, shape=8))
+
+
+def test_inside_a_kernel_is_a_located_error():
+    """Called from a kernel, the helpers would launch kernels while it compiles (Taichi refuses as well)."""
+    x = ti.field(ti.i32, 8)
+
+    @ti.kernel
+    def sorts():
+        ti.algorithms.parallel_sort(x)
+
+    @ti.kernel
+    def scans():
+        ti.algorithms.PrefixSumExecutor(8).run(x)
+
+    here = __file__.split("/")[-1]
+    with pytest.raises(ti.TaichiSyntaxError, match=f"(?s){here}.*parallel_sort\\(x\\).*call it in Python scope"):
+        sorts()
+    with pytest.raises(ti.TaichiSyntaxError, match="PrefixSumExecutor.run launches kernels"):
+        scans()
 
 
 @pytest.mark.parametrize("kind", ["field", "ndarray"])
