@@ -5,7 +5,8 @@ ndarrays `ti.types.ndarray()` ones, so every kernel that touches a user's contai
 
 import simgrad as ti
 from simgrad import errors
-from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
+from simgrad.errors import SimgradNotSupportedError, SimgradSyntaxError, SimgradTypeError, caller_loc
+from simgrad.lang import ad_hooks
 
 
 def python_scope(name: str) -> None:
@@ -35,6 +36,14 @@ class Array1D:
             comps = obj._components() if isinstance(obj, ti.MatrixField) else [obj]
             self.offset = int((comps[0].offset or (0,))[0])
         self.obj, self.n, self.dtype = obj, int(obj.shape[0]), obj.dtype
+
+    def has_gradient(self) -> bool:
+        """Whether the container carries a gradient (a placed one for a field, needs_grad for an ndarray)."""
+        if self.kind == "ndarray":
+            return getattr(self.obj, "grad", None) is not None
+        comp = self.obj._components()[0] if isinstance(self.obj, ti.MatrixField) else self.obj
+        g = getattr(comp, "grad", None)
+        return g is not None and (g.layout is not None or bool(getattr(comp, "_needs_grad", False)))
 
     def scratch(self, n: int):
         """A new ndarray of n elements of this element type."""
@@ -70,3 +79,18 @@ def _copy_kernel(src_ann, dst_ann):
             dst[i + dst_offset] = src[i + src_offset]
 
     return copy_kernel
+
+
+def not_on_a_tape(name: str, *arrays: "Array1D | None") -> None:
+    """Refuse permuting or scanning a container with a gradient while a ti.ad.Tape records: the kernels'
+    adjoints would not carry the gradient back through the permutation (the result would be silently wrong;
+    Taichi's are too). Containers without gradients (integer keys, index values) are fine on a Tape."""
+    if ad_hooks.recorder is None:
+        return
+    for a in arrays:
+        if a is not None and a.has_gradient():
+            what = f"field {a.obj.name}" if a.kind == "field" else "an ndarray"
+            raise SimgradNotSupportedError(
+                f"ti.algorithms.{name} on a ti.ad.Tape is not differentiated, and {what} has a gradient: call it "
+                "outside the Tape, or sort indices (keys without gradients, values = indices) and gather the "
+                "differentiable data in a kernel", caller_loc())

@@ -8,7 +8,7 @@ targets. Like Taichi it takes i32 only (raising Taichi's RuntimeError for other 
 overflow as i32 addition does."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, annotation, python_scope
+from simgrad.algorithms.containers import Array1D, annotation, not_on_a_tape, python_scope
 from simgrad.errors import SimgradRuntimeError, SimgradTypeError, SimgradValueError, caller_loc
 
 _BLOCK = 65536  # elements per block, at most _MAX_BLOCKS blocks
@@ -68,6 +68,7 @@ class PrefixSumExecutor:
         if a.entry_shape:
             raise SimgradTypeError(f"PrefixSumExecutor.run takes scalars, got entries of shape {a.entry_shape}",
                                    caller_loc())
+        not_on_a_tape("PrefixSumExecutor.run", a)
         n = self.sorting_length
         if a.n < n:
             raise SimgradValueError(f"PrefixSumExecutor({n}).run: the array has only {a.n} elements",

@@ -15,7 +15,7 @@ flipped, floats by their bits with the negative ones inverted; -0.0 orders as 0.
 as numpy sorts them (Taichi's comparison network leaves NaNs anywhere)."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, copy, python_scope
+from simgrad.algorithms.containers import Array1D, copy, not_on_a_tape, python_scope
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 
 RADIX = 256  # 8-bit digits
@@ -150,6 +150,7 @@ def parallel_sort(keys, values=None) -> None:
                                 caller_loc())
     if v is not None and v.obj is keys:
         v = None  # sorting a container as its own values
+    not_on_a_tape("parallel_sort", k, v)
     n = k.n
     if n <= 1:
         return

@@ -224,6 +224,49 @@ def test_inside_a_kernel_is_a_located_error():
         scans()
 
 
+def test_on_a_tape_only_without_gradients():
+    """On a Tape, sorting indices by integer keys is fine (the gradient through the gather, checked against
+    central differences in f64); permuting or scanning a container with a gradient is refused (its adjoint
+    zeroed the gradient: silently wrong)."""
+    n = 50
+    rng = np.random.default_rng(4)
+    xv, kv = rng.standard_normal(n), rng.integers(0, 10, n).astype(np.int32)
+    x = ti.field(ti.f64, n, needs_grad=True)
+    loss = ti.field(ti.f64, (), needs_grad=True)
+    idx, key = ti.field(ti.i32, n), ti.ndarray(ti.i32, n)
+
+    @ti.kernel
+    def energy():
+        for i in x:
+            loss[None] += ti.sin(x[idx[i]]) * (i + 1)
+
+    def numpy_loss(v):
+        return float((np.sin(v[np.argsort(kv, kind="stable")]) * np.arange(1, n + 1)).sum())
+
+    x.from_numpy(xv)
+    key.from_numpy(kv)
+    idx.from_numpy(np.arange(n, dtype=np.int32))
+    with ti.ad.Tape(loss):
+        ti.algorithms.parallel_sort(key, idx)
+        energy()
+    h = 1e-6
+    fd = [(numpy_loss(xv + h * e) - numpy_loss(xv - h * e)) / (2 * h) for e in np.eye(n)]
+    np.testing.assert_allclose(x.grad.to_numpy(), fd, rtol=1e-7, atol=1e-7)
+    assert loss[None] == pytest.approx(numpy_loss(xv), rel=1e-12)
+
+    here = __file__.split("/")[-1]
+    with pytest.raises(ti.SimgradNotSupportedError, match=f"(?s){here}.*parallel_sort on a ti.ad.Tape.*field x has a"):
+        with ti.ad.Tape(loss):
+            ti.algorithms.parallel_sort(x)
+    values = ti.ndarray(ti.f32, n, needs_grad=True)
+    with pytest.raises(ti.SimgradNotSupportedError, match="an ndarray has a gradient"):
+        with ti.ad.Tape(loss):
+            ti.algorithms.parallel_sort(key, values)
+    s = ti.field(ti.i32, n)
+    with ti.ad.Tape(loss):
+        ti.algorithms.PrefixSumExecutor(n).run(s)  # no gradient: fine
+
+
 @pytest.mark.parametrize("kind", ["field", "ndarray"])
 def test_prefix_sum_like_numpy(kind):
     for n in SIZES:
