@@ -1,4 +1,4 @@
-# mypy: disable-error-code="valid-type"
+# mypy: disable-error-code="valid-type, index"
 """ti.algorithms.parallel_sort: an in-place, stable LSD radix sort of a 1-D field or ndarray, with an optional
 field or ndarray of values moved along, in simgrad kernels.
 
@@ -15,7 +15,7 @@ flipped, floats by their bits with the negative ones inverted; -0.0 orders as 0.
 as numpy sorts them (Taichi's comparison network leaves NaNs anywhere)."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, copy, not_on_a_tape, python_scope
+from simgrad.algorithms.containers import Array1D, annotation, copy, not_on_a_tape, python_scope
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 
 RADIX = 256  # 8-bit digits
@@ -65,74 +65,84 @@ def order_bits(kdt):
     return bits
 
 
+@ti.kernel
+def places(h: ti.types.ndarray(), n: ti.i32, nb: ti.i32) -> ti.i32:
+    """Block counts -> each (block, digit)'s first output place, digit-major (digit d's keys block by block,
+    then digit d + 1's: that order is what makes the sort stable); 1 when one digit holds all n keys."""
+    trivial = 0
+    run = 0
+    ti.loop_config(serialize=True)
+    for d in range(RADIX):
+        start = run
+        for b in range(nb):
+            c = h[b * RADIX + d]
+            h[b * RADIX + d] = run
+            run += c
+        if run - start == n:
+            trivial = 1
+    return trivial
+
+
 _KERNELS: dict = {}
 
 
-def _kernels(kdt):
-    """The count, scan and scatter kernels for keys of one dtype (made once per dtype)."""
-    if kdt in _KERNELS:
-        return _KERNELS[kdt]
+def _kernels(kdt, kinds: tuple):
+    """The count and scatter kernels for keys of one dtype and the containers' kinds: (keys from, keys to)
+    or (keys from, keys to, values from, values to), each "field" or "ndarray". Made once per such key."""
+    if (kdt, kinds) in _KERNELS:
+        return _KERNELS[kdt, kinds]
     bits = order_bits(kdt)
     wide = ti.u64 if _KEY_TYPES[kdt] == 64 else ti.u32
+    src_ann, dst_ann = annotation(kinds[0]), annotation(kinds[1])
 
     @ti.func
     def digit(x, shift):
         return ti.cast((bits(x) >> ti.cast(shift, wide)) & wide(RADIX - 1), ti.i32)
 
     @ti.kernel
-    def count(keys: ti.types.ndarray(), n: ti.i32, nb: ti.i32, bs: ti.i32, shift: ti.i32,
+    def count(keys: src_ann, off: ti.i32, n: ti.i32, nb: ti.i32, bs: ti.i32, shift: ti.i32,
               h: ti.types.ndarray()):
         ti.loop_config(block_dim=1)
         for b in range(nb):  # h[b * RADIX + d]: block b's keys with digit d (a block's counts are its own)
             for d in range(RADIX):
                 h[b * RADIX + d] = 0
             for i in range(b * bs, ti.min(b * bs + bs, n)):
-                k = b * RADIX + digit(keys[i], shift)
+                k = b * RADIX + digit(keys[i + off], shift)
                 h[k] = h[k] + 1
 
-    @ti.kernel
-    def places(h: ti.types.ndarray(), n: ti.i32, nb: ti.i32) -> ti.i32:
-        trivial = 0
-        run = 0
-        ti.loop_config(serialize=True)
-        for d in range(RADIX):  # digit-major: digit d's keys block by block, then digit d + 1's
-            start = run
-            for b in range(nb):
-                c = h[b * RADIX + d]
-                h[b * RADIX + d] = run
-                run += c
-            if run - start == n:
-                trivial = 1
-        return trivial
+    if len(kinds) == 2:
+        @ti.kernel
+        def scatter(src: src_ann, soff: ti.i32, dst: dst_ann, doff: ti.i32, n: ti.i32, nb: ti.i32, bs: ti.i32,
+                    shift: ti.i32, h: ti.types.ndarray()):
+            ti.loop_config(block_dim=1)
+            for b in range(nb):  # in order within a block, from the block's places for each digit
+                for i in range(b * bs, ti.min(b * bs + bs, n)):
+                    x = src[i + soff]
+                    k = b * RADIX + digit(x, shift)
+                    p = h[k]
+                    h[k] = p + 1
+                    dst[p + doff] = x
+
+        _KERNELS[kdt, kinds] = count, scatter
+        return count, scatter
+    vsrc_ann, vdst_ann = annotation(kinds[2]), annotation(kinds[3])
 
     @ti.kernel
-    def scatter(src: ti.types.ndarray(), dst: ti.types.ndarray(), n: ti.i32, nb: ti.i32, bs: ti.i32,
-                shift: ti.i32, h: ti.types.ndarray()):
-        ti.loop_config(block_dim=1)
-        for b in range(nb):
-            for i in range(b * bs, ti.min(b * bs + bs, n)):
-                x = src[i]
-                k = b * RADIX + digit(x, shift)
-                p = h[k]
-                h[k] = p + 1
-                dst[p] = x
-
-    @ti.kernel
-    def scatter_values(src: ti.types.ndarray(), dst: ti.types.ndarray(), vsrc: ti.types.ndarray(),
-                       vdst: ti.types.ndarray(), n: ti.i32, nb: ti.i32, bs: ti.i32, shift: ti.i32,
+    def scatter_values(src: src_ann, soff: ti.i32, dst: dst_ann, doff: ti.i32, vsrc: vsrc_ann, vsoff: ti.i32,
+                       vdst: vdst_ann, vdoff: ti.i32, n: ti.i32, nb: ti.i32, bs: ti.i32, shift: ti.i32,
                        h: ti.types.ndarray()):
         ti.loop_config(block_dim=1)
         for b in range(nb):
             for i in range(b * bs, ti.min(b * bs + bs, n)):
-                x = src[i]
+                x = src[i + soff]
                 k = b * RADIX + digit(x, shift)
                 p = h[k]
                 h[k] = p + 1
-                dst[p] = x
-                vdst[p] = vsrc[i]
+                dst[p + doff] = x
+                vdst[p + vdoff] = vsrc[i + vsoff]
 
-    _KERNELS[kdt] = count, places, scatter, scatter_values
-    return _KERNELS[kdt]
+    _KERNELS[kdt, kinds] = count, scatter_values
+    return count, scatter_values
 
 
 def parallel_sort(keys, values=None) -> None:
@@ -154,34 +164,29 @@ def parallel_sort(keys, values=None) -> None:
     n = k.n
     if n <= 1:
         return
-    count, places, scatter, scatter_values = _kernels(k.dtype)
     nb = min(_MAX_BLOCKS, -(-n // _BLOCK))
     bs = -(-n // nb)
     h = ti.ndarray(ti.i32, nb * RADIX)
-
-    def work(a: Array1D):
-        """Two buffers to sort between: an ndarray is its own first one; a field is copied into one."""
-        first = a.obj if a.kind == "ndarray" else a.scratch(n)
-        if a.kind == "field":
-            copy(a.obj, a.offset, first, 0, n, "field", "ndarray")
-        return [first, a.scratch(n)]
-
-    kb = work(k)
-    vb = work(v) if v is not None else None
+    # the two buffers each pass goes between: the user's container (its offset) and a scratch ndarray
+    kb = [(keys, k.kind, k.offset), (k.scratch(n), "ndarray", 0)]
+    vb = [(values, v.kind, v.offset), (v.scratch(n), "ndarray", 0)] if v is not None else None
     cur = 0
     for shift in range(0, _KEY_TYPES[k.dtype], 8):
-        count(kb[cur], n, nb, bs, shift, h)
+        (ks, kks, kso), (kd, kkd, kdo) = kb[cur], kb[1 - cur]
+        if vb is None:
+            count, scatter = _kernels(k.dtype, (kks, kkd))
+            args: tuple = (ks, kso, kd, kdo)
+        else:
+            (vs, vks, vso), (vd, vkd, vdo) = vb[cur], vb[1 - cur]
+            count, scatter = _kernels(k.dtype, (kks, kkd, vks, vkd))
+            args = (ks, kso, kd, kdo, vs, vso, vd, vdo)
+        count(ks, kso, n, nb, bs, shift, h)
         if places(h, n, nb):
             continue  # every key has this digit: the order stays
-        if vb is None:
-            scatter(kb[cur], kb[1 - cur], n, nb, bs, shift, h)
-        else:
-            scatter_values(kb[cur], kb[1 - cur], vb[cur], vb[1 - cur], n, nb, bs, shift, h)
+        scatter(*args, n, nb, bs, shift, h)
         cur = 1 - cur
-    for a, bufs in ((k, kb), (v, vb)):
-        if a is None or bufs is None:
-            continue
-        if a.kind == "field":
-            copy(bufs[cur], 0, a.obj, a.offset, n, "ndarray", "field")
-        elif cur == 1:
-            copy(bufs[1], 0, a.obj, 0, n, "ndarray", "ndarray")
+    if cur == 1:  # an odd number of passes moved the elements: they are in the scratch buffers
+        for bufs in (kb, vb):
+            if bufs is not None:
+                (src, _, _), (dst, kind, off) = bufs[1], bufs[0]
+                copy(src, 0, dst, off, n, "ndarray", kind)
