@@ -1,7 +1,8 @@
 # mypy: disable-error-code="valid-type, index"
 """The 1-D fields and ndarrays ti.algorithms works on: what one is (length, index offset, element type, a
-gradient), a scratch ndarray of the same element type, copies between them, and where the helpers may run. Fields are `ti.template()` arguments and
-ndarrays `ti.types.ndarray()` ones, so every kernel that touches a user's container comes in both kinds."""
+gradient), a scratch ndarray of the same element type, copies between them, and where the helpers may run.
+Fields are `ti.template()` arguments and ndarrays `ti.types.ndarray()` ones, so every kernel that touches a
+user's container comes in both kinds."""
 
 import simgrad as ti
 from simgrad import errors
