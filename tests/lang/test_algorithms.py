@@ -97,25 +97,26 @@ def test_sort_of_nothing_and_of_one_element(n):
 
 
 @pytest.mark.parametrize("offset", [-23333, -1, 128])
-def test_sort_offset_fields_and_mixed_containers(offset):
+@pytest.mark.parametrize("dtype", [ti.i8, ti.i32], ids=str)  # one pass (the result lands in the scratch), four
+def test_sort_offset_fields_and_mixed_containers(offset, dtype):
     """Taichi's test_sort_with_offset: keys and values fields with an index offset; also keys in a field with
     values in an ndarray and the reverse, and values longer than keys (only the first n move)."""
     n = 1001
-    a = _keys(np.int32, n, seed=3)
-    keys, values = ti.field(ti.i32, n, offset=offset), ti.field(ti.i32, n, offset=offset)
+    a = _keys(DTYPES[dtype], n, seed=3)
+    keys, values = ti.field(dtype, n, offset=offset), ti.field(ti.i32, n, offset=offset)
     keys.from_numpy(a)
     values.from_numpy(np.arange(n, dtype=np.int32))
     ti.algorithms.parallel_sort(keys, values)
     _check(keys.to_numpy(), values.to_numpy(), a)
 
-    keys, values = ti.field(ti.i32, n, offset=offset), ti.ndarray(ti.i32, n + 5)
+    keys, values = ti.field(dtype, n, offset=offset), ti.ndarray(ti.i32, n + 5)
     keys.from_numpy(a)
     values.from_numpy(np.arange(n + 5, dtype=np.int32))
     ti.algorithms.parallel_sort(keys, values)
     _check(keys.to_numpy(), values.to_numpy()[:n], a)
     assert values.to_numpy()[n:].tolist() == list(range(n, n + 5))
 
-    keys, values = ti.ndarray(ti.i32, n), ti.field(ti.i32, n, offset=offset)
+    keys, values = ti.ndarray(dtype, n), ti.field(ti.i32, n, offset=offset)
     keys.from_numpy(a)
     values.from_numpy(np.arange(n, dtype=np.int32))
     ti.algorithms.parallel_sort(keys, values)
