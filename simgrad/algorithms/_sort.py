@@ -15,7 +15,7 @@ flipped, floats by their bits with the negative ones inverted; -0.0 orders as 0.
 as numpy sorts them (Taichi's comparison network leaves NaNs anywhere)."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, annotation, copy, not_on_a_tape, python_scope
+from simgrad.algorithms._containers import Array1D, annotation, copy, not_on_a_tape, python_scope
 from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
 
 RADIX = 256  # 8-bit digits

@@ -8,7 +8,7 @@ targets. Like Taichi it takes i32 only (raising Taichi's RuntimeError for other 
 overflow as i32 addition does."""
 
 import simgrad as ti
-from simgrad.algorithms.containers import Array1D, annotation, not_on_a_tape, python_scope
+from simgrad.algorithms._containers import Array1D, annotation, not_on_a_tape, python_scope
 from simgrad.errors import SimgradRuntimeError, SimgradTypeError, SimgradValueError, caller_loc
 
 _BLOCK = 65536  # elements per block, at most _MAX_BLOCKS blocks
