@@ -371,3 +371,24 @@ def test_the_algorithms_are_kernels_not_numpy():
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             assert not any(n.split(".")[0] == "numpy" for n in names), f"{path.name} imports numpy"
+
+
+def test_debug_mode_index_checks_stay_quiet():
+    """ti.init(debug=True) checks every index the kernels use: none is out of bounds (offsets, values longer
+    than the keys, one pass ending in the scratch buffer)."""
+    ti.init(arch=ti.cpu, debug=True)
+    n = 3001
+    a = _keys(np.int8, n, seed=12)
+    keys, values = ti.field(ti.i8, n, offset=-50), ti.Vector.ndarray(2, ti.f32, n + 3)
+    vals = np.random.default_rng(0).standard_normal((n + 3, 2)).astype(np.float32)
+    keys.from_numpy(a)
+    values.from_numpy(vals)
+    ti.algorithms.parallel_sort(keys, values)
+    order = np.argsort(a, kind="stable")
+    np.testing.assert_array_equal(keys.to_numpy(), a[order])
+    np.testing.assert_array_equal(values.to_numpy()[:n], vals[order])
+    x = ti.field(ti.i32, 5000, offset=7)
+    b = np.random.default_rng(1).integers(-9, 9, 5000, dtype=np.int32)
+    x.from_numpy(b)
+    ti.algorithms.PrefixSumExecutor(4000).run(x)
+    np.testing.assert_array_equal(x.to_numpy(), np.r_[np.cumsum(b[:4000], dtype=np.int32), b[4000:]])
