@@ -142,7 +142,6 @@ _NOT_SUPPORTED = {
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
-    "algorithms": "ti.algorithms (parallel sort, prefix sums) is not built yet",
     "BitpackedFields": "quantized types are not built yet",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
@@ -167,6 +166,10 @@ def __getattr__(name):
         import simgrad.lang.graph as _graph
 
         return _graph
+    if name == "algorithms":  # parallel_sort and PrefixSumExecutor, simgrad kernels
+        import simgrad.algorithms as _algorithms
+
+        return _algorithms
     if name == "linalg":  # sparse matrices and solvers: loaded (with scipy, lazily) when first used
         import simgrad.linalg as _linalg
 
