@@ -15,6 +15,7 @@ from simgrad.errors import SimgradRuntimeError, SimgradSyntaxError, SimgradValue
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.program import get_program
+from simgrad.lang.quant import is_quant
 from simgrad.lang.types import MatrixType
 
 _counter = [0]
@@ -118,6 +119,9 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
 
     if isinstance(dtype, MatrixType):
         return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
+    if is_quant(dtype):
+        return _quant_field(lambda base: ScalarField(dtype.compute, base), dtype, shape, name, needs_grad,
+                            needs_dual)
     t = dt.from_any(dtype)
     shape = _check_shape(shape)
     base, auto = _name(name)
@@ -126,7 +130,29 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     return _place_new(f, shape, offset, needs_grad)
 
 
+def _quant_field(make, qtype, shape, name, needs_grad: bool, needs_dual: bool) -> Field:
+    """A field of a ti.types.quant type (lang/quant.py): computes in its compute type, placed by the user
+    in a ti.BitpackedFields or under ti.root.quant_array. No gradient: Taichi differentiates none either."""
+    if needs_grad or needs_dual:
+        raise SimgradRuntimeError(f"a field of quant type {qtype!r} cannot have needs_grad=True or needs_dual=True: "
+                                  "quantized values are not differentiated (as in Taichi)", caller_loc())
+    if shape is not None:
+        raise SimgradSyntaxError(f"a field of quant type {qtype!r} takes no shape: place it in a "
+                                 "ti.BitpackedFields or under ti.root.quant_array(...)", caller_loc())
+    base, auto = _name(name)
+    f = make(base)
+    for c in f._components():
+        c.quant_type = qtype
+    f.quant_type = qtype
+    f._auto_name = auto
+    f._needs_grad = False
+    return f
+
+
 def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
+    if is_quant(dtype):
+        return _quant_field(lambda base: MatrixField(n, m, dtype.compute, base), dtype, shape, name, needs_grad,
+                            needs_dual)
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
     shape = _check_shape(shape)
     base, auto = _name(name)

@@ -166,6 +166,7 @@ class ScalarField(Field):
         self.is_primal = True
         self.is_dual = False
         self.sparse = False  # under a pointer/bitmasked/dynamic SNode: Python scope goes through kernels
+        self.quant_type = None  # a ti.types.quant type (lang/quant.py); dtype is then its compute type
 
     def _components(self):
         return [self]
@@ -182,8 +183,16 @@ class ScalarField(Field):
         if cached is None or cached[0] != key:
             node = self._snode
             levels = node.levels() if node.has_sparse_path() else ()
+            value_offset = node.offset_in_parent if levels else 0
+            quant = None
+            if self.quant_type is not None:
+                from simgrad.lang.quant import slot_of
+
+                quant = slot_of(self)
+                if levels and node._parent.kind == "bit_struct":  # the cell's offset in its parent's cell
+                    value_offset += node._parent.offset_in_parent
             ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, owner=self, dual=dual,
-                           levels=levels, value_offset=node.offset_in_parent if levels else 0)
+                           levels=levels, value_offset=value_offset, quant=quant)
             self._ref = cached = (key, ref)
         return cached[1]
 
@@ -214,6 +223,9 @@ class ScalarField(Field):
             self.sparse = True
             return
         self.layout = (tree.id, const, terms, shape)
+        if self.quant_type is not None:  # bits of a packed cell: Python scope goes through kernels too
+            self.sparse = True
+            return
         buf = tree.buffer
         isz = self.dtype.nbytes
         if all(t.divisor == 1 and t.modulus == 0 for t in terms) and len(terms) == len(shape):
