@@ -273,6 +273,8 @@ class ScalarField(Field):
             self._ensure()
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
+        if self.quant_type is not None:  # kept to its bits whatever the value, as in kernels and Taichi
+            return scope_hooks.sparse.set(self, self._unshift(key), _wrapped(value, self.dtype))
         _check_value(value, self.dtype, self.name)
         if self.sparse:
             return scope_hooks.sparse.set(self, self._unshift(key), value)
@@ -366,6 +368,13 @@ def _check_bounds(key, shape, name):
                                     f"indices must be integers", caller_loc())
         if not 0 <= k < n:
             raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
+
+
+def _wrapped(value, dtype: dt.DataType):
+    """An integer value converted to an integer type the way a kernel's cast does (wrapping)."""
+    if dtype.is_float or isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return value
+    return np.array(int(value) & ((1 << dtype.bits) - 1), dtype=np.uint64).astype(dtype.np).item()
 
 
 def _check_value(value, dtype: dt.DataType, name: str) -> None:

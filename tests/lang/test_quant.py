@@ -322,3 +322,53 @@ def test_types_namespace():
     assert sorted(n for n in dir(ti.types.quant) if not n.startswith("_")) == ["fixed", "float", "i32", "impl", "int"]
     assert ti.types.quant.i32 is ti.i32
     assert repr(ti.types.quant.int(5, False)) == "qu5"
+
+
+def test_python_scope_write_wraps_like_a_kernel():
+    """`b[None] = -64` on a 7-bit unsigned quant int computing in u16 keeps the low bits (64), as a kernel's store
+    and Taichi do (Taichi's test_cast.py test_quant_int_extension); a plain u16 field would refuse the value."""
+    a = ti.field(dtype=ti.types.quant.int(5, True, ti.i16))
+    b = ti.field(dtype=ti.types.quant.int(7, False, ti.u16))
+    bp = ti.BitpackedFields(max_num_bits=32)
+    bp.place(a, b)
+    ti.root.place(bp)
+    a[None] = -16
+    b[None] = -64
+    assert a[None] == -16 and b[None] == 64
+    x = ti.field(ti.u32, shape=2)
+
+    @ti.kernel
+    def widen():
+        x[0] = ti.cast(a[None], ti.u32)
+        x[1] = ti.cast(b[None], ti.u32)
+
+    widen()
+    assert x.to_numpy().tolist() == [0xFFFFFFF0, 64]
+
+
+def test_matrix_field_of_entry_types():
+    """ti.Matrix.field(2, 2, dtype=[[qflt, qfxt], [qflt, qfxt]]): one quant type per entry, one compute type;
+    mixing compute types is Taichi's RuntimeError. FieldsBuilder has quant_array too."""
+    qflt = ti.types.quant.float(exp=8, frac=5)
+    qfxt = ti.types.quant.fixed(bits=10, scale=0.1)
+    a = ti.Matrix.field(2, 2, dtype=[[qflt, qfxt], [qflt, qfxt]])
+    for r in range(2):
+        bp = ti.BitpackedFields(max_num_bits=32)
+        bp.place(a.get_scalar_field(r, 0), a.get_scalar_field(r, 1))
+        ti.root.dense(ti.i, 1).place(bp)
+
+    @ti.kernel
+    def init():
+        a[0] = [[1.3, 3.14], [-2.6, 0.06]]
+
+    init()
+    # 4 digit bits of f32 1.3 round to 1.3125 (1.0101b); fixed 3.14 -> 31 * 0.1; -2.6 -> -2.625; 0.06 -> 0.1
+    np.testing.assert_allclose(a.to_numpy()[0], [[1.3125, 3.1], [-2.625, 0.1]], rtol=1e-6)
+    with pytest.raises(RuntimeError, match="Member fields of a matrix field must have the same compute type"):
+        ti.Vector.field(2, dtype=[ti.types.quant.int(10), qfxt])
+    fb = ti.FieldsBuilder()
+    q = ti.field(dtype=ti.types.quant.int(2, False))
+    fb.quant_array(ti.i, 16, max_num_bits=32).place(q)
+    fb.finalize()
+    q[15] = 3
+    assert q[15] == 3 and q[14] == 0
