@@ -217,6 +217,23 @@ class SNode:
         return self.memory_usage()["touched_blocks"] if self.kind in ("pointer", "dynamic") else 0
 
     @property
+    def _cell_size_bytes(self) -> int:
+        """Taichi's layout inspection: the bytes of one cell of this node (a place node: its value's)."""
+        self._lay_out()
+        return self.field.dtype.nbytes if self.kind == "place" and self.field is not None else self.cell_size
+
+    @property
+    def _offset_bytes_in_parent_cell(self) -> int:
+        """Taichi's layout inspection: where this node starts in a cell of its parent."""
+        self._lay_out()
+        return self.offset_in_parent
+
+    def _lay_out(self) -> None:
+        """Offsets as materialising will give them (laying out is a pure function of the tree's structure)."""
+        if self.tree is not None and not self.tree.materialized:
+            self.tree.root._layout()
+
+    @property
     def _snode_tree_id(self) -> int:
         assert self.tree is not None
         return self.tree.id

@@ -372,3 +372,23 @@ def test_matrix_field_of_entry_types():
     fb.finalize()
     q[15] = 3
     assert q[15] == 3 and q[14] == 0
+
+
+def test_layout_inspection():
+    """Taichi's `_cell_size_bytes` / `_offset_bytes_in_parent_cell` (its test_snode_layout_inspection.py): a
+    BitpackedFields takes its physical integer's bytes in its parent's cell."""
+    x = ti.field(dtype=ti.types.quant.int(16, False))
+    y = ti.field(dtype=ti.types.quant.fixed(16, False))
+    z = ti.field(dtype=ti.f32)
+    n1 = ti.root.dense(ti.i, 32)
+    bp = ti.BitpackedFields(max_num_bits=32)
+    bp.place(x)
+    n1.place(bp)
+    n2 = ti.root.dense(ti.i, 4)
+    bp = ti.BitpackedFields(max_num_bits=32)
+    bp.place(y)
+    n2.place(bp)
+    n2.place(z)
+    assert (n1._cell_size_bytes, n2._cell_size_bytes) == (4, 8)
+    assert (n1._offset_bytes_in_parent_cell, n2._offset_bytes_in_parent_cell) == (0, 4 * 32)
+    assert z.snode._offset_bytes_in_parent_cell == 4
