@@ -44,6 +44,8 @@ class _State:
         self.changed = False
 
     def cell(self, f: FieldRef, slot: QuantSlot) -> FieldRef:
+        if f.quant is None:  # already the cell's record
+            return f
         key = (f.layout, f.offset, f.levels, f.value_offset, slot.physical)
         ref = self.cells.get(key)
         if ref is None:
@@ -51,6 +53,14 @@ class _State:
                            value_offset=f.value_offset)
             self.cells[key] = ref
         return ref
+
+    def quant_of(self, ptr: Stmt) -> QuantSlot | None:
+        """The quant slot a pointer points into (before or after slot_of retargeted it), else None."""
+        if ptr.op is not Op.GLOBAL_PTR:
+            return None
+        slot = self.slots.get(id(ptr))
+        target = ptr.attrs["target"]
+        return slot if slot is not None else target.quant if isinstance(target, FieldRef) else None
 
     def slot_of(self, ptr: Stmt) -> QuantSlot | None:
         if ptr.op is not Op.GLOBAL_PTR:
@@ -69,10 +79,13 @@ class _State:
 
 
 def _block(block: Block, state: _State) -> None:
+    fused, dropped = _fusions(block, state)
     out: list[Stmt] = []
     for s in block.stmts:
         if state.repl:
             s.operands = tuple(state.repl.get(id(o), o) for o in s.operands)
+        if id(s) in dropped:  # stored by the fused store of its group, further down
+            continue
         slot = state.slot_of(s.operands[0]) if s.op in _ACCESS and s.operands else None
         if slot is None:
             for blk in s.blocks:
@@ -86,7 +99,8 @@ def _block(block: Block, state: _State) -> None:
         if s.op is Op.GLOBAL_LOAD:
             state.repl[id(s)] = q.load()
         elif s.op is Op.GLOBAL_STORE:
-            q.store(s.operands[1])
+            members = fused.get(id(s), [(slot, s.operands[1])])
+            q.store([(m, state.repl.get(id(v), v)) for m, v in members])
         else:
             state.repl[id(s)] = q.atomic(s.attrs["kind"], s.operands[1])
         for x in scratch.stmts:
@@ -94,6 +108,43 @@ def _block(block: Block, state: _State) -> None:
         out += scratch.stmts
         state.changed = True
     block.stmts = out
+
+
+def _fusions(block: Block, state: _State) -> tuple[dict, set]:
+    """Taichi's store fusion (optimize_bit_struct_stores.cpp): stores to members of one BitpackedFields cell in
+    a run of a block with no control statement between become one store at the last of them, so a shared
+    exponent is chosen once for all the new values (stored one by one, each would recode the others' already
+    rounded digits). A load or atomic of the cell's field between two stores ends the run (Taichi: a load).
+    Returns ({id(last store): [(slot, value), ...]}, ids of the stores it replaces)."""
+    fused: dict[int, list] = {}
+    dropped: set[int] = set()
+    runs: dict[tuple, list[Stmt]] = {}
+
+    def flush(key=None):
+        for k in [key] if key is not None else list(runs):
+            stores = runs.pop(k, [])
+            if len(stores) > 1:
+                fused[id(stores[-1])] = [(state.quant_of(x.operands[0]), x.operands[1]) for x in stores]
+                dropped.update(id(x) for x in stores[:-1])
+
+    for s in block.stmts:
+        if s.blocks:
+            flush()
+            continue
+        if s.op not in _ACCESS or not s.operands:
+            continue
+        slot = state.quant_of(s.operands[0])
+        if slot is None or slot.array:
+            continue
+        cell = state.cell(s.operands[0].attrs["target"], slot)
+        if s.op is Op.GLOBAL_STORE:
+            index = tuple(("c", o.attrs["value"]) if o.op is Op.CONST else id(o) for o in s.operands[0].operands)
+            runs.setdefault((id(cell), index), []).append(s)
+        else:  # a read of the cell (at any index: it may alias) ends its runs
+            for k in [k for k in runs if k[0] == id(cell)]:
+                flush(k)
+    flush()
+    return fused, dropped
 
 
 class _Quant:
@@ -175,31 +226,26 @@ class _Quant:
                 b.emit(Op.LOCAL_STORE, None, (var, got))
         return b.emit(Op.LOCAL_LOAD, P, (var,))
 
-    def write(self, update_bits, full: bool = False) -> Stmt | None:
-        """Store: update_bits(old) -> (value bits, mask). A value filling the whole cell is a plain store."""
-        if full:
-            val, _mask = update_bits(None)
-            self.b.emit(Op.GLOBAL_STORE, None, (self.ptr, val))
-            return None
-        return self.cas(lambda old: self.merge(old, *update_bits(old)))
-
-    # -- values -----------------------------------------------------------------------------------------
-    def decode(self, cell: Stmt) -> Stmt:
-        q, b = self.q, self.b
+    # -- values ---------------------------------------------------------------------------------------
+    def decode(self, cell: Stmt, q: QuantSlot | None = None) -> Stmt:
+        q = q or self.q
+        b = self.b
+        off = self.off if q is self.q else q.offset
         if q.kind == "float":
-            return self._float_decode(cell, self.off, q.bits, q.signed)
-        raw = self.extract(cell, self.off, q.bits, q.signed)
+            return self._float_decode(cell, q, off, q.bits, q.signed)
+        raw = self.extract(cell, off, q.bits, q.signed)
+        compute = q.compute or self.compute
         if q.kind == "int":
-            return b.cast(raw, self.compute)
+            return b.cast(raw, compute)
         digits = b.cast(raw, dt.i32 if q.signed else dt.u32)
-        return b.mul(b.cast(digits, self.compute), b.const(q.scale, self.compute))
+        return b.mul(b.cast(digits, compute), b.const(q.scale, compute))
 
-    def encode(self, v: Stmt) -> Stmt:
+    def encode(self, v: Stmt, q: QuantSlot) -> Stmt:
         """An int's or fixed value's digits (an integer of the compute or digits type)."""
-        q, b = self.q, self.b
+        b = self.b
         if q.kind == "int":
             return v
-        t = self.compute
+        t = v.vtype
         scaled = b.mul(v, b.const(1.0 / q.scale, t))
         ut = dt.u32 if t.bits == 32 else dt.u64
         sign = b.bit_and(b.emit(Op.BITCAST, ut, (scaled,)), b.const(1 << (t.bits - 1), ut))
@@ -209,26 +255,52 @@ class _Quant:
     def load(self) -> Stmt:
         return self.decode(self.b.emit(Op.GLOBAL_LOAD, self.P, (self.ptr,)))
 
-    def store(self, v: Stmt) -> None:
-        q = self.q
-        if q.kind == "float":
-            if q.shared:
-                self.cas(lambda old: self._shared_store(old, v))
-            else:
-                self.write(lambda old: self._float_bits(v))
-            return
-        digits = self.encode(v)
-        full = not q.array and q.offset == 0 and q.bits == self.W
-        self.write(lambda old: self.placed(digits, q.bits, self.off), full)
+    def store(self, members: list) -> None:
+        """Store [(slot, value)] into this cell at once (one member, or a fused group of a BitpackedFields):
+        a shared exponent is recoded for all its users, from the new values and the others' current ones."""
+        given = {m.offset: (m, v) for m, v in members}  # a member stored twice keeps its last value
+        groups = {m.exp_offset: m for m, _v in given.values() if m.kind == "float" and m.shared}
+        plain = [(m, v) for m, v in given.values() if not (m.kind == "float" and m.shared)]
+        reads_old = any(o not in given for g in groups.values() for o, _bits, _sg in g.shared)
+        covered = 0
+        for m, _v in plain:
+            covered |= ((1 << m.bits) - 1) << m.offset if not m.array else 0
+            covered |= ((1 << m.exp_bits) - 1) << m.exp_offset if m.kind == "float" else 0
+        for g in groups.values():
+            covered |= ((1 << g.exp_bits) - 1) << g.exp_offset
+            for o, bits, _sg in g.shared:
+                covered |= ((1 << bits) - 1) << o
+        digits = [(m, self.encode(v, m)) if m.kind != "float" else (m, v) for m, v in plain]
+
+        def update(old: Stmt | None) -> tuple[Stmt, Stmt]:
+            parts = []
+            for m, v in digits:
+                if m.kind == "float":  # its exponent is not masked: an overflow spills, as in Taichi
+                    parts.append(self._float_bits(v, m))
+                    continue
+                x, y = self.placed(v, m.bits, self.off if m is self.q else m.offset)
+                parts.append((self.b.bit_and(x, y), y))  # the value's own bits only (a plain store ORs them)
+            for g in groups.values():
+                values = {o: given[o][1] for o, _bits, _sg in g.shared if o in given}
+                parts.append(self._shared_bits(old, g, values))
+            val, mask = parts[0]
+            for x, y in parts[1:]:
+                val, mask = self.b.bit_or(val, x), self.b.bit_or(mask, y)
+            return val, mask
+
+        if not reads_old and covered == (1 << self.W) - 1:  # the whole cell is new: a plain store
+            self.b.emit(Op.GLOBAL_STORE, None, (self.ptr, update(None)[0]))
+        else:
+            self.cas(lambda old: self.merge(old, *update(old)))
 
     def atomic(self, kind: str, v: Stmt) -> Stmt:
         q, b = self.q, self.b
         if q.kind == "float":  # Taichi demotes these to a read-modify-write (not atomic)
             old = self.load()
-            self.store(_combine(b, kind, old, v))
+            self.store([(q, _combine(b, kind, old, v))])
             return old
         if q.kind == "fixed" and kind == "add":  # Taichi adds the coded operand to the digits
-            dv = self.encode(v)
+            dv = self.encode(v, q)
 
             def added(old: Stmt) -> Stmt:
                 d = b.cast(self.extract(old, self.off, q.bits, q.signed), dv.vtype)
@@ -237,26 +309,27 @@ class _Quant:
 
         def update(old: Stmt) -> Stmt:
             new = _combine(b, kind, self.decode(old), v)
-            return self.merge(old, *self.placed(self.encode(new), q.bits, self.off))
+            return self.merge(old, *self.placed(self.encode(new, q), q.bits, self.off))
         return self.decode(self.cas(update))
 
     # -- quant floats (f32 compute; Taichi's codegen_llvm_quant.cpp arithmetic) -------------------------
-    def _conv(self, exp: Stmt) -> Stmt:
+    def _conv(self, exp: Stmt, q: QuantSlot) -> Stmt:
         """The exponent bias difference, 0 for a zero exponent when the exponent is narrower than f32's."""
-        b, q = self.b, self.q
+        b = self.b
         conv = 127 - (1 << (q.exp_bits - 1)) + 1
         if q.exp_bits >= 8:
             return b.const(conv, dt.i32)
         return b.select(b.ne(exp, b.const(0, dt.i32)), b.const(conv, dt.i32), b.const(0, dt.i32))
 
-    def _float_decode(self, cell: Stmt, off, bits: int, signed: bool) -> Stmt:
-        b, q = self.b, self.q
+    def _float_decode(self, cell: Stmt, q: QuantSlot, off: int | Stmt, bits: int, signed: bool) -> Stmt:
+        """The f32 value of the digits at `off` (`bits` wide) with q's exponent."""
+        b = self.b
         u = dt.u32
         d = bits - (1 if signed else 0)
         given = b.cast(self.extract(cell, off, bits, signed), dt.i32)
         raw = b.bit_and(b.cast(given, u), (1 << bits) - 1)
         exp = b.cast(self.extract(cell, q.exp_offset, q.exp_bits, False), dt.i32)
-        conv = self._conv(exp)
+        conv = self._conv(exp, q)
         sign: Stmt | None = None
         if q.shared:
             digits = raw
@@ -279,9 +352,9 @@ class _Quant:
             f = b.bit_or(f, sign if sign is not None else b.shl(b.bit_and(digits, 1 << 23), 8))
         return b.emit(Op.BITCAST, dt.f32, (f,))
 
-    def _float_bits(self, v: Stmt) -> tuple[Stmt, Stmt]:
+    def _float_bits(self, v: Stmt, q: QuantSlot) -> tuple[Stmt, Stmt]:
         """A float with its own exponent: (digit and exponent bits, their mask), rounded to nearest."""
-        b, q = self.b, self.q
+        b = self.b
         u = dt.u32
         d = q.bits - (1 if q.signed else 0)
         fb = b.emit(Op.BITCAST, u, (v,))
@@ -292,23 +365,30 @@ class _Quant:
         if q.signed:
             digits = b.bit_or(digits, b.shr(b.bit_and(fb, 1 << 31), 31 - d))
         e = b.cast(exp, dt.i32)
-        e = b.max(b.sub(e, self._conv(e)), 0)
+        e = b.max(b.sub(e, self._conv(e, q)), 0)
         digits = b.select(b.ne(e, b.const(0, dt.i32)), digits, b.const(0, u))  # flush to zero
         ev, em = self.placed(e, q.exp_bits, q.exp_offset)
         dv, dm = self.placed(digits, q.bits, q.offset)
         return b.bit_or(ev, dv), b.bit_or(em, dm)
 
-    def _shared_store(self, old: Stmt, v: Stmt) -> Stmt:
-        """The cell with `v` stored and every float sharing its exponent recoded against the largest one."""
-        b, q = self.b, self.q
+    def _shared_bits(self, old: Stmt | None, q: QuantSlot, values: dict) -> tuple[Stmt, Stmt]:
+        """Every float sharing q's exponent recoded against the largest exponent: the values in `values`
+        (by digit offset) and the others' current ones (from `old`). Returns (bits, mask)."""
+        b = self.b
         u = dt.u32
-        values = [v if o == q.offset else self._float_decode(old, o, bits, sg) for o, bits, sg in q.shared]
-        fbits = [b.emit(Op.BITCAST, u, (x,)) for x in values]
+        floats = []
+        for o, bits, sg in q.shared:
+            if o in values:
+                floats.append(values[o])
+            else:
+                assert old is not None
+                floats.append(self._float_decode(old, q, o, bits, sg))
+        fbits = [b.emit(Op.BITCAST, u, (x,)) for x in floats]
         exps = [b.bit_and(b.shr(x, 23), 255) for x in fbits]
         top = exps[0]
         for e in exps[1:]:
             top = b.max(top, e)
-        stored = b.max(b.sub(b.cast(top, dt.i32), self._conv(b.cast(top, dt.i32))), 0)
+        stored = b.max(b.sub(b.cast(top, dt.i32), self._conv(b.cast(top, dt.i32), q)), 0)
         val, mask = self.placed(stored, q.exp_bits, q.exp_offset)
         for (o, bits, sg), x, e in zip(q.shared, fbits, exps):
             d = bits - (1 if sg else 0)
@@ -322,7 +402,7 @@ class _Quant:
                 digits = b.bit_or(digits, b.shr(b.bit_and(x, 1 << 31), 31 - d))
             dv, dm = self.placed(digits, bits, o)
             val, mask = b.bit_or(val, dv), b.bit_or(mask, dm)
-        return self.merge(old, val, mask)
+        return val, mask
 
 
 def _clz32(b: Builder, x: Stmt) -> Stmt:

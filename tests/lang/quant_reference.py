@@ -87,6 +87,35 @@ def cases(ti) -> dict:
     out["shared_u"] = shared(va, [abs(v) for v in vb], False)
     out["shared_s"] = shared(va, vb, True)
 
+    # stores to members of one cell in a row are fused (one shared exponent for the new values); a read of the
+    # cell between them ends the fusion (each store then recodes the other's rounded digits)
+    def fused(read_between: bool):
+        vals = np.random.default_rng(3).standard_normal((64, 2)).astype(np.float32) * np.float32(7.0)
+        v = ti.Vector.field(2, dtype=ti.types.quant.float(exp=6, frac=9))
+        bp = ti.BitpackedFields(max_num_bits=32)
+        bp.place(v, shared_exponent=True)
+        ti.root.dense(ti.i, 64).place(bp)
+        src = ti.Vector.field(2, ti.f32, shape=64)
+        seen = ti.field(ti.f32, shape=64)
+        back = ti.Vector.field(2, ti.f64, shape=64)
+        src.from_numpy(vals)
+
+        @ti.kernel
+        def go():
+            for i in range(64):
+                v[i][0] = src[i][0]
+                if ti.static(read_between):
+                    seen[i] = v[i][0]
+                v[i][1] = src[i][1]
+            for i in range(64):
+                back[i] = v[i]
+
+        go()
+        return back.to_numpy().tolist()
+
+    out["fused"] = fused(False)
+    out["not_fused"] = fused(True)
+
     # atomics: many iterations onto one quant int, neighbours in a quant_array, max/min
     x = ti.field(dtype=ti.types.quant.int(13, True))
     y = ti.field(dtype=ti.types.quant.int(5, True))
