@@ -48,7 +48,8 @@ class QuantSlot:
     at bit `exp_offset`). `offset`: the first bit. A quant_array element adds `number * bits`, with
     number = sum((I[position] % modulus) * weight) over `array`. A float whose exponent is shared lists
     every member using it in `shared` as (bit offset, bits, signed), itself included. `compute`: the type
-    kernels see (the field's dtype)."""
+    kernels see (the field's dtype). `used`: how many low bits of the cell its members take (the rest are
+    always zero)."""
 
     kind: str
     physical: DataType
@@ -61,6 +62,7 @@ class QuantSlot:
     exp_offset: int = 0
     shared: tuple = ()
     compute: DataType | None = None
+    used: int = 0
 
 
 @dataclass(frozen=True)

@@ -207,15 +207,16 @@ def slot_of(field) -> QuantSlot:
             terms.append((position[a], size, weight))
             weight *= size
         return QuantSlot(kind, cell.physical, q.storage_bits, q.signed, 0, tuple(terms[::-1]), scale,
-                         compute=field.dtype)
+                         compute=field.dtype, used=cell.num_cells * q.storage_bits)
     pack: BitpackedFields = cell.bitpack
     me = next(m for m in pack.members if m[0] is field)
     if kind != "float":
-        return QuantSlot(kind, cell.physical, q.storage_bits, q.signed, me[2], (), scale, compute=field.dtype)
+        return QuantSlot(kind, cell.physical, q.storage_bits, q.signed, me[2], (), scale, compute=field.dtype,
+                         used=pack.total)
     exp = me[3]
     users = tuple((m[2], m[1].digits.bits, m[1].signed) for m in pack.members if m[3] == exp)
     return QuantSlot(kind, cell.physical, q.storage_bits, q.signed, me[2], (), scale, q.exponent.bits,
-                     pack.members[exp][2], users if len(users) > 1 else (), compute=field.dtype)
+                     pack.members[exp][2], users if len(users) > 1 else (), compute=field.dtype, used=pack.total)
 
 
 def check_array_member(node, field) -> None:

@@ -288,7 +288,8 @@ class _Quant:
                 val, mask = self.b.bit_or(val, x), self.b.bit_or(mask, y)
             return val, mask
 
-        if not reads_old and covered == (1 << self.W) - 1:  # the whole cell is new: a plain store
+        # every member's bits new (Taichi's atomic demotion of a store of all members): a plain store
+        if not reads_old and covered == (1 << (self.q.used or self.W)) - 1:
             self.b.emit(Op.GLOBAL_STORE, None, (self.ptr, update(None)[0]))
         else:
             self.cas(lambda old: self.merge(old, *update(old)))

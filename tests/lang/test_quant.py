@@ -419,3 +419,44 @@ def test_layout_inspection():
     assert (n1._cell_size_bytes, n2._cell_size_bytes) == (4, 8)
     assert (n1._offset_bytes_in_parent_cell, n2._offset_bytes_in_parent_cell) == (0, 4 * 32)
     assert z.snode._offset_bytes_in_parent_cell == 4
+
+
+def test_store_forms():
+    """How stores reach memory (the compiled IR): storing every member of a cell in a row is one plain store
+    (Taichi's store fusion and atomic demotion), storing one of several members is a compare-and-swap loop
+    (ATOMIC kind cas, kept atomic in parallel loops), a value alone in its cell a plain store."""
+    from simgrad.ir.nodes import walk
+    from simgrad.ir.ops import Op
+
+    x = ti.field(dtype=ti.types.quant.int(5, True))
+    y = ti.field(dtype=ti.types.quant.fixed(7, max_value=2))
+    bp = ti.BitpackedFields(max_num_bits=16)
+    bp.place(x, y)
+    ti.root.dense(ti.i, 8).place(bp)
+    w = ti.field(dtype=ti.types.quant.int(32, False))
+    bp32 = ti.BitpackedFields(max_num_bits=32)
+    bp32.place(w)
+    ti.root.dense(ti.i, 8).place(bp32)
+
+    @ti.kernel
+    def both():
+        for i in range(8):
+            x[i] = i
+            y[i] = 0.5
+
+    @ti.kernel
+    def one():
+        for i in range(8):
+            y[i] = 0.25
+            w[i] = i
+
+    def forms(k):
+        k()
+        ir = k.instance(()).ir
+        return sorted((s.op.name, s.attrs.get("kind"), s.attrs.get("strategy")) for s in walk(ir.body)
+                      if s.op in (Op.GLOBAL_STORE, Op.ATOMIC))
+
+    assert forms(both) == [("GLOBAL_STORE", None, None)]
+    assert forms(one) == [("ATOMIC", "cas", "atomic"), ("GLOBAL_STORE", None, None)]
+    assert x.to_numpy().tolist() == list(range(8)) and (y.to_numpy() == 0.25).all()
+    assert w.to_numpy().tolist() == list(range(8))
