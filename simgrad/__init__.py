@@ -99,6 +99,10 @@ from simgrad.lang.operators import math_functions as _math_functions
 globals().update(_math_functions("ti"))  # the registry's math functions (ir/opdefs.py): ti.sin, ti.atan2, ...
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import Layout, ref, sparse_matrix_builder, template, types
+from simgrad.lang.quant import BitpackedFields
+from simgrad.lang import impl as _impl
+
+types.quant.impl = _impl  # ti.types.quant.impl is Taichi's ti.lang.impl
 from simgrad.lang.atomics import (
     atomic_add,
     atomic_and,
@@ -142,7 +146,6 @@ _NOT_SUPPORTED = {
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
-    "BitpackedFields": "quantized types are not built yet",
     "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",

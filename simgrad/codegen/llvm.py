@@ -509,6 +509,13 @@ def lower_global_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 
 def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    if s.attrs["kind"] == "cas":  # (pointer, expected, new) -> the value found (passes/quant.py's loops)
+        p, e, n = s.operands
+        ty, res, r = llvm_type(s.vtype), f.tmp("cx"), f.tmp("old")
+        f.emit(f"{res} = cmpxchg ptr {f.v(p)}, {ty} {f.v(e)}, {ty} {f.v(n)} monotonic monotonic")
+        f.emit(f"{r} = extractvalue {{ {ty}, i1 }} {res}, 0")
+        f.names[s] = r
+        return
     p, v = s.operands
     t = s.vtype
     ty = llvm_type(t)

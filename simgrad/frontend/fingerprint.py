@@ -252,7 +252,10 @@ def _component(c) -> tuple:
     node = c.snode
     path = _path(node) if node else None
     tree = node.tree.id if node is not None and node.tree is not None else None
-    return (c.name, c.dtype.name, c.offset, c.layout, tree, path, c.is_primal)
+    quant = repr(c.quant_type) if getattr(c, "quant_type", None) is not None else None
+    if quant is not None and node is not None and node._parent is not None and node._parent.bitpack is not None:
+        quant += repr([(repr(m[1]), m[2], m[3]) for m in node._parent.bitpack.members])  # the packing compiled in
+    return (c.name, c.dtype.name, c.offset, c.layout, tree, path, c.is_primal, quant)
 
 
 def _adopt_name(v, name: str) -> None:

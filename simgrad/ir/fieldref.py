@@ -39,6 +39,33 @@ class Level:
 
 
 @dataclass(frozen=True)
+class QuantSlot:
+    """Where a quant field's value sits in its physical cell (an unsigned integer of type `physical`; the
+    field's layout addresses the cell) and how it is coded (lang/quant.py; passes/quant.py expands accesses).
+
+    kind: "int" (two's complement or unsigned `bits` bits), "fixed" (digits of `bits` bits times `scale`) or
+    "float" (`bits` digits, the sign bit among them when signed, and an unsigned exponent of `exp_bits` bits
+    at bit `exp_offset`). `offset`: the first bit. A quant_array element adds `number * bits`, with
+    number = sum((I[position] % modulus) * weight) over `array`. A float whose exponent is shared lists
+    every member using it in `shared` as (bit offset, bits, signed), itself included. `compute`: the type
+    kernels see (the field's dtype). `used`: how many low bits of the cell its members take (the rest are
+    always zero)."""
+
+    kind: str
+    physical: DataType
+    bits: int
+    signed: bool
+    offset: int
+    array: tuple = ()
+    scale: float = 1.0
+    exp_bits: int = 0
+    exp_offset: int = 0
+    shared: tuple = ()
+    compute: DataType | None = None
+    used: int = 0
+
+
+@dataclass(frozen=True)
 class SNodeRef:
     """An SNode as the IR sees it (the target of ti.activate / is_active / deactivate / append / length):
     the levels from the root down to it and the number of indices that address its cells."""
@@ -70,6 +97,8 @@ class FieldRef:
     #: `layout` says everything); then the value sits `value_offset` bytes into a cell of the last level
     levels: tuple = ()
     value_offset: int = 0
+    #: a quant field's bits in its physical cell (the layout then addresses the cell), None otherwise
+    quant: QuantSlot | None = None
 
     @property
     def sparse(self) -> bool:

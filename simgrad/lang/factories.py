@@ -15,6 +15,7 @@ from simgrad.errors import SimgradRuntimeError, SimgradSyntaxError, SimgradValue
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.program import get_program
+from simgrad.lang.quant import is_quant
 from simgrad.lang.types import MatrixType
 
 _counter = [0]
@@ -118,6 +119,9 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
 
     if isinstance(dtype, MatrixType):
         return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
+    if is_quant(dtype):
+        return _quant_field(lambda base: ScalarField(dtype.compute, base), [dtype], shape, name, needs_grad,
+                            needs_dual)
     t = dt.from_any(dtype)
     shape = _check_shape(shape)
     base, auto = _name(name)
@@ -126,7 +130,58 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     return _place_new(f, shape, offset, needs_grad)
 
 
+def _quant_field(make, qtypes: list, shape, name, needs_grad: bool, needs_dual: bool) -> Field:
+    """A field of ti.types.quant types (lang/quant.py; one per component): computes in their compute type,
+    placed by the user in a ti.BitpackedFields or under ti.root.quant_array. No gradient (as in Taichi)."""
+    what = repr(qtypes[0]) if len(set(qtypes)) == 1 else "[" + ", ".join(map(repr, qtypes)) + "]"
+    if needs_grad or needs_dual:
+        raise SimgradRuntimeError(f"a field of quant type {what} cannot have needs_grad=True or needs_dual=True: "
+                                  "quantized values are not differentiated (as in Taichi)", caller_loc())
+    if shape is not None:
+        raise SimgradSyntaxError(f"a field of quant type {what} takes no shape: place it in a "
+                                 "ti.BitpackedFields or under ti.root.quant_array(...)", caller_loc())
+    base, auto = _name(name)
+    f = make(base)
+    comps = f._components()
+    for c, q in zip(comps, qtypes * len(comps) if len(qtypes) == 1 else qtypes):
+        c.quant_type = q
+    f.quant_type = qtypes[0]
+    f._auto_name = auto
+    f._needs_grad = False
+    return f
+
+
+def _entry_types(n: int, m: int, dtype) -> tuple[list, dt.DataType]:
+    """`ti.Matrix.field(n, m, dtype=[[...], ...])`: one type per entry (quant types, say), all of one compute
+    type as Taichi requires; returns (entry types, compute type)."""
+    flat: list = []
+
+    def walk(x):
+        for t in x:
+            if isinstance(t, (list, tuple)):
+                walk(t)
+            else:
+                flat.append(t)
+
+    walk(dtype)
+    if len(flat) != n * max(m, 1):
+        raise SimgradValueError(f"a matrix field of {n}x{max(m, 1)} entries got {len(flat)} entry types", caller_loc())
+    computes = {t.compute if is_quant(t) else dt.from_any(t) for t in flat}
+    if len(computes) != 1 or len({is_quant(t) for t in flat}) != 1:
+        raise SimgradRuntimeError("Member fields of a matrix field must have the same compute type", caller_loc())
+    return flat, computes.pop()
+
+
 def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
+    if isinstance(dtype, (list, tuple)):
+        types, compute = _entry_types(n, m, dtype)
+        if not is_quant(types[0]):
+            return _matrix_field(n, m, compute, shape, name, offset, needs_grad, needs_dual)
+        return _quant_field(lambda base: MatrixField(n, m, compute, base), types, shape, name, needs_grad,
+                            needs_dual)
+    if is_quant(dtype):
+        return _quant_field(lambda base: MatrixField(n, m, dtype.compute, base), [dtype], shape, name, needs_grad,
+                            needs_dual)
     t = dt.from_any(dtype) if dtype is not None else dt.Defaults.fp
     shape = _check_shape(shape)
     base, auto = _name(name)
@@ -203,6 +258,9 @@ class FieldsBuilder:
 
     def bitmasked(self, indices, dimensions):
         return self.root.bitmasked(indices, dimensions)
+
+    def quant_array(self, indices, dimensions, max_num_bits):
+        return self.root.quant_array(indices, dimensions, max_num_bits)
 
     def dynamic(self, index, dimension, chunk_size=None):
         return self.root.dynamic(index, dimension, chunk_size)

@@ -166,6 +166,7 @@ class ScalarField(Field):
         self.is_primal = True
         self.is_dual = False
         self.sparse = False  # under a pointer/bitmasked/dynamic SNode: Python scope goes through kernels
+        self.quant_type = None  # a ti.types.quant type (lang/quant.py); dtype is then its compute type
 
     def _components(self):
         return [self]
@@ -182,8 +183,16 @@ class ScalarField(Field):
         if cached is None or cached[0] != key:
             node = self._snode
             levels = node.levels() if node.has_sparse_path() else ()
+            value_offset = node.offset_in_parent if levels else 0
+            quant = None
+            if self.quant_type is not None:
+                from simgrad.lang.quant import slot_of
+
+                quant = slot_of(self)
+                if levels and node._parent.kind == "bit_struct":  # the cell's offset in its parent's cell
+                    value_offset += node._parent.offset_in_parent
             ref = FieldRef(self.name, self.dtype, self.layout, self.offset, grad, owner=self, dual=dual,
-                           levels=levels, value_offset=node.offset_in_parent if levels else 0)
+                           levels=levels, value_offset=value_offset, quant=quant)
             self._ref = cached = (key, ref)
         return cached[1]
 
@@ -214,6 +223,9 @@ class ScalarField(Field):
             self.sparse = True
             return
         self.layout = (tree.id, const, terms, shape)
+        if self.quant_type is not None:  # bits of a packed cell: Python scope goes through kernels too
+            self.sparse = True
+            return
         buf = tree.buffer
         isz = self.dtype.nbytes
         if all(t.divisor == 1 and t.modulus == 0 for t in terms) and len(terms) == len(shape):
@@ -261,6 +273,8 @@ class ScalarField(Field):
             self._ensure()
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
+        if self.quant_type is not None:  # kept to its bits whatever the value, as in kernels and Taichi
+            return scope_hooks.sparse.set(self, self._unshift(key), _wrapped(value, self.dtype))
         _check_value(value, self.dtype, self.name)
         if self.sparse:
             return scope_hooks.sparse.set(self, self._unshift(key), value)
@@ -354,6 +368,13 @@ def _check_bounds(key, shape, name):
                                     f"indices must be integers", caller_loc())
         if not 0 <= k < n:
             raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
+
+
+def _wrapped(value, dtype: dt.DataType):
+    """An integer value converted to an integer type the way a kernel's cast does (wrapping)."""
+    if dtype.is_float or isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return value
+    return np.array(int(value) & ((1 << dtype.bits) - 1), dtype=np.uint64).astype(dtype.np).item()
 
 
 def _check_value(value, dtype: dt.DataType, name: str) -> None:

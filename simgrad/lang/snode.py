@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simgrad.dtypes import DataType
 from simgrad.errors import SimgradError, SimgradValueError, caller_loc
 from simgrad.ir.fieldref import Level
 
@@ -67,6 +68,8 @@ class SNode:
         self.mask_offset = 0  # bitmasked: where the activity bits start in the container
         self.pool = -1  # pointer/dynamic: the program's pool for this node's blocks
         self.chunk_size = None  # dynamic: Taichi's chunk size (blocks here hold the whole list)
+        self.physical: DataType | None = None  # bit_struct / quant_array: the integer type of the cell (lang/quant.py)
+        self.bitpack = None  # bit_struct: the ti.BitpackedFields it was made from
         self._ref: object = None  # its IR record once materialised (lang/sparse.py snode_ref)
 
     def parent(self, n: int = 1) -> SNode | None:
@@ -120,6 +123,15 @@ class SNode:
         node.chunk_size = chunk_size
         return node
 
+    def quant_array(self, indices, dimensions, max_num_bits) -> SNode:
+        """Cells of one quant field packed side by side into a single physical integer of max_num_bits bits
+        (lang/quant.py): `quant_array(ti.i, 32, max_num_bits=32).place(x)` stores 32 1-bit elements in a u32."""
+        from simgrad.lang.quant import physical_type
+
+        node = self._child("quant_array", indices, dimensions)
+        node.physical = physical_type(max_num_bits)
+        return node
+
     def hash(self, *args, **kwargs):
         from simgrad.errors import SimgradNotSupportedError
 
@@ -148,8 +160,13 @@ class SNode:
     def place(self, *fields, offset=None) -> SNode:
         self._check_open()
         from simgrad.lang.field import Field
+        from simgrad.lang.quant import BitpackedFields, check_array_member
 
-        fields = tuple(p for f in fields for p in (f.placeable() if isinstance(f, Field) else [f]))
+        packs = [f for f in fields if isinstance(f, BitpackedFields)]
+        for pack in packs:
+            self._place_bitpack(pack, offset)
+        fields = tuple(p for f in fields if not isinstance(f, BitpackedFields)
+                       for p in (f.placeable() if isinstance(f, Field) else [f]))
         for f in fields:
             comps = f._components() if isinstance(f, Field) else None
             if comps is None:
@@ -157,6 +174,11 @@ class SNode:
             for c in comps:
                 if c.snode is not None:
                     raise SimgradError(f"field {c.name} is placed twice")
+                if self.kind == "quant_array":
+                    check_array_member(self, c)
+                elif getattr(c, "quant_type", None) is not None and self.kind != "bit_struct":
+                    raise SimgradError(f"field {c.name} has a quant type: place it in a ti.BitpackedFields (then "
+                                       "place that) or under ti.root.quant_array(...)", caller_loc())
                 node = SNode(self, "place")
                 node.field = c
                 c.snode = node
@@ -175,10 +197,41 @@ class SNode:
                 self.place(gdual, offset=offset)
         return self
 
+    def _place_bitpack(self, pack, offset) -> None:
+        """A BitpackedFields becomes one `bit_struct` node: a physical integer per cell of this node, each
+        member field a place node in it (lang/quant.py slot_of reads the bits from the pack)."""
+        if pack.placed:
+            raise SimgradError("this BitpackedFields is placed twice", caller_loc())
+        if not pack.fields():
+            raise SimgradError("BitpackedFields placed with no fields in it", caller_loc())
+        node = SNode(self, "bit_struct")
+        node.physical = pack.physical
+        node.bitpack = pack
+        self.children.append(node)
+        pack.placed = True
+        node.place(*pack.fields(), offset=offset)
+
     @property
     def _num_dynamically_allocated(self) -> int:
         """Taichi's count of blocks ever allocated for this node (pointer/dynamic; 0 for others)."""
         return self.memory_usage()["touched_blocks"] if self.kind in ("pointer", "dynamic") else 0
+
+    @property
+    def _cell_size_bytes(self) -> int:
+        """Taichi's layout inspection: the bytes of one cell of this node (a place node: its value's)."""
+        self._lay_out()
+        return self.field.dtype.nbytes if self.kind == "place" and self.field is not None else self.cell_size
+
+    @property
+    def _offset_bytes_in_parent_cell(self) -> int:
+        """Taichi's layout inspection: where this node starts in a cell of its parent."""
+        self._lay_out()
+        return self.offset_in_parent
+
+    def _lay_out(self) -> None:
+        """Offsets as materialising will give them (laying out is a pure function of the tree's structure)."""
+        if self.tree is not None and not self.tree.materialized:
+            self.tree.root._layout()
 
     @property
     def _snode_tree_id(self) -> int:
@@ -245,6 +298,13 @@ class SNode:
             size = self.field.dtype.nbytes
             self.align = size
             return size
+        if self.kind in ("bit_struct", "quant_array"):  # one physical integer holds every cell's bits
+            assert self.physical is not None
+            for c in self.children:
+                c.offset_in_parent = 0
+            self.cell_size = 0 if self.kind == "quant_array" else self.physical.nbytes
+            self.align = self.physical.nbytes
+            return self.physical.nbytes
         off = 0
         align = 1
         for c in self.children:
@@ -296,6 +356,7 @@ class SNode:
         path = self.path()[1:]
         if self.kind == "place":
             path = path[:-1]
+        path = [n for n in path if n.kind != "bit_struct"]  # within a cell: the value offset covers it
         axes_ = sorted({a for n in path for a in n.axes})
         position = {a: p for p, a in enumerate(axes_)}
         below = dict.fromkeys(axes_, 1)  # product of the sizes along each axis under the current level
@@ -317,7 +378,8 @@ class SNode:
             total = 1
             for m in n.path()[1:]:
                 total *= m.num_cells
-            levels.append(Level(n.kind, n.offset_in_parent, tuple(terms[::-1]), n.cell_size, n.num_cells,
+            kind = "dense" if n.kind == "quant_array" else n.kind  # bits of one cell: 0-byte cells
+            levels.append(Level(kind, n.offset_in_parent, tuple(terms[::-1]), n.cell_size, n.num_cells,
                                 n.pool, n.mask_offset, total))
         return tuple(levels)
 
@@ -336,6 +398,9 @@ class SNode:
         inner = dict.fromkeys(range(ndim), 1)
         raw: list[AccessTerm] = []
         for n in reversed(path):  # innermost first
+            if n.kind == "quant_array":  # its cells are bits of one integer: digits above it skip its sizes
+                for ax, s in zip(n.axes, n.sizes):
+                    inner[position[ax]] *= s
             if n.kind != "dense":
                 continue
             row = n.cell_size

@@ -6,6 +6,7 @@ from enum import Enum
 
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradTypeError
+from simgrad.lang.quant import quant as quant_types
 
 
 class Template:
@@ -202,6 +203,7 @@ class _Types:
     sparse_matrix_builder = sparse_matrix_builder
     vector = staticmethod(vector)
     matrix = staticmethod(matrix)
+    quant = quant_types
 
     @staticmethod
     def struct(**members):

@@ -23,7 +23,7 @@ def _verify_enabled() -> bool:
 
 def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics)."""
-    from simgrad.passes import hoist, lower_access, parallel_strategy, promote, simplify, verify
+    from simgrad.passes import hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -33,6 +33,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
     # loop-invariant index arithmetic out of parallel loops, then merged where it became common
     steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
+    # quant fields: accesses become integer IR on their physical cells (compare-and-swap loops for writes)
+    steps.append(("quant", quant.expand_quant))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)

@@ -96,7 +96,9 @@ def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
         if x.op is not Op.ATOMIC:
             continue
         p = x.operands[0]
-        if id(x) in reducing:
+        if x.attrs["kind"] == "cas":  # a quant cell's compare-and-swap (passes/quant.py): cells are shared
+            form = ATOMIC
+        elif id(x) in reducing:
             form = REDUCE
         elif p.op is Op.ALLOCA:  # a local: shared only when declared outside the loop
             form = ATOMIC if id(p) not in inside else PLAIN
