@@ -222,7 +222,7 @@ class CudaDriver(Device):
 
     def alloc_shared(self, nbytes: int) -> np.ndarray:
         n = max(int(nbytes), 1)
-        ptr = int(self._check(self.cu.cuMemAllocManaged(n, self.cu.CUmemAttach_flags.CU_MEM_ATTACH_GLOBAL)))
+        ptr = int(self._check(self.cu.cuMemAllocManaged(n, 1)))  # CU_MEM_ATTACH_GLOBAL: every stream, every device
         self._check(self.cu.cuMemsetD8(ptr, 0, n))
         self._check(self.cu.cuCtxSynchronize())
         self.shared.append(ptr)  # freed with the context (the program's memory lives as long as the process)
