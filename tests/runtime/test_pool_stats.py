@@ -61,3 +61,39 @@ def test_no_counting_code_without_the_variable():
     assert off.count("call i64 @sg_now()") < on.count("call i64 @sg_now()")
     if os.environ.get("SIMGRAD_POOL_STATS", "0") in ("", "0"):
         assert set(pool_stats().values()) == {0}
+
+
+ONE_CPU = textwrap.dedent("""
+    import json, os
+    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # the pool's worker cannot run while we do
+    import simgrad as ti
+    from simgrad.runtime.threadpool import pool_stats, reset_pool_stats
+
+    ti.init(arch=ti.cpu, cpu_max_num_threads=2)
+    x = ti.field(ti.f32, 1 << 16)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            x[i] += 1.0
+
+    k()
+    reset_pool_stats()
+    for _ in range(200):
+        k()
+    print(json.dumps(pool_stats()))
+""")
+
+
+def test_a_woken_worker_is_not_woken_again_before_it_runs(tmp_path):
+    """Every futex wake is for a worker that went to sleep: one woken but not yet scheduled (here it shares the
+    caller's only CPU) is not counted asleep by the next launch. Before, each of the 200 launches woke it again
+    (under load: ~5,000 futile wake syscalls in a diffmpm run; benchmarks/pool_stalls.py)."""
+    script = tmp_path / "one_cpu.py"
+    script.write_text(ONE_CPU)
+    env = dict(os.environ, SIMGRAD_POOL_STATS="1", SIMGRAD_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    st = json.loads(out.stdout.strip().splitlines()[-1])
+    assert st["launches"] == 200
+    assert st["wakes"] <= st["worker_sleeps"] + 1, st

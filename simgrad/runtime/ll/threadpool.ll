@@ -156,7 +156,9 @@ publish:
   store atomic i64 %begin, ptr @sg_next monotonic, ${a8}
   store atomic i32 0, ptr @sg_state release, ${a4}       ; open, nobody joined
   atomicrmw add ptr @sg_gen, i32 1 seq_cst, ${a4}
-  %sl = load atomic i32, ptr @sg_sleepers seq_cst, ${a4}
+  ; claim the sleepers: each wake is for those counted now; a worker woken but not yet running is not counted
+  ; again, so the next launch does not wake it a second time (a futile syscall per launch under load)
+  %sl = atomicrmw xchg ptr @sg_sleepers, i32 0 seq_cst, ${a4}
   %anysl = icmp ne i32 %sl, 0
   br i1 %anysl, label %wake, label %work
 wake:
@@ -224,9 +226,8 @@ sleep_loop:
 do_wait:
   call void @sg_futex(ptr @sg_gen, i64 ${_FUTEX_WAIT}, i32 %seen)
   br label %sleep_loop
-woke:
-  atomicrmw sub ptr @sg_sleepers, i32 1 seq_cst, ${a4}
-  br label %got
+woke:                      ; the launch that woke us took our count (a stale count after a wake without a
+  br label %got            ; sleep only costs the next launch one futile wake)
 got:
   %g = phi i32 [ %g0, %spin_hit ], [ %g1, %woke ]
   %sd = load atomic i32, ptr @sg_shutdown acquire, ${a4}
