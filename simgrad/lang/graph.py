@@ -15,6 +15,7 @@ from __future__ import annotations
 import enum
 
 from simgrad.errors import SimgradError, SimgradNotSupportedError, caller_loc
+from simgrad.runtime.launch import Sequence, replay_key
 
 __all__ = ["Arg", "ArgKind", "Graph", "GraphBuilder"]
 
@@ -126,7 +127,7 @@ class Graph:
             raise SimgradError(f"graph run: no value for the arguments {missing}", loc)
         for name, arg in self.args.items():
             arg.check(args[name], loc)
-        key = tuple((name, _identity(args[name])) for name in sorted(self.args))
+        key = tuple((name, replay_key(args[name])) for name in sorted(self.args))
         from simgrad.lang.program import get_program
 
         generation = get_program().generation
@@ -140,13 +141,6 @@ class Graph:
         self._captured = (generation, key, sequence, args) if sequence is not None else None
 
 
-def _identity(value):
-    """What must not change for a replay: an array's identity, a scalar's type and value."""
-    if hasattr(value, "shape") or hasattr(value, "__array_interface__"):
-        return ("array", id(value))
-    return (type(value).__name__, value)
-
-
 def _capturable() -> bool:
     from simgrad.lang import ad_hooks
     from simgrad.lang.program import get_program
@@ -158,21 +152,14 @@ def _capturable() -> bool:
 
 def _capture(kernels: list, bound: list):
     """The launches as a native Sequence, or None when a step cannot be replayed without Python."""
-    from simgrad.runtime.launch import Sequence
-
-    launchers, contexts = [], []
+    steps = []
     for kernel, values in zip(kernels, bound):
         target = getattr(kernel, "kernel", kernel)  # a data_oriented object's kernel method
         if hasattr(kernel, "obj"):
             values = (kernel.obj, *values)
         instance = getattr(target, "instance", None)
         try:
-            launcher = instance(values).launcher if instance is not None else None
+            steps.append((instance(values).launcher if instance is not None else None, values))
         except SimgradError:  # e.g. arguments its defaults complete: it launches from Python
             return None
-        if launcher is None or launcher.pack is None:
-            return None
-        launcher.pack(*values)
-        launchers.append(launcher)
-        contexts.append(launcher.buf.copy())
-    return Sequence(launchers, contexts)
+    return Sequence.packed(steps)

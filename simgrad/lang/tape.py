@@ -21,6 +21,7 @@ from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
+from simgrad.runtime.launch import Sequence, replay_key
 
 
 class Tape:
@@ -191,33 +192,22 @@ def _backward_sequence(entries: list):
     arch=cuda."""
     global _backward
     from simgrad.lang.program import get_program
-    from simgrad.runtime.launch import Sequence
 
     prog = get_program()
     if ad_hooks.forward_mode is not None or prog.config.kernel_profiler or \
             getattr(prog.config.arch, "name", None) == "cuda":
         return None
-    key = tuple((id(fn), tuple(_identity(a) for a in args)) for fn, args in entries)
+    key = tuple((id(fn), tuple(replay_key(a) for a in args)) for fn, args in entries)
     if _backward is not None and _backward[:2] == (prog.generation, key):
         return _backward[3]
-    launchers, contexts = [], []
+    steps = []
     for fn, args in reversed(entries):
         make = getattr(getattr(fn, "grad", None), "launcher", None)
-        launcher = make(args) if make is not None else None
-        if launcher is None or launcher.pack is None:
-            return None
-        launcher.pack(*args)
-        launchers.append(launcher)
-        contexts.append(launcher.buf.copy())
-    _backward = (prog.generation, key, list(entries), Sequence(launchers, contexts))
-    return _backward[3]
-
-
-def _identity(value):
-    """What must not change for a replay: an array's or field's identity, a scalar's type and value."""
-    if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
-        return (type(value).__name__, value)
-    return ("object", id(value))
+        steps.append((make(args) if make is not None else None, args))
+    sequence = Sequence.packed(steps)
+    if sequence is not None:
+        _backward = (prog.generation, key, list(entries), sequence)
+    return sequence
 
 
 def _in_place_fields(kernel, args) -> list:

@@ -201,6 +201,19 @@ class Sequence:
     """Launches captured for replay in one native call (lang/graph.py): each step's context is a copy of its
     launcher's, packed with that step's arguments, so one kernel may appear with different arguments."""
 
+    @classmethod
+    def packed(cls, steps) -> Sequence | None:
+        """The Sequence of (launcher, arguments) steps, each context packed now; None when a launcher cannot be
+        packed alone (Python must run after its launch)."""
+        launchers, contexts = [], []
+        for launcher, args in steps:
+            if launcher is None or launcher.pack is None:
+                return None
+            launcher.pack(*args)
+            launchers.append(launcher)
+            contexts.append(launcher.buf.copy())
+        return cls(launchers, contexts)
+
     def __init__(self, launchers: list[Launcher], contexts: list[np.ndarray]):
         self.launchers = launchers
         self.contexts = contexts  # kept alive: the steps point into them
@@ -227,3 +240,11 @@ class Sequence:
                 raise
         if k < len(self.launchers):
             self.launchers[k].fail()
+
+
+def replay_key(value):
+    """What must not change for a captured Sequence to be replayed with `value` as an argument: an array's or
+    field's identity (its context words hold its address), a scalar's type and value."""
+    if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
+        return (type(value).__name__, value)
+    return ("object", id(value))
