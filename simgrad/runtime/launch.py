@@ -89,7 +89,7 @@ class Launcher:
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_interrupted": self.clear_interrupt,
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
-        gen = LaunchCode(self.kernel_name, env, self.views)
+        gen = LaunchCode(self.kernel_name, env, self.views, bool(getattr(self.program.device, "asynchronous", False)))
         names = [p.name for p in params]
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
