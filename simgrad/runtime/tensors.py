@@ -123,6 +123,8 @@ def tensor_info(a, kernel: str, param: str, on_device: bool):
             raise SimgradValueError(f"kernel {kernel}: Non contiguous tensors are not supported: argument "
                                     f"'{param}' has strides {a.stride()} for shape {tuple(a.shape)}; pass "
                                     "t.contiguous() (a copy: write results back yourself)", caller_loc())
+        if a.requires_grad and a.grad is None:  # as Taichi: every tensor that requires grad gets one at launch
+            a.grad = a.new_zeros(a.shape)
         return a.data_ptr(), tuple(a.shape)
     if isinstance(a, np.ndarray):
         arr = a
@@ -150,15 +152,11 @@ def tensor_info(a, kernel: str, param: str, on_device: bool):
 
 def tensor_grad_info(a, shape, kernel: str, param: str, on_device: bool) -> int:
     """The base address of the gradient of a tensor argument: a GradPair's `grad`, else the tensor's `.grad`
-    (made zero when it has none yet, as Taichi does); its shape must be the argument's."""
+    (tensor_info made it zero when it had none yet, as Taichi does); its shape must be the argument's."""
     if isinstance(a, GradPair):
         grad = a.grad
     else:
-        grad = getattr(a, "grad", None)
-        if grad is None and is_torch(a) and a.requires_grad:
-            import torch
-
-            grad = a.grad = torch.zeros_like(a)
+        grad = getattr(a, "grad", None)  # made by tensor_info for a tensor that requires grad
         if grad is None:
             raise SimgradTypeError(f"kernel {kernel}: argument '{param}' has no gradient (a tensor that requires "
                                    "grad, or ti.ad.with_grad(value, grad))", caller_loc())
