@@ -153,7 +153,8 @@ class _Call:
 
     def _paired(self, a, buffers: dict):
         if isinstance(a, torch.Tensor) and a.is_floating_point() and a.numel():
-            return GradPair(a, self._grad_view(a, buffers))
+            # detached: an output is part of the graph by now, and kernels must not give it a .grad
+            return GradPair(a.detach(), self._grad_view(a, buffers))
         return a
 
 
@@ -191,7 +192,9 @@ class _Watch(TorchFunctionMode):
         name = getattr(func, "__name__", str(func))
         if name.endswith("_like") or name.startswith("new_") or name in ("requires_grad_", "__get__"):
             return out
-        bad = name.endswith("_") or name in _READS_VALUES or any(
+        in_place = (name.endswith("_") and not name.endswith("__")) or name == "__setitem__" or \
+            (name.startswith("__i") and name.endswith("__") and name not in ("__index__", "__int__"))
+        bad = in_place or name in _READS_VALUES or any(
             isinstance(o, torch.Tensor) and o.numel() and _storage(o) not in self.storages for o in _flat(out))
         if bad:
             raise GradientError(f"simgrad.torch.function {self.name}: torch operation '{name}' on an input runs "
