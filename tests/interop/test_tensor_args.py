@@ -29,15 +29,14 @@ def test_a_tensor_argument_is_the_tensors_memory():
     _scale(t, 2.0)
     np.testing.assert_array_equal(view, np.arange(6) * 2.0)  # the kernel wrote into t itself
 
-    @ti.kernel
-    def address(x: ti.types.ndarray(dtype=ti.f32, ndim=1), out: ti.types.ndarray(dtype=ti.i64, ndim=1)):
-        for i in range(1):
-            out[0] = 0
-        x[0] = 42.0
+    # the launch put the tensor's own data pointer in the kernel's context
+    from simgrad.runtime.abi import CTX_ARGS
 
-    out = np.zeros(1, np.int64)
-    address(t, out)
-    assert t[0].item() == 42.0  # a kernel's write is seen by torch
+    launcher = _scale.instance((t, 2.0)).launcher
+    assert int(launcher.buf[CTX_ARGS + launcher.params[0].slot]) == t.data_ptr()
+    t[0] = 21.0
+    _scale(t, 2.0)
+    assert t[0].item() == 42.0  # a torch write is seen by the kernel, the kernel's write by torch
     t[1] = -1.0  # a torch write is seen by the next launch
     _scale(t, 3.0)
     assert t[1].item() == -3.0
