@@ -159,6 +159,9 @@ class _Call:
 
 
 # -- what the function may do with its inputs -----------------------------------------------------------
+# what reads no values: properties (shape, dtype, device, requires_grad, grad), layout queries, allocations
+_METADATA = {"__get__", "data_ptr", "is_contiguous", "dim", "size", "stride", "numel", "element_size",
+             "untyped_storage", "storage_offset", "is_floating_point", "requires_grad_", "__len__", "detach"}
 _READS_VALUES = {"numpy", "tolist", "item", "__float__", "__int__", "__index__", "__bool__", "__array__"}
 
 
@@ -184,14 +187,13 @@ class _Watch(TorchFunctionMode):
     def __torch_function__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
         out = func(*args, **kwargs)
-        if not self.storages:
-            return out
+        name = getattr(func, "__name__", "")
+        if name in _METADATA or name.endswith("_like") or name.startswith("new_") or not self.storages:
+            return out  # the launcher's own reads (shape, dtype, data_ptr) take this path
         if not any(isinstance(a, torch.Tensor) and a.numel() and _storage(a) in self.storages
                    for a in _flat((args, kwargs))):
             return out
-        name = getattr(func, "__name__", str(func))
-        if name.endswith("_like") or name.startswith("new_") or name in ("requires_grad_", "__get__"):
-            return out
+        name = name or str(func)
         in_place = (name.endswith("_") and not name.endswith("__")) or name == "__setitem__" or \
             (name.startswith("__i") and name.endswith("__") and name not in ("__index__", "__int__"))
         bad = in_place or name in _READS_VALUES or any(
@@ -214,7 +216,11 @@ def _field_accesses(kernel, args):
     if instance is None:
         return [], []
     inst = instance(args)
-    reads, writes = [], []
+    cached = getattr(inst, "_bridge_accesses", None)  # one walk per instance, as the Tape's in-place fields
+    if cached is not None:
+        return cached
+    reads: list = []
+    writes: list = []
     for s in walk(inst.ir.body):
         if s.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
             t = s.operands[0].attrs["target"]
@@ -222,6 +228,7 @@ def _field_accesses(kernel, args):
                 (reads if s.op is Op.GLOBAL_LOAD or s.op is Op.ATOMIC else writes).append((t, s.loc))
                 if s.op is Op.ATOMIC:
                     writes.append((t, s.loc))
+    inst._bridge_accesses = (reads, writes)
     return reads, writes
 
 
