@@ -201,14 +201,16 @@ def _check_array_loss(loss) -> None:
                                       f"{loss.shape}", caller_loc())
         if loss.grad is None:
             raise SimgradRuntimeError("Gradients of loss are not allocated, please set needs_grad=True for all "
-                                      "ndarrays that are required by autodiff.", caller_loc())
+                                      "ndarrays that are required by autodiff. (The loss ndarray has no gradient: "
+                                      "create it with ti.ndarray(..., needs_grad=True).)", caller_loc())
     elif hasattr(loss, "requires_grad") and hasattr(loss, "numel"):
         if loss.numel() != 1:
             raise SimgradRuntimeError(f"The loss of `Tape` must be a tensor only contains one element, got shape "
                                       f"{tuple(loss.shape)}", caller_loc())
         if not loss.requires_grad:
             raise SimgradRuntimeError("Gradients of loss are not allocated, please set requires_grad=True for all "
-                                      "tensors that are required by autodiff.", caller_loc())
+                                      "tensors that are required by autodiff. (The loss tensor has no gradient: "
+                                      "create it with requires_grad=True.)", caller_loc())
     else:
         raise SimgradError(f"Tape(loss=...) expects a scalar field, a one-element ndarray or a tensor, got "
                            f"{type(loss).__name__}", caller_loc())

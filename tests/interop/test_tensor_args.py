@@ -249,3 +249,10 @@ def test_fields_to_and_from_torch():
     assert s[1].a == 2 and s[2].b == 2.5
     d = s.to_torch()
     assert (d["a"] == torch.tensor([1, 2, 3], dtype=torch.int32)).all()
+
+
+def test_a_tape_loss_tensor_must_be_one_element_with_a_gradient():
+    with pytest.raises(RuntimeError, match="must be a tensor only contains one element"):
+        ti.ad.Tape(loss=torch.ones(2, requires_grad=True))
+    with pytest.raises(RuntimeError, match="The loss tensor has no gradient"):
+        ti.ad.Tape(loss=torch.ones(1))
