@@ -12,6 +12,7 @@ What the bridge cannot differentiate is refused at the user's line instead of gi
 gradient:
 - torch operations inside the function that compute from an input (they run with autograd off): only
   views, metadata and `*_like` allocations of inputs are allowed; compute outside the function;
+- a kernel writing into an input tensor (torch would not see the in-place change), refused before it runs;
 - fields: the function may read fields (parameters: their gradients accumulate into `field.grad`, outside
   torch) and keep its own temporaries in fields (saved at the end of the call and restored for its
   backward, so a second call may overwrite them), but it may not read a field another pending call wrote
@@ -27,7 +28,7 @@ import torch
 from torch.overrides import TorchFunctionMode
 
 from simgrad.errors import GradientError, SimgradTypeError, caller_loc
-from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
@@ -98,7 +99,7 @@ class _Call:
 
     def forward(self, tensors) -> tuple:
         self.inputs = [t.detach() for t in tensors]
-        self.tape = tape = Tape(clear_gradients=False)
+        self.tape = tape = _CallTape(self)
         watch = _Watch(self.f.name, {_storage(t) for t in self.inputs if t.is_floating_point()} - {0})
         with tape, watch:
             out = self.f.fn(*_replaced(self.args, self.positions, self.inputs), **self.kwargs)
@@ -108,7 +109,7 @@ class _Call:
             raise SimgradTypeError(f"simgrad.torch.function {self.f.name} must return a tensor or a tuple of "
                                    f"tensors, got {type(out).__name__}", caller_loc())
         self.outputs = outs
-        self.fields = _owned_fields(self, tape.entries)
+        self.fields = tape.owned_fields()
         return tuple(o for o in outs)
 
     def backward(self, grads) -> list:
@@ -211,33 +212,58 @@ _LAST_WRITER: dict = {}  # id(field component) -> (weakref to the _Call that wro
 
 
 def _field_accesses(kernel, args):
-    """(fields read, fields written) by one recorded launch, in IR order: lists of (FieldRef, loc)."""
+    """(fields read, fields written) by one recorded launch, in IR order: lists of (FieldRef, loc); and the
+    arguments it writes into ({argument index: location of a write})."""
     instance = getattr(kernel, "instance", None)
     if instance is None:
-        return [], []
+        return [], [], {}
     inst = instance(args)
     cached = getattr(inst, "_bridge_accesses", None)  # one walk per instance, as the Tape's in-place fields
     if cached is not None:
         return cached
     reads: list = []
     writes: list = []
+    arrays: dict = {}  # index of an argument the kernel writes into -> the location of a write
+    slots = {p.slot: k for k, p in enumerate(inst.launcher.params) if hasattr(p, "grad_slot")}
     for s in walk(inst.ir.body):
+        if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
+            t = s.operands[0].attrs["target"]
+            if isinstance(t, ArrayRef) and t.slot in slots:
+                arrays.setdefault(slots[t.slot], s.loc)
         if s.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR:
             t = s.operands[0].attrs["target"]
             if isinstance(t, FieldRef) and t.owner is not None:
                 (reads if s.op is Op.GLOBAL_LOAD or s.op is Op.ATOMIC else writes).append((t, s.loc))
                 if s.op is Op.ATOMIC:
                     writes.append((t, s.loc))
-    inst._bridge_accesses = (reads, writes)
-    return reads, writes
+    inst._bridge_accesses = (reads, writes, arrays)
+    return reads, writes, arrays
 
 
-def _owned_fields(call: _Call, entries: list) -> list:
-    """The fields the call wrote, with their values now (restored for its backward); refuses what torch
-    cannot see (see the module's docstring)."""
-    written: dict = {}
-    for kernel, args in entries:
-        reads, writes = _field_accesses(kernel, args)
+class _CallTape(Tape):
+    """The call's Tape: before each launch is recorded (and run), what torch could not see is refused (see the
+    module's docstring); it remembers the fields the call wrote."""
+
+    def __init__(self, call: _Call):
+        super().__init__(clear_gradients=False)
+        self.call = call
+        self.written: dict = {}  # id(field component) -> the component, as the call's launches write them
+        self.inputs = {_storage(t) for t in call.inputs if t.numel()}
+
+    def _record(self, kernel, args) -> None:
+        self._check(kernel, args)
+        super()._record(kernel, args)
+
+    def _check(self, kernel, args) -> None:
+        call, written = self.call, self.written
+        reads, writes, arrays = _field_accesses(kernel, args)
+        for k, loc in arrays.items():
+            a = args[k] if k < len(args) else None
+            if isinstance(a, torch.Tensor) and a.numel() and _storage(a) in self.inputs:
+                raise GradientError(f"simgrad.torch.function {call.f.name}: kernel {kernel.name} writes into an "
+                                    f"input tensor (argument '{kernel.params[k].name}'): torch does not see that "
+                                    "in-place change, and the gradient of what it overwrote would be wrong. "
+                                    "Allocate outputs inside the function (torch.empty_like(x))", loc)
         for t, loc in reads:
             f = t.owner
             if id(f) in written:
@@ -257,6 +283,10 @@ def _owned_fields(call: _Call, entries: list) -> list:
                                     "argument)", loc)
         for t, _ in writes:
             written[id(t.owner)] = t.owner
-    for key in written:
-        _LAST_WRITER[key] = (weakref.ref(call), call.f.name)
-    return [(f, f.to_numpy()) for f in written.values()]
+
+    def owned_fields(self) -> list:
+        """The fields the call wrote, with their values now (restored for its backward); they are the call's
+        until its backward has run."""
+        for key in self.written:
+            _LAST_WRITER[key] = (weakref.ref(self.call), self.call.f.name)
+        return [(f, f.to_numpy()) for f in self.written.values()]

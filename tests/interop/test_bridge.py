@@ -306,6 +306,19 @@ def test_torch_computations_on_inputs_inside_the_function_are_refused():
         assign(_rand(3))
 
 
+def test_a_kernel_writing_into_an_input_is_refused():
+    @ti.torch.function
+    def overwrite(x):
+        _scale_into(x.new_ones(x.shape), x)  # writes x in place, behind torch's back
+        return x.new_zeros(1)
+
+    x = _rand(3)
+    before = x.detach().clone()
+    with pytest.raises(GradientError, match="kernel _scale_into writes into an input tensor \\(argument 'y'\\)"):
+        overwrite(x)
+    assert torch.equal(x.detach(), before)  # refused before the launch
+
+
 def test_the_function_must_return_tensors():
     @ti.torch.function
     def nothing(x):
