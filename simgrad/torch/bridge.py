@@ -13,6 +13,7 @@ gradient:
 - torch operations inside the function that compute from an input (they run with autograd off): only
   views, metadata and `*_like` allocations of inputs are allowed; compute outside the function;
 - a kernel writing into an input tensor (torch would not see the in-place change), refused before it runs;
+- ti.ad.grad_replaced units and ti.ad.checkpoint (they replay launches themselves, unpaired);
 - fields: the function may read fields (parameters: their gradients accumulate into `field.grad`, outside
   torch) and keep its own temporaries in fields (saved at the end of the call and restored for its
   backward, so a second call may overwrite them), but it may not read a field another pending call wrote
@@ -27,7 +28,7 @@ import weakref
 import torch
 from torch.overrides import TorchFunctionMode
 
-from simgrad.errors import GradientError, SimgradTypeError, caller_loc
+from simgrad.errors import GradientError, SimgradNotSupportedError, SimgradTypeError, caller_loc
 from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import walk
 from simgrad.ir.ops import Op
@@ -253,6 +254,12 @@ class _CallTape(Tape):
     def _record(self, kernel, args) -> None:
         self._check(kernel, args)
         super()._record(kernel, args)
+
+    def insert(self, fn, args) -> None:
+        raise SimgradNotSupportedError(f"simgrad.torch.function {self.call.f.name}: ti.ad.grad_replaced functions "
+                                       "and ti.ad.checkpoint replay their launches themselves, where the bridge "
+                                       "cannot give tensor arguments their gradient buffers; call them outside a "
+                                       "bridged function (under a ti.ad.Tape)", caller_loc())
 
     def _check(self, kernel, args) -> None:
         call, written = self.call, self.written

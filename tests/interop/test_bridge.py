@@ -319,6 +319,22 @@ def test_a_kernel_writing_into_an_input_is_refused():
     assert torch.equal(x.detach(), before)  # refused before the launch
 
 
+def test_grad_replaced_units_inside_are_refused():
+    @ti.ad.grad_replaced
+    def unit(x, y):
+        _scale_into(x, y)
+
+    @ti.torch.function
+    def uses_unit(x):
+        y = torch.zeros_like(x)
+        unit(x, y)
+        return y
+
+    with pytest.raises(ti.SimgradNotSupportedError, match="grad_replaced functions and ti.ad.checkpoint") as e:
+        uses_unit(_rand(3))
+    assert "test_bridge.py" in str(e.value)
+
+
 def test_the_function_must_return_tensors():
     @ti.torch.function
     def nothing(x):
