@@ -138,8 +138,17 @@ class _Call:
             for f, values in now:
                 f.from_numpy(values)
         self.done = True
-        return [self._grad_view(t, buffers) if t.is_floating_point() and _storage(t) in buffers else None
-                for t in self.inputs]
+        out: list = []
+        for t in self.inputs:
+            if not (t.is_floating_point() and _storage(t) in buffers):
+                out.append(None)
+                continue
+            # an input sharing memory with an earlier one (f(x, x), overlapping views) reports only what the
+            # earlier ones have not: torch adds the gradients of both uses
+            view = self._grad_view(t, buffers)
+            out.append(view.clone())
+            view.zero_()
+        return out
 
     def _grad_view(self, t: torch.Tensor, buffers: dict) -> torch.Tensor:
         """The gradient of tensor `t`: its place in the buffer of its storage."""

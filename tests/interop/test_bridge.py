@@ -86,6 +86,18 @@ def test_two_calls_in_one_graph_accumulate():
     torch.testing.assert_close(gw, w.grad)
 
 
+def test_one_tensor_passed_twice_counts_once_per_use():
+    torch.manual_seed(6)
+    x = _rand(4)
+    y, s = wave(x, x)  # y = sin(x * x) + roll(x) ** 2
+    (y.sum() + s.sum()).backward()
+    g = x.grad.clone()
+    x.grad = None
+    ref = torch.sin(x * x) + torch.roll(x, -1) ** 2
+    (ref.sum() + (ref * x).sum()).backward()
+    torch.testing.assert_close(g, x.grad)
+
+
 def test_backward_twice_with_retain_graph():
     x, w = _rand(3), _rand(3)
     y, _ = wave(x, w)
