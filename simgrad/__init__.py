@@ -177,6 +177,10 @@ def __getattr__(name):
         import simgrad.linalg as _linalg
 
         return _linalg
+    if name == "torch":  # the torch autograd bridge: loaded on use, where torch is installed
+        import simgrad.torch as _torch_bridge
+
+        return _torch_bridge
     if name in ("ad", "Tape", "clear_all_gradients", "no_grad", "grad_replaced", "grad_for"):
         from simgrad.lang import ad as _ad
 

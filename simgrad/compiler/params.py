@@ -44,7 +44,9 @@ from simgrad.runtime.args import (
     Packing,
     ScalarPacking,
     StructPacking,
+    TensorPacking,
 )
+from simgrad.runtime.tensors import GradPair, array_dtype, described, is_foreign, is_torch
 
 
 class Slots:
@@ -212,7 +214,8 @@ class BuilderParam(Param):
 
 
 class NdarrayParam(Param):
-    """`ti.types.ndarray(...)` (or np.ndarray): a numpy array, ti.ndarray or CPU torch tensor by reference;
+    """`ti.types.ndarray(...)` (or np.ndarray): a numpy array or ti.ndarray by reference (TensorParam below
+    takes torch tensors and DLPack arrays);
     its dtype, dimensions, element shape and whether the kernel sees its gradient pick the instantiation."""
 
     keyed = True
@@ -268,13 +271,13 @@ class NdarrayParam(Param):
         return arg, ArrayPacking(self.name, arg.slot, arg.dtype, arg.ndim, arg.ndim + len(arg.element_shape),
                                  arg.grad_slot)
 
-    def _array_arg(self, a, slots: Slots) -> ArrayArg:
+    def _array_arg(self, a, slots: Slots, grad: bool | None = None) -> ArrayArg:
         """The compiler's view of the argument, its dtype, dimensions and element shape checked (Taichi's
         messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
         ann: NdarrayType = self.ann
         kernel_name, name = self.kernel_name, self.name
         arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
-        t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else _torch_dtype(arr)
+        t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else array_dtype(arr)
         want: dt.DataType | None
         elem = self.element_shape(a)
         own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray") else None
@@ -299,7 +302,8 @@ class NdarrayParam(Param):
             raise SimgradValueError(f"kernel {kernel_name}: Invalid value for argument {name} - required "
                                     f"ndim={ann.ndim}, but {ndim}d ndarray with shape {tuple(arr.shape)} is "
                                     "provided")
-        arg = ArrayArg(name, slots.count, t, ndim, elem, ann.boundary, grad=t.is_float and self.with_grad(a))
+        grad = t.is_float and (self.with_grad(a) if grad is None else grad)
+        arg = ArrayArg(name, slots.count, t, ndim, elem, ann.boundary, grad=grad)
         slots.take(arg.num_slots)
         return arg
 
@@ -312,16 +316,40 @@ def _element_type_text(ann: NdarrayType, elem: tuple, want) -> str:
     return tensor_text(elem, want)
 
 
-def _torch_dtype(t):
-    import torch
+class TensorParam(NdarrayParam):
+    """A foreign array under `ti.types.ndarray(...)`: a torch tensor, any object with `__dlpack__`, or an
+    explicit (value, gradient) pair (ti.ad.with_grad), by reference with no copy (runtime/tensors.py checks
+    layout and device at each launch). Numpy arrays and ti.ndarray objects go the ndarray kind's way."""
 
-    m = {torch.float32: dt.f32, torch.float64: dt.f64, torch.int32: dt.i32, torch.int64: dt.i64,
-         torch.int8: dt.i8, torch.int16: dt.i16, torch.uint8: dt.u8, torch.float16: dt.f16}
-    return m[t.dtype]
+    def key(self, a, keep: list):
+        if not is_foreign(a):
+            return super().key(a, keep)
+        kind = "pair" if isinstance(a, GradPair) else "torch" if is_torch(a) else "dlpack"
+        d = described(a)
+        return (kind, array_dtype(d).name, len(d.shape), self.element_shape(d), self.with_grad(a))
+
+    def with_grad(self, a) -> bool:
+        if not is_foreign(a):
+            return super().with_grad(a)
+        has = isinstance(a, GradPair) or bool(getattr(a, "requires_grad", False))
+        want = self.ann.needs_grad
+        if want and not has:
+            raise SimgradTypeError(f"kernel {self.kernel_name}: ndarray argument '{self.name}' is annotated "
+                                   "needs_grad=True but has no gradient (pass a tensor that requires grad, or "
+                                   "ti.ad.with_grad(value, grad))", caller_loc())
+        return has if want is None else bool(want)
+
+    def bind(self, a, slots: Slots) -> tuple[object, Packing]:
+        if not is_foreign(a):
+            return super().bind(a, slots)
+        arg = self._array_arg(described(a), slots, self.with_grad(a))
+        return arg, TensorPacking(self.name, arg.slot, arg.dtype, arg.ndim, arg.ndim + len(arg.element_shape),
+                                  arg.grad_slot, pair=isinstance(a, GradPair))
 
 
 # The kinds in the order they are tried; `register` puts a new one first.
-KINDS: list[type[Param]] = [TemplateParam, NdarrayParam, MatrixParam, BuilderParam, StructParam, ScalarParam]
+KINDS: list[type[Param]] = [TemplateParam, TensorParam, NdarrayParam, MatrixParam, BuilderParam, StructParam,
+                            ScalarParam]
 
 
 def register(kind: type[Param]) -> type[Param]:

@@ -229,6 +229,10 @@ class StructField(Field):
     def to_torch(self, device=None) -> dict:
         return {k: f.to_torch(device) for k, f in self.members.items()}
 
+    def from_torch(self, tensors: dict) -> None:
+        """Each member from the tensor of its name (Taichi's dict form, as from_numpy)."""
+        self.from_numpy({k: t.detach().cpu().numpy() for k, t in tensors.items()})
+
     def copy_from(self, other: StructField) -> None:
         self.from_numpy(other.to_numpy())
 

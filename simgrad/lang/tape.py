@@ -16,7 +16,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.autodiff.validate import differentiable, user_name, written_targets
-from simgrad.errors import AccessRuleError, GradientError, SimgradError
+from simgrad.errors import AccessRuleError, GradientError, SimgradError, SimgradRuntimeError, caller_loc
 from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
@@ -229,20 +229,27 @@ def _in_place_fields(kernel, args) -> list:
 
 def _check_array_loss(loss) -> None:
     """A Tape's loss may also be a one-element ti.ndarray with needs_grad=True or a torch tensor that
-    requires grad (as in Taichi); gradients of ndarrays are not cleared on entry."""
+    requires grad (as in Taichi, whose RuntimeError texts these are); gradients of ndarrays are not cleared on
+    entry."""
     if hasattr(loss, "_ndarray"):
         if loss._ndarray.size != 1:
-            raise SimgradError(f"the loss of a Tape must be an ndarray of one element, got shape {loss.shape}")
+            raise SimgradRuntimeError(f"The loss of `Tape` must be an ndarray with only one element, got shape "
+                                      f"{loss.shape}", caller_loc())
         if loss.grad is None:
-            raise SimgradError("the loss ndarray has no gradient: create it with ti.ndarray(..., needs_grad=True)")
+            raise SimgradRuntimeError("Gradients of loss are not allocated, please set needs_grad=True for all "
+                                      "ndarrays that are required by autodiff. (The loss ndarray has no gradient: "
+                                      "create it with ti.ndarray(..., needs_grad=True).)", caller_loc())
     elif hasattr(loss, "requires_grad") and hasattr(loss, "numel"):
         if loss.numel() != 1:
-            raise SimgradError(f"the loss of a Tape must be a tensor of one element, got shape {tuple(loss.shape)}")
+            raise SimgradRuntimeError(f"The loss of `Tape` must be a tensor only contains one element, got shape "
+                                      f"{tuple(loss.shape)}", caller_loc())
         if not loss.requires_grad:
-            raise SimgradError("the loss tensor does not require grad: create it with requires_grad=True")
+            raise SimgradRuntimeError("Gradients of loss are not allocated, please set requires_grad=True for all "
+                                      "tensors that are required by autodiff. (The loss tensor has no gradient: "
+                                      "create it with requires_grad=True.)", caller_loc())
     else:
         raise SimgradError(f"Tape(loss=...) expects a scalar field, a one-element ndarray or a tensor, got "
-                           f"{type(loss).__name__}")
+                           f"{type(loss).__name__}", caller_loc())
 
 
 def _fill(x, value: float) -> None:

@@ -15,14 +15,16 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.runtime.abi import CTX_ARGS
+from simgrad.runtime.tensors import tensor_grad_info, tensor_info
 
 
 class LaunchCode:
     """What a packing writes launcher lines with: the generated function's globals (`env`), the typed views of
     the context buffer, the kernel's name (for messages) and the lines that run after the native call."""
 
-    def __init__(self, kernel_name: str, env: dict, views: dict):
+    def __init__(self, kernel_name: str, env: dict, views: dict, on_device: bool = False):
         self.kernel_name = kernel_name
+        self.on_device = on_device  # the kernel runs on an asynchronous GPU: arrays must be device memory
         self.env = env
         self.views = views
         self.after: list[str] = []
@@ -138,6 +140,29 @@ class ArrayPacking(Packing):
         return lines
 
 
+class TensorPacking(ArrayPacking):
+    """A torch tensor, DLPack array or ti.ad.with_grad pair by reference (runtime/tensors.py): the ndarray
+    words, from checks of the foreign array's layout and device (`pair`: the value is `arg.value`, the
+    gradient `arg.grad`)."""
+
+    def __init__(self, name: str, slot: int, dtype: dt.DataType, ndim: int, ndim_total: int, grad_slot: int = -1,
+                 pair: bool = False):
+        super().__init__(name, slot, dtype, ndim, ndim_total, grad_slot)
+        self.pair = pair
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        kernel = gen.kernel_name
+        gen.env["_tensor"], gen.env["_tensor_grad"] = tensor_info, tensor_grad_info
+        value = f"{src}.value" if self.pair else src
+        lines = [f"_p, _s = _tensor({value}, {kernel!r}, {self.name!r}, {gen.on_device})",
+                 f"_buf[{gen.word(self.slot)}] = _p"]
+        lines += [f"_buf[{gen.word(self.slot + 1 + d)}] = _s[{d}]" for d in range(self.ndim)]
+        if self.grad_slot >= 0:
+            lines.append(f"_buf[{gen.word(self.grad_slot)}] = _tensor_grad({src}, _s, {kernel!r}, {self.name!r}, "
+                         f"{gen.on_device})")
+        return lines
+
+
 class BuilderPacking(Packing):
     """A ti.linalg.SparseMatrixBuilder: (pointer, extent) of its triplet count, rows, columns and values in 8
     slots; after the call, a count past the capacity is an error (the excess was never stored)."""
@@ -195,13 +220,8 @@ def member(value, path):
 
 
 def grad_info(a, shape, kernel, param, ndim):
-    """The base address of the gradient of ndarray argument `a` (a ti.ndarray's .grad, a tensor's .grad, made
-    zero when the tensor has none yet, as Taichi does)."""
+    """The base address of the gradient of ndarray argument `a` (a ti.ndarray's .grad; tensors: TensorPacking)."""
     grad = getattr(a, "grad", None)
-    if grad is None and hasattr(a, "data_ptr") and getattr(a, "requires_grad", False):
-        import torch
-
-        grad = a.grad = torch.zeros_like(a)
     if grad is None:
         raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' has no gradient")
     ptr, gshape = array_info(grad, kernel, param + ".grad", ndim)
@@ -212,16 +232,12 @@ def grad_info(a, shape, kernel, param, ndim):
 
 
 def array_info(a, kernel, param, ndim):
-    """(base address, shape) of an ndarray argument: a numpy array, a CPU torch tensor or a ti.ndarray."""
+    """(base address, shape) of an ndarray argument: a numpy array or a ti.ndarray (tensors: TensorPacking)."""
     if isinstance(a, np.ndarray):
         if not a.flags.c_contiguous:
             raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' must be C-contiguous "
                                    "(use np.ascontiguousarray)")
         return a.ctypes.data, a.shape
-    if hasattr(a, "data_ptr") and hasattr(a, "is_contiguous"):  # a torch tensor
-        if a.device.type != "cpu" or not a.is_contiguous():
-            raise SimgradTypeError(f"kernel {kernel}: tensor argument '{param}' must be a contiguous CPU tensor")
-        return a.data_ptr(), tuple(a.shape)
     if hasattr(a, "_ndarray"):
         return array_info(a._ndarray, kernel, param, ndim)
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")

@@ -4,6 +4,7 @@ arguments into the context buffer and makes one native call. No generic per-argu
 from __future__ import annotations
 
 import ctypes
+import itertools
 import re
 import struct
 import threading
@@ -91,7 +92,7 @@ class Launcher:
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_interrupted": self.clear_interrupt,
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
-        gen = LaunchCode(self.kernel_name, env, self.views)
+        gen = LaunchCode(self.kernel_name, env, self.views, bool(getattr(self.program.device, "asynchronous", False)))
         names = [p.name for p in params]
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
@@ -242,9 +243,18 @@ class Sequence:
             self.launchers[k].fail()
 
 
+_VOLATILE = itertools.count()
+
+
 def replay_key(value):
-    """What must not change for a captured Sequence to be replayed with `value` as an argument: an array's or
-    field's identity (its context words hold its address), a scalar's type and value."""
+    """What must not change for a captured Sequence to be replayed with `value` as an argument: a scalar's type
+    and value; the identity of a numpy array, a ti.ndarray, a field or a template object (their context words
+    stay valid while they live). A torch tensor or other DLPack object gets a key equal to nothing: its data and
+    its `.grad` can be replaced under the same object (optimizer.zero_grad(set_to_none=True)), so it is packed
+    anew every time."""
     if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
         return (type(value).__name__, value)
+    if not isinstance(value, np.ndarray) and not hasattr(value, "_ndarray") and (
+            hasattr(value, "__dlpack__") or hasattr(value, "data_ptr") or hasattr(value, "__cuda_array_interface__")):
+        return ("volatile", next(_VOLATILE))
     return ("object", id(value))

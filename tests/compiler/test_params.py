@@ -16,7 +16,7 @@ from simgrad import dtypes as dt
 from simgrad.compiler import params
 from simgrad.errors import GradientError, SimgradTypeError
 from simgrad.frontend.arrays import ArrayArg
-from simgrad.runtime.args import LaunchCode, Packing, ScalarPacking
+from simgrad.runtime.args import LaunchCode, Packing, ScalarPacking, TensorPacking
 
 
 class Boxed:
@@ -156,7 +156,8 @@ def test_an_unregistered_annotation_is_refused():
 def test_every_kind_is_a_class_and_packings_pickle():
     """Each built-in annotation gets its own Param class; the packings go to the kernel cache (pickled)."""
     S = ti.types.struct(a=ti.f32, b=ti.types.vector(2, ti.i32))
-    anns = {ti.template(): params.TemplateParam, ti.types.ndarray(): params.NdarrayParam,
+    # ti.types.ndarray(): the tensor kind, a subclass of the ndarray kind that defers to it for numpy arrays
+    anns = {ti.template(): params.TemplateParam, ti.types.ndarray(): params.TensorParam,
             ti.types.vector(3, ti.f32): params.MatrixParam, ti.types.sparse_matrix_builder(): params.BuilderParam,
             S: params.StructParam, ti.f32: params.ScalarParam, int: params.ScalarParam}
     for ann, kind in anns.items():
@@ -166,6 +167,8 @@ def test_every_kind_is_a_class_and_packings_pickle():
     back = pickle.loads(pickle.dumps(leaf))
     assert (back.name, back.slot, back.dtype, back.path) == ("s", 3, dt.i64, ("c", "d"))
     assert back.slot_values({"c": {"d": 7}}) == {3: 7}
+    tp = pickle.loads(pickle.dumps(TensorPacking("t", 2, dt.f32, 1, 1, 4, pair=True)))
+    assert (tp.slot, tp.grad_slot, tp.pair) == (2, 4, True)
 
 
 def _sliced_program():

@@ -62,5 +62,32 @@ def expected_archs():
     return [ti.cpu]
 
 
-def torch_op(*args, **kwargs):
-    raise NotImplementedError("test_utils.torch_op is not provided by the simgrad shim")
+def torch_op(*, output_shapes=((1,),)):
+    """Taichi's helper: a kernel over (inputs..., outputs...) ndarrays as a torch.autograd.Function whose outputs
+    are f64 zeros made per call and whose backward runs kernel.grad with the outputs' .grad set to the incoming
+    gradients (the inputs' .grad zeroed first; it is what the adjoint accumulates into)."""
+    import torch
+
+    def wrap(kernel):
+        class Op(torch.autograd.Function):
+            @staticmethod
+            def forward(ctx, *inputs):
+                outputs = tuple(torch.zeros(s, dtype=torch.double, requires_grad=True) for s in output_shapes)
+                kernel(*inputs, *outputs)
+                ctx.save_for_backward(*inputs, *outputs)
+                return outputs
+
+            @staticmethod
+            def backward(ctx, *grads):
+                saved = ctx.saved_tensors
+                inputs, outputs = saved[:len(saved) - len(grads)], saved[len(saved) - len(grads):]
+                for x in inputs:
+                    x.grad.fill_(0)
+                for o, g in zip(outputs, grads):
+                    o.grad = g
+                kernel.grad(*inputs, *outputs)
+                return tuple(x.grad for x in inputs)
+
+        return lambda *args, **kwargs: Op.apply(*args, **kwargs)
+
+    return wrap
