@@ -7,7 +7,7 @@ import builtins
 import inspect
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
+from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
 from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
 from simgrad.ir.ops import Op
@@ -199,11 +199,11 @@ def inline(comp, fn, args, kwargs, node):
     sig = fn.signature
     unknown = unexpected_keywords(sig, kwargs)
     if unknown:
-        raise SimgradTypeError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
+        raise ArgumentCountError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
     try:
         bound = sig.bind(*args, **kwargs)
     except TypeError as e:
-        raise SimgradTypeError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
+        raise ArgumentCountError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
     bound.apply_defaults()
     frame = Frame(get_source(fn.func), False)
     frame.real = getattr(fn, "real", False)

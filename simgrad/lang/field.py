@@ -37,7 +37,7 @@ def _norm_index(key, ndim: int, name: str = "") -> tuple:
         key = (key,)
     if len(key) != ndim:
         raise SimgradOutOfBoundError(f"field {name} has {ndim} indices, got {len(key)} (Slicing is not supported "
-                                     "on ti.field)")
+                                     "on ti.field)", caller_loc())
     return key
 
 

@@ -35,7 +35,8 @@ class Func:
     def __call__(self, *args, **kwargs):
         comp = context.current()
         if comp is None:
-            raise SimgradTypeError(f"ti.func {self.name} can only be called from a kernel or another ti.func")
+            raise SimgradSyntaxError(f"ti.func {self.name} can only be called from a kernel or another ti.func "
+                                     "(Taichi functions cannot be called from Python-scope)", caller_loc())
         return comp.call_func(self, list(args), kwargs)  # the frontend's compiler inlines it
 
     def __get__(self, obj, owner=None):

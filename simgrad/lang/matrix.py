@@ -89,7 +89,7 @@ class Matrix:
         shape = mats[0].shape
         for a in mats[1:]:
             if a.shape != shape:
-                raise ValueError(f"matrix shapes {shape} and {a.shape} do not match")
+                raise SimgradTypeError(f"matrix shapes {shape} and {a.shape} do not match")
         proto = mats[0]
         cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
         return proto._like([fn(*xs) for xs in zip(*cols)])
