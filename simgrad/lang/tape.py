@@ -345,6 +345,16 @@ class _Replaced:
         finally:
             ad_hooks.recorder = outer
 
+    def __get__(self, obj, owner=None):
+        """`obj.f(x)` for a method of a (@ti.data_oriented) class: the primal and its grad_for method both
+        bound to the object, so the Tape records and replays them with `self`."""
+        if obj is None:
+            return self
+        bound = _Replaced(functools.partial(self.fn, obj))
+        if self.grad is not None:
+            bound.grad = functools.partial(self.grad, obj)
+        return bound
+
 
 def grad_replaced(fn):
     return _Replaced(fn)
