@@ -130,8 +130,9 @@ class ArgumentTypeError(SimgradTypeError, TaichiRuntimeTypeError):
     """A kernel argument of the wrong type, found when it is passed (Taichi: TaichiRuntimeTypeError)."""
 
 
-class ArgumentValueError(SimgradTypeError, ValueError):
-    """An array argument of the wrong dtype or ndim for its ndarray parameter (Taichi: ValueError)."""
+class ArgumentValueError(ArgumentTypeError, ValueError):
+    """An argument its parameter kind refuses (compiler/params.py): Taichi raises ValueError for an array of
+    the wrong dtype or ndim, TaichiRuntimeTypeError for a value that is no array at all."""
 
 
 class ArgumentCountError(SimgradTypeError, TaichiSyntaxError):

@@ -16,7 +16,7 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.autodiff.validate import differentiable, user_name, written_targets
-from simgrad.errors import AccessRuleError, GradientError, SimgradError
+from simgrad.errors import AccessRuleError, GradientError, SimgradError, SimgradRuntimeError, caller_loc
 from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
@@ -321,9 +321,18 @@ _NATIVE_ZEROING = 1 << 16
 
 
 def no_grad(kernel):
-    """The kernel runs in forward; a Tape skips it in backward."""
+    """The kernel runs in forward; a Tape skips it in backward. A plain Python function (Taichi's use: it
+    calls kernels) is recorded on the Tape as one unit whose gradient, `fn.grad`, does nothing."""
+    if not hasattr(kernel, "grad"):  # not a kernel: a Python function
+        replaced = _Replaced(kernel)
+        replaced.grad = _no_gradient
+        return replaced
     kernel._no_grad = True
     return kernel
+
+
+def _no_gradient(*args, **kwargs) -> None:
+    return None
 
 
 class _Replaced:
@@ -362,8 +371,13 @@ def grad_replaced(fn):
 
 def grad_for(primal):
     def register(fn):
-        if not isinstance(primal, _Replaced):
-            raise SimgradError("ti.ad.grad_for expects a function decorated with @ti.ad.grad_replaced")
+        if not isinstance(primal, _Replaced):  # RuntimeErrors, as Taichi raises them
+            if hasattr(primal, "grad"):
+                raise SimgradRuntimeError("ti.ad.grad_for: the primal function must be a **python** function "
+                                          f"instead of a taichi kernel ({primal.__name__}): wrap the kernel in a "
+                                          "@ti.ad.grad_replaced decorated python function", caller_loc())
+            raise SimgradRuntimeError(f"Primal function `{getattr(primal, '__name__', primal)}` must be "
+                                      "decorated by ti.ad.grad_replaced", caller_loc())
         primal.grad = fn
         return fn
 

@@ -227,3 +227,47 @@ def test_type_attributes():
         return a
 
     assert k.grad is not None
+
+
+def test_no_grad_python_function():
+    """`@ti.ad.no_grad` on a Python function that calls kernels (Taichi's use): one unit on the Tape whose
+    gradient (`fn.grad`, Taichi's placeholder) does nothing, so only the other launches contribute."""
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    x = ti.field(ti.f64, shape=4, needs_grad=True)
+    total = ti.field(ti.f64, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def acc(mul: ti.f64):
+        for i in range(4):
+            total[None] += x[i] * mul
+
+    @ti.ad.no_grad
+    def forward(mul):
+        acc(mul)
+        acc(mul)
+
+    with ti.ad.Tape(loss=total):
+        forward(4.0)
+        acc(5.0)
+    assert x.grad.to_numpy().tolist() == [5.0] * 4
+    assert total[None] == 0.0  # x is zero: the values only check that every launch ran
+    x.grad.fill(0)
+    forward.grad(4.0)
+    assert x.grad.to_numpy().tolist() == [0.0] * 4
+
+
+def test_grad_for_refuses_as_taichi():
+    """grad_for of a kernel, or of a function without @grad_replaced: Taichi's RuntimeError, located."""
+
+    @ti.kernel
+    def k(a: ti.f32):
+        pass
+
+    def plain(a):
+        k(a)
+
+    for primal in (k, plain):
+        with pytest.raises(RuntimeError, match=f"(?s){__file__}.*grad_replaced"):
+            @ti.ad.grad_for(primal)
+            def backward(a):
+                pass

@@ -9,7 +9,8 @@ The class of each row was recorded by running the row's program under taichi 1.7
 TaichiNameError, TaichiIndexError (the four are TaichiCompilationErrors), TaichiRuntimeError, TaichiAssertionError,
 TaichiRuntimeTypeError (the last two are TaichiRuntimeErrors); a builtin name where Taichi raises a builtin.
 Not in the table: `v[5]` of a 3-vector (taichi 1.7.4 raises nothing; simgrad a TaichiIndexError) and a kernel
-method of a class without @ti.data_oriented (Taichi's TaichiSyntaxError; simgrad binds the object)."""
+method of a class without @ti.data_oriented (Taichi's TaichiSyntaxError; simgrad binds the object), a
+2-vector for a 3-vector parameter (taichi leaks numpy's IndexError; simgrad a TaichiRuntimeTypeError)."""
 
 import builtins
 import runpy
@@ -235,6 +236,20 @@ x[0] = 1.0  #!
 def k(a: ti.template()):
     a[0] = 1  #!
 k(3)
+"""),
+    ("ndarray_given_float", "TaichiRuntimeTypeError", """
+@ti.kernel
+def k(a: ti.types.ndarray()):
+    pass
+k(1.2)  #!
+"""),
+    ("struct_arg_mismatch", "TaichiRuntimeTypeError", """
+sphere_type = ti.types.struct(center=ti.math.vec3, radius=float)
+circle_type = ti.types.struct(center=ti.math.vec2, radius=float)
+@ti.kernel
+def k(sphere: sphere_type):
+    pass
+k(circle_type(center=ti.math.vec2([1, 2]), radius=2.33))  #!
 """),
 ]
 
