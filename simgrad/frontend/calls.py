@@ -214,6 +214,7 @@ def inline(comp, fn, args, kwargs, node):
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
             frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
+            _check_matrix_argument(name, ann, value, comp.loc(node))
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
             frame.scopes[0][name] = comp.new_var(value, ann)
@@ -245,6 +246,21 @@ def inline(comp, fn, args, kwargs, node):
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
             rv = operators.cast(rv, ann)
     return rv
+
+
+def _check_matrix_argument(name: str, ann: MatrixType, value, loc) -> None:
+    """A matrix for a parameter annotated with a matrix type has its shape (Taichi's TaichiSyntaxError texts);
+    it was reinterpreted silently."""
+    if not isinstance(value, Matrix) or ann.n is None:
+        return
+    want, got = ann.shape, value.shape
+    if len(want) != len(got):
+        raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with ndim {len(want)}, "
+                                 f"but got {len(got)}.", loc)
+    for axis, letter in enumerate("nm"[:len(want)]):
+        if want[axis] != got[axis]:
+            raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with {letter} "
+                                     f"{want[axis]}, but got {got[axis]}.", loc)
 
 
 def _is_scalar_type(ann) -> bool:

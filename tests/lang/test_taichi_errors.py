@@ -251,6 +251,17 @@ def k(sphere: sphere_type):
     pass
 k(circle_type(center=ti.math.vec2([1, 2]), radius=2.33))  #!
 """),
+    ("func_matrix_arg_wrong_shape", "TaichiSyntaxError", """
+vec3 = ti.types.vector(3, ti.f32)
+@ti.func
+def f(a: vec3):
+    a[0] = 100
+@ti.kernel
+def k():
+    x = ti.Matrix([3, 4])
+    f(x)  #!
+k()
+"""),
 ]
 
 
