@@ -9,8 +9,8 @@ import time
 
 from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
-from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
 from simgrad.compiler import params
+from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
 from simgrad.compiler.params import TemplateParam, make_param
 from simgrad.errors import (
     ArgumentCountError,

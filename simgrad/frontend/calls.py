@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import builtins
 import inspect
+from typing import TYPE_CHECKING
 
 from simgrad import dtypes as dt
 from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
@@ -16,6 +17,9 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
+
+if TYPE_CHECKING:
+    from simgrad.lang.types import MatrixType
 
 
 def _builtin_int(x=0, *rest):

@@ -73,7 +73,7 @@ class Field:
             return repr(self)
         if any(c.snode is None for c in self._components()):
             return "<Field: Definition of this field is incomplete>"
-        return str(self.to_numpy())
+        return str(self.to_numpy())  # type: ignore[attr-defined]  # every concrete field has one
 
     def placeable(self) -> list[Field]:
         """The fields place() puts under a node for this one (a struct field: its members)."""

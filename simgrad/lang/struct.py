@@ -297,7 +297,6 @@ def _add_methods(stype: StructType, namespace: dict) -> None:
 def dataclass(cls):
     """@ti.dataclass: a struct type from the class's annotations; its ti.func methods become the struct's
     methods (called on struct values, locals and field elements, `self` being the struct)."""
-    from simgrad.lang.functions import Func
 
     ann = dict(getattr(cls, "__annotations__", {}))
     defaults = [k for k in ann if k in vars(cls)]
