@@ -24,7 +24,7 @@ from simgrad.errors import (
     caller_loc,
 )
 from simgrad.lang import ad_hooks
-from simgrad.lang.functions import KernelDef, resolved_signature, unexpected_keywords
+from simgrad.lang.functions import KernelDef, binding_error, resolved_signature
 from simgrad.lang.program import Program, get_program
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
@@ -88,13 +88,10 @@ class Kernel(KernelDef):
         return self if obj is None else BoundKernel(self, obj)
 
     def _bind(self, args, kwargs):
-        unknown = unexpected_keywords(self.signature, kwargs)
-        if unknown:
-            raise ArgumentCountError(f"kernel {self.name}: {unknown}", caller_loc())
-        try:
-            b = self.signature.bind(*args, **kwargs)
-        except TypeError as e:
-            raise ArgumentCountError(f"kernel {self.name}: {e}", caller_loc()) from None
+        wrong = binding_error(self.signature, args, kwargs)
+        if wrong:
+            raise ArgumentCountError(f"kernel {self.name}: {wrong}", caller_loc())
+        b = self.signature.bind(*args, **kwargs)
         b.apply_defaults()
         return tuple(b.arguments.values())
 
@@ -116,9 +113,8 @@ class Kernel(KernelDef):
 
     def _instance_for(self, args, mode: str) -> CompiledKernel:
         if len(args) != self._nparams:
-            names = ", ".join(p.name for p in self.params)
-            raise ArgumentCountError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
-                                     f"got {len(args)}", caller_loc())
+            raise ArgumentCountError(f"kernel {self.name}: {binding_error(self.signature, args, {})}",
+                                     caller_loc())
         keep: list = []
         try:
             key = tuple([p.key(args[k], keep) for k, p in self._keyed])

@@ -198,16 +198,13 @@ def inline(comp, fn, args, kwargs, node):
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
-    from simgrad.lang.functions import unexpected_keywords
+    from simgrad.lang.functions import binding_error
 
     sig = fn.signature
-    unknown = unexpected_keywords(sig, kwargs)
-    if unknown:
-        raise ArgumentCountError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
-    try:
-        bound = sig.bind(*args, **kwargs)
-    except TypeError as e:
-        raise ArgumentCountError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
+    wrong = binding_error(sig, args, kwargs)
+    if wrong:
+        raise ArgumentCountError(f"calling ti.func {fn.name}: {wrong}", comp.loc(node))
+    bound = sig.bind(*args, **kwargs)
     bound.apply_defaults()
     frame = Frame(get_source(fn.func), False)
     frame.real = getattr(fn, "real", False)
