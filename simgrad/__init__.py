@@ -16,18 +16,17 @@ from simgrad.errors import (
     SimgradRuntimeError,
     SimgradSyntaxError,
     SimgradTypeError,
+    TaichiAssertionError,
     TaichiCompilationError,
+    TaichiIndexError,
+    TaichiNameError,
     TaichiRuntimeError,
+    TaichiRuntimeTypeError,
+    TaichiSyntaxError,
+    TaichiTypeError,
 )
 from simgrad.lang.logging import CRITICAL, DEBUG, ERROR, INFO, TRACE, WARN, is_logging_effective, set_logging_level
 
-# Taichi's exception names for ours (`except ti.TaichiTypeError` in existing programs catches simgrad's)
-TaichiSyntaxError = SimgradSyntaxError
-TaichiTypeError = SimgradTypeError
-TaichiNameError = SimgradNameError
-TaichiIndexError = SimgradIndexError
-TaichiAssertionError = SimgradAssertionError
-TaichiRuntimeTypeError = SimgradTypeError
 from simgrad.lang import mathlib as math
 from simgrad.lang.archs import (
     amdgpu,

@@ -32,6 +32,10 @@ class DataType:
     def __repr__(self) -> str:
         return self.name
 
+    def to_string(self) -> str:
+        """Taichi's name of the type (`ti.f32.to_string() == str(ti.f32) == "f32"`)."""
+        return self.name
+
     def __call__(self, value):
         """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast in a kernel)."""
         if cast_hook is None:

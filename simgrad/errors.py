@@ -69,36 +69,75 @@ class SimgradError(Exception):
         return self._text()
 
 
+# Taichi's exception classes, with Taichi's hierarchy (taichi/lang/exception.py in 1.7.4), so that
+# `except ti.TaichiRuntimeError` in existing programs catches ours. simgrad raises its own concrete classes
+# below, each an instance of the Taichi class Taichi raises in that situation
+# (tests/lang/test_taichi_errors.py records the situations).
 class TaichiCompilationError(SimgradError):
-    """What a program does wrong, found while compiling a kernel (Taichi's name, so that
-    `except ti.TaichiCompilationError` in existing programs catches ours)."""
+    """What a program does wrong, found while compiling a kernel."""
 
 
-class TaichiRuntimeError(SimgradError, RuntimeError):
-    """An error a running kernel or the runtime reports (Taichi's name)."""
-
-
-class SimgradSyntaxError(TaichiCompilationError, SyntaxError):
-    """A Python construct the kernel language does not support, or misuse of one it does."""
-
+class TaichiSyntaxError(TaichiCompilationError, SyntaxError):
     def __init__(self, message: str, loc: Loc | None = None):
         SimgradError.__init__(self, message, loc)
-        self.args = (self._text(),)
+        self.args = (self._text(),)  # SyntaxError's own __str__ would show only the first argument
 
     def __str__(self) -> str:
         return self._text()
 
 
-class SimgradTypeError(TaichiCompilationError, TypeError):
+class TaichiNameError(TaichiCompilationError, NameError):
     pass
 
 
-class SimgradNameError(TaichiCompilationError, NameError):
+class TaichiIndexError(TaichiCompilationError, IndexError):
     pass
 
 
-class SimgradIndexError(TaichiCompilationError, IndexError):
+class TaichiTypeError(TaichiCompilationError, TypeError):
     pass
+
+
+class TaichiRuntimeError(SimgradError, RuntimeError):
+    """An error a running kernel or the runtime reports."""
+
+
+class TaichiAssertionError(TaichiRuntimeError, AssertionError):
+    pass
+
+
+class TaichiRuntimeTypeError(TaichiRuntimeError, TypeError):
+    pass
+
+
+class SimgradSyntaxError(TaichiSyntaxError):
+    """A Python construct the kernel language does not support, or misuse of one it does."""
+
+
+class SimgradTypeError(TaichiTypeError):
+    pass
+
+
+class SimgradNameError(TaichiNameError):
+    pass
+
+
+class SimgradIndexError(TaichiIndexError):
+    pass
+
+
+class ArgumentTypeError(SimgradTypeError, TaichiRuntimeTypeError):
+    """A kernel argument of the wrong type, found when it is passed (Taichi: TaichiRuntimeTypeError)."""
+
+
+class ArgumentValueError(ArgumentTypeError, ValueError):
+    """An argument its parameter kind refuses (compiler/params.py): Taichi raises ValueError for an array of
+    the wrong dtype or ndim, TaichiRuntimeTypeError for a value that is no array at all."""
+
+
+class ArgumentCountError(SimgradTypeError, TaichiSyntaxError):
+    """Too many or too few arguments, or an unknown keyword, for a kernel or ti.func (Taichi:
+    TaichiSyntaxError; a TypeError as Python says)."""
 
 
 class SimgradValueError(SimgradError, ValueError):
@@ -109,7 +148,7 @@ class SimgradOverflowError(SimgradError, OverflowError):
     pass
 
 
-class SimgradAssertionError(TaichiRuntimeError, AssertionError):
+class SimgradAssertionError(TaichiAssertionError):
     pass
 
 

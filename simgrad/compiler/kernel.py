@@ -4,15 +4,27 @@ instantiation they need (compiler/driver.py) and launches it; Tape recording goe
 from __future__ import annotations
 
 import inspect
+import os
 import time
 
 from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
+from simgrad.compiler import params
 from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
-from simgrad.compiler.params import make_param
-from simgrad.errors import SimgradTypeError, caller_loc
+from simgrad.compiler.params import TemplateParam, make_param
+from simgrad.errors import (
+    ArgumentCountError,
+    ArgumentTypeError,
+    ArgumentValueError,
+    Loc,
+    SimgradError,
+    SimgradSyntaxError,
+    SimgradTypeError,
+    SimgradValueError,
+    caller_loc,
+)
 from simgrad.lang import ad_hooks
-from simgrad.lang.functions import KernelDef, resolved_signature, unexpected_keywords
+from simgrad.lang.functions import KernelDef, binding_error, resolved_signature
 from simgrad.lang.program import Program, get_program
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
@@ -32,7 +44,8 @@ class Kernel(KernelDef):
         self.name = func.__name__
         self.__name__, self.__qualname__, self.__module__ = func.__name__, func.__qualname__, func.__module__
         self.signature = resolved_signature(func)
-        self.params = [make_param(n, p.annotation, self.name, first=k == 0)
+        _check_parameter_kinds(func, self.signature)
+        self.params = [_make_param(k, n, p.annotation, self.name)
                        for k, (n, p) in enumerate(self.signature.parameters.items())]
         self._nparams = len(self.params)
         # the parameters whose arguments pick the instantiation; without any, one instance serves every call
@@ -60,25 +73,25 @@ class Kernel(KernelDef):
         launch = self._simple_launch
         if launch is None or len(args) != self._nparams or ad_hooks.forward_mode is not None:
             launch = self._launch_for(args, "fwd" if ad_hooks.forward_mode is not None else "")
-        if prog.config.kernel_profiler:
-            t0 = time.perf_counter()
-            out = launch(*args)
-            prog.profiler.add(self.name, time.perf_counter() - t0)
-            return out
-        return launch(*args)
+        try:
+            if prog.config.kernel_profiler:
+                t0 = time.perf_counter()
+                out = launch(*args)
+                prog.profiler.add(self.name, time.perf_counter() - t0)
+                return out
+            return launch(*args)
+        except SimgradTypeError as e:
+            raise _argument_error(e, ArgumentTypeError) from None
 
     def __get__(self, obj, owner=None):
         """`obj.step()` for a kernel method: the kernel with the object as its first (template) argument."""
         return self if obj is None else BoundKernel(self, obj)
 
     def _bind(self, args, kwargs):
-        unknown = unexpected_keywords(self.signature, kwargs)
-        if unknown:
-            raise SimgradTypeError(f"kernel {self.name}: {unknown}", caller_loc())
-        try:
-            b = self.signature.bind(*args, **kwargs)
-        except TypeError as e:
-            raise SimgradTypeError(f"kernel {self.name}: {e}") from None
+        wrong = binding_error(self.signature, args, kwargs)
+        if wrong:
+            raise ArgumentCountError(f"kernel {self.name}: {wrong}", caller_loc())
+        b = self.signature.bind(*args, **kwargs)
         b.apply_defaults()
         return tuple(b.arguments.values())
 
@@ -100,18 +113,22 @@ class Kernel(KernelDef):
 
     def _instance_for(self, args, mode: str) -> CompiledKernel:
         if len(args) != self._nparams:
-            names = ", ".join(p.name for p in self.params)
-            raise SimgradTypeError(f"kernel {self.name} takes {self._nparams} argument(s) ({names}), "
-                                   f"got {len(args)}")
+            raise ArgumentCountError(f"kernel {self.name}: {binding_error(self.signature, args, {})}",
+                                     caller_loc())
         keep: list = []
-        key = tuple([p.key(args[k], keep) for k, p in self._keyed])
-        cache = self._caches[mode]
-        inst = cache.get(key)
-        if inst is None:
-            with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
-                inst = cache.get(key)
-                if inst is None:
-                    inst = self._compile_instance(args, mode, key, keep, cache)
+        try:
+            key = tuple([p.key(args[k], keep) for k, p in self._keyed])
+            cache = self._caches[mode]
+            inst = cache.get(key)
+            if inst is None:
+                with COMPILE_LOCK:  # the frontend and passes share state: one compile at a time
+                    inst = cache.get(key)
+                    if inst is None:
+                        inst = self._compile_instance(args, mode, key, keep, cache)
+        except (SimgradTypeError, SimgradValueError) as e:
+            if not _raised_in(e, _PARAMS_FILE):
+                raise
+            raise _argument_error(e, ArgumentValueError) from None
         return inst
 
     def _compile_instance(self, args, mode: str, key, keep: list, cache: dict) -> CompiledKernel:
@@ -168,12 +185,15 @@ class GradKernel:
             k._reset(prog)
         # inside ti.ad.FwdMode the adjoint runs with tangents: gradients' duals get Hessian-vector products
         launch = k._launch_for(args, "gradfwd" if ad_hooks.forward_mode is not None else "grad")
-        if prog.config.kernel_profiler:
-            t0 = time.perf_counter()
+        try:
+            if prog.config.kernel_profiler:
+                t0 = time.perf_counter()
+                launch(*args)
+                prog.profiler.add(self.name, time.perf_counter() - t0)
+                return None
             launch(*args)
-            prog.profiler.add(self.name, time.perf_counter() - t0)
-            return None
-        launch(*args)
+        except SimgradTypeError as e:
+            raise _argument_error(e, ArgumentTypeError) from None
         return None
 
 
@@ -199,6 +219,70 @@ class _BoundGrad:
 
     def in_place(self, *args) -> None:
         self.grad.in_place(self.obj, *args)
+
+
+def _argument_error(e: SimgradError, cls: type[SimgradTypeError]) -> SimgradError:
+    """An argument refused when it is passed (the launcher's packing, the parameter's key), as the class
+    Taichi raises there: TaichiRuntimeTypeError for a scalar or vector, ValueError for an array (both
+    still SimgradTypeErrors). Errors already of a more precise class pass unchanged."""
+    if type(e) is SimgradTypeError:
+        out: SimgradError = cls(e.message, e.loc or caller_loc())
+    elif type(e) is SimgradValueError and e.loc is None:
+        out = SimgradValueError(e.message, caller_loc())
+    else:
+        return e
+    out.__traceback__ = e.__traceback__
+    return out
+
+
+# an argument's checks live in the parameter kinds (compiler/params.py: key and bind)
+_PARAMS_FILE = os.path.abspath(params.__file__)
+
+
+def _raised_in(e: BaseException, filename: str) -> bool:
+    """Whether the innermost frame of e's traceback is in `filename`."""
+    tb = e.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return os.path.abspath(tb.tb_frame.f_code.co_filename) == filename
+
+
+def _check_parameter_kinds(func, signature: inspect.Signature) -> None:
+    """*args / **kwargs / keyword-only parameters: Taichi refuses them with a TaichiSyntaxError."""
+    for p in signature.parameters.values():
+        if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD, p.KEYWORD_ONLY):
+            what = {p.VAR_POSITIONAL: "variable positional parameters (i.e., *args)",
+                    p.VAR_KEYWORD: "variable keyword parameters (i.e., **kwargs)",
+                    p.KEYWORD_ONLY: "keyword-only parameters"}[p.kind]
+            raise SimgradSyntaxError(f"Taichi kernels do not support {what}: kernel {func.__name__}, "
+                                     f"parameter '{p.name}'", _def_loc(func))
+
+
+def _def_loc(func) -> Loc | None:
+    """The `def` line of a (decorated) function."""
+    code = getattr(func, "__code__", None)
+    if code is None:
+        return None
+    import linecache
+
+    line = code.co_firstlineno
+    for k in range(line, line + 50):
+        text = linecache.getline(code.co_filename, k).lstrip()
+        if text.startswith(("def ", "async def ")):
+            return Loc(code.co_filename, k)
+        if not text:
+            break
+    return Loc(code.co_filename, line)
+
+
+def _make_param(k: int, name: str, ann, kernel_name: str):
+    """A kernel parameter; the unannotated first parameter `cls` of a @classmethod kernel is, like `self`, the
+    compile-time object (Taichi's docs: data_oriented_class.md)."""
+    if k == 0 and name == "cls" and ann is inspect.Parameter.empty:
+        return TemplateParam(name, ann, kernel_name)
+    return make_param(name, ann, kernel_name, first=k == 0)
 
 
 def kernel(func=None, **kw):

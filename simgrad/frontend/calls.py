@@ -5,9 +5,10 @@ from __future__ import annotations
 import ast
 import builtins
 import inspect
+from typing import TYPE_CHECKING
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradError, SimgradSyntaxError, SimgradTypeError
+from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
 from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
 from simgrad.ir.ops import Op
@@ -16,6 +17,9 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
+
+if TYPE_CHECKING:
+    from simgrad.lang.types import MatrixType
 
 
 def _builtin_int(x=0, *rest):
@@ -194,16 +198,13 @@ def inline(comp, fn, args, kwargs, node):
     if len(comp.frames) > comp.MAX_INLINE_DEPTH:
         raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
                                  comp.loc(node))
-    from simgrad.lang.functions import unexpected_keywords
+    from simgrad.lang.functions import binding_error
 
     sig = fn.signature
-    unknown = unexpected_keywords(sig, kwargs)
-    if unknown:
-        raise SimgradTypeError(f"calling ti.func {fn.name}: {unknown}", comp.loc(node))
-    try:
-        bound = sig.bind(*args, **kwargs)
-    except TypeError as e:
-        raise SimgradTypeError(f"calling ti.func {fn.name}: {e}", comp.loc(node)) from None
+    wrong = binding_error(sig, args, kwargs)
+    if wrong:
+        raise ArgumentCountError(f"calling ti.func {fn.name}: {wrong}", comp.loc(node))
+    bound = sig.bind(*args, **kwargs)
     bound.apply_defaults()
     frame = Frame(get_source(fn.func), False)
     frame.real = getattr(fn, "real", False)
@@ -214,6 +215,7 @@ def inline(comp, fn, args, kwargs, node):
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
             frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
+            _check_matrix_argument(name, ann, value, comp.loc(node))
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
             frame.scopes[0][name] = comp.new_var(value, ann)
@@ -245,6 +247,21 @@ def inline(comp, fn, args, kwargs, node):
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
             rv = operators.cast(rv, ann)
     return rv
+
+
+def _check_matrix_argument(name: str, ann: MatrixType, value, loc) -> None:
+    """A matrix for a parameter annotated with a matrix type has its shape (Taichi's TaichiSyntaxError texts);
+    it was reinterpreted silently."""
+    if not isinstance(value, Matrix) or ann.n is None:
+        return
+    want, got = ann.shape, value.shape
+    if len(want) != len(got):
+        raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with ndim {len(want)}, "
+                                 f"but got {len(got)}.", loc)
+    for axis, letter in enumerate("nm"[:len(want)]):
+        if want[axis] != got[axis]:
+            raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with {letter} "
+                                     f"{want[axis]}, but got {got[axis]}.", loc)
 
 
 def _is_scalar_type(ann) -> bool:

@@ -14,7 +14,7 @@ from simgrad import dtypes as dt
 from simgrad.errors import SimgradRuntimeError, SimgradSyntaxError, SimgradValueError, caller_loc
 from simgrad.lang import snode as sn
 from simgrad.lang.field import Field, MatrixField, ScalarField
-from simgrad.lang.program import get_program
+from simgrad.lang.program import get_program, require_init
 from simgrad.lang.quant import is_quant
 from simgrad.lang.types import MatrixType
 
@@ -117,6 +117,7 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
           order=None, layout=None):
     from simgrad.lang.types import MatrixType
 
+    require_init("field")
     if isinstance(dtype, MatrixType):
         return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
     if is_quant(dtype):
@@ -173,6 +174,7 @@ def _entry_types(n: int, m: int, dtype) -> tuple[list, dt.DataType]:
 
 
 def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
+    require_init("field")
     if isinstance(dtype, (list, tuple)):
         types, compute = _entry_types(n, m, dtype)
         if not is_quant(types[0]):
@@ -247,7 +249,7 @@ class FieldsBuilder:
     """`ti.FieldsBuilder()`: an explicit SNode tree; `finalize()` materialises it."""
 
     def __init__(self):
-        self.tree = sn.new_tree(get_program())
+        self.tree = sn.new_tree(require_init("a FieldsBuilder"))
         self.root = self.tree.root
 
     def dense(self, indices, dimensions):
@@ -306,6 +308,7 @@ def _struct_field(stype, name: str, needs_grad: bool, needs_dual: bool):
 def place_struct_field(stype, shape, name, offset, needs_grad: bool, needs_dual: bool):
     """`Type.field(shape=...)`: every member in one dense node of its own tree (Taichi places a struct's
     members together), gradients beside them; without a shape the user places it with ti.root."""
+    require_init("field")
     shape = _check_shape(shape)
     base, auto = _name(name)
     f = _struct_field(stype, base, needs_grad, needs_dual)

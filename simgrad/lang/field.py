@@ -17,6 +17,7 @@ from simgrad.errors import (
     SimgradOutOfBoundError,
     SimgradOverflowError,
     SimgradTypeError,
+    TaichiRuntimeError,
     caller_loc,
 )
 from simgrad.ir.fieldref import FieldRef
@@ -37,7 +38,7 @@ def _norm_index(key, ndim: int, name: str = "") -> tuple:
         key = (key,)
     if len(key) != ndim:
         raise SimgradOutOfBoundError(f"field {name} has {ndim} indices, got {len(key)} (Slicing is not supported "
-                                     "on ti.field)")
+                                     "on ti.field)", caller_loc())
     return key
 
 
@@ -62,6 +63,17 @@ class Field:
 
     def _components(self) -> list[ScalarField]:
         raise NotImplementedError
+
+    def __str__(self) -> str:
+        """`print(x)`: the values, as Taichi prints them (str of to_numpy()); while a kernel compiles, and for a
+        field not placed or released, the repr (no materialisation from a message)."""
+        from simgrad.errors import compiling
+
+        if compiling() or self.released():
+            return repr(self)
+        if any(c.snode is None for c in self._components()):
+            return "<Field: Definition of this field is incomplete>"
+        return str(self.to_numpy())  # type: ignore[attr-defined]  # every concrete field has one
 
     def placeable(self) -> list[Field]:
         """The fields place() puts under a node for this one (a struct field: its members)."""
@@ -104,14 +116,19 @@ class Field:
         return self._components()[0].snode.tree
 
     def released(self) -> bool:
-        """Whether the program this field was placed in was dropped by ti.reset() or a later ti.init()."""
+        """Whether the program this field was placed in was dropped by ti.reset() or a later ti.init(), or its
+        SNode tree destroyed (tree.destroy())."""
         node = self._components()[0].snode
-        return node is not None and node.tree is not None and node.tree.program.released
+        return node is not None and node.tree is not None and (node.tree.program.released or node.tree.destroyed)
 
     def check_alive(self, loc=None) -> None:
-        if self.released():
-            raise SimgradError(f"field {self.name} belongs to a program that ti.reset() or a later ti.init() "
-                               "released: create the fields again after ti.init()", loc or caller_loc())
+        if not self.released():
+            return
+        if self._components()[0].snode.tree.destroyed:
+            raise TaichiRuntimeError(f"field {self.name} belongs to an SNode tree that was destroyed "
+                                     "(tree.destroy())", loc or caller_loc())
+        raise SimgradError(f"field {self.name} belongs to a program that ti.reset() or a later ti.init() "
+                           "released: create the fields again after ti.init()", loc or caller_loc())
 
     def _ensure(self) -> None:
         comps = self._components()

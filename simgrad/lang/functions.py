@@ -35,7 +35,8 @@ class Func:
     def __call__(self, *args, **kwargs):
         comp = context.current()
         if comp is None:
-            raise SimgradTypeError(f"ti.func {self.name} can only be called from a kernel or another ti.func")
+            raise SimgradSyntaxError(f"ti.func {self.name} can only be called from a kernel or another ti.func "
+                                     "(Taichi functions cannot be called from Python-scope)", caller_loc())
         return comp.call_func(self, list(args), kwargs)  # the frontend's compiler inlines it
 
     def __get__(self, obj, owner=None):
@@ -112,6 +113,41 @@ def resolved_signature(func) -> inspect.Signature:
     return sig.replace(parameters=params, return_annotation=ev(sig.return_annotation))
 
 
+def binding_error(sig: inspect.Signature, args, kwargs) -> str:
+    """Why `args`/`kwargs` do not bind to `sig`, in Taichi's words (its tests match them: "Too many arguments",
+    "Parameter `a : i32` missing", "Unexpected argument 'c'", "Multiple values for argument 'a'"); "" when
+    they bind. An unknown keyword is reported first (Python would say a parameter is missing)."""
+    unknown = unexpected_keywords(sig, kwargs)
+    if unknown:
+        return unknown
+    params = [p for p in sig.parameters.values() if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    if len(args) > len(params) and not any(p.kind is p.VAR_POSITIONAL for p in sig.parameters.values()):
+        expected = ", ".join(_param_text(p) for p in params)
+        return f"Too many arguments. Expected ({expected}), got ({', '.join(map(_arg_text, args))})."
+    for p in params[:len(args)]:
+        if p.name in kwargs:
+            return f"Multiple values for argument '{p.name}'."
+    for p in params[len(args):]:
+        if p.name not in kwargs and p.default is inspect.Parameter.empty:
+            return f"Parameter `{_param_text(p)}` missing."
+    try:
+        sig.bind(*args, **kwargs)
+    except TypeError as e:
+        return str(e)
+    return ""
+
+
+def _param_text(p: inspect.Parameter) -> str:
+    if p.annotation is inspect.Parameter.empty:
+        return p.name
+    return f"{p.name} : {p.annotation}"
+
+
+def _arg_text(a) -> str:
+    text = repr(a)
+    return text if len(text) <= 40 else type(a).__name__
+
+
 def unexpected_keywords(sig: inspect.Signature, kwargs) -> str:
     """Python's bind reports a missing parameter before an unknown keyword (`k(b=1)` for `k(a)` says
     "missing 'a'"); the unknown keyword is the real mistake, so it is reported first."""
@@ -121,5 +157,4 @@ def unexpected_keywords(sig: inspect.Signature, kwargs) -> str:
     bad = [k for k in kwargs if k not in names]
     if not bad:
         return ""
-    return (f"got an unexpected keyword argument '{bad[0]}' (its parameters are: "
-            f"{', '.join(sig.parameters)})")
+    return f"Unexpected argument '{bad[0]}' (its parameters are: {', '.join(sig.parameters)})."

@@ -10,7 +10,8 @@ import numbers
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradIndexError, SimgradTypeError
+from simgrad import errors
+from simgrad.errors import SimgradIndexError, SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
@@ -89,7 +90,10 @@ class Matrix:
         shape = mats[0].shape
         for a in mats[1:]:
             if a.shape != shape:
-                raise ValueError(f"matrix shapes {shape} and {a.shape} do not match")
+                # as Taichi: a TaichiTypeError in a kernel, numpy's ValueError in Python scope
+                if errors.compiling():
+                    raise SimgradTypeError(f"matrix shapes {shape} and {a.shape} do not match")
+                raise SimgradValueError(f"matrix shapes {shape} and {a.shape} do not match", caller_loc())
         proto = mats[0]
         cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
         return proto._like([fn(*xs) for xs in zip(*cols)])

@@ -9,7 +9,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.lang.field import FieldElement
-from simgrad.lang.program import get_program
+from simgrad.lang.program import get_program, require_init
 from simgrad.lang.types import MatrixType
 
 
@@ -30,6 +30,7 @@ class Ndarray:
     """An n-dimensional array of scalars, vectors or matrices; `shape` is the outer shape (as Taichi)."""
 
     def __init__(self, dtype, shape, element_shape: tuple = (), needs_grad: bool = False):
+        require_init("ndarray")
         self.dtype = dt.from_any(dtype)
         self.shape = (shape,) if isinstance(shape, (int, np.integer, float)) else tuple(shape)
         if any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 < n < 2**31
@@ -121,6 +122,15 @@ class Ndarray:
 
     def __repr__(self) -> str:
         return f"<ndarray {self.element_type} shape={self.shape}>"
+
+    def __str__(self) -> str:
+        """`print(a)` prints what Taichi 1.7.4 prints for an ndarray (its repr, not the values)."""
+        es = self.element_shape
+        if not es:
+            return "<ti.ndarray>"
+        if len(es) == 1:
+            return f"<{es[0]} Layout.AOS ti.Vector.ndarray>"
+        return f"<{es[0]}x{es[1]} Layout.AOS ti.Matrix.ndarray>"
 
 
 class ScalarNdarray(Ndarray):

@@ -118,6 +118,12 @@ class Program:
         if ip is not None:
             self.config.default_ip = dt.Defaults.ip = dt.from_any(ip)
 
+    def bump_generation(self) -> None:
+        """A new generation of this program: every kernel drops its instances and compiles again (an SNode
+        tree was destroyed)."""
+        Program.generation += 1
+        self.generation = Program.generation
+
     def release(self) -> None:
         """Free this program's native code (ti.reset / the next ti.init). Kernels notice the new program
         generation and compile again; fields of this program refuse further use."""
@@ -196,6 +202,16 @@ def get_program() -> Program:
     global _program
     if _program is None:
         _program = Program()
+    return _program
+
+
+def require_init(what: str) -> Program:
+    """The program fields and ndarrays are created in: Taichi 1.7.4 refuses to create one before ti.init() (or
+    after ti.reset()) with this TaichiRuntimeError, where simgrad used to start a default program silently."""
+    if _program is None:
+        from simgrad.errors import TaichiRuntimeError, caller_loc
+
+        raise TaichiRuntimeError(f"Cannot create {what}, maybe you forgot to call `ti.init()` first?", caller_loc())
     return _program
 
 

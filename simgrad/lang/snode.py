@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simgrad.dtypes import DataType
-from simgrad.errors import SimgradError, SimgradValueError, caller_loc
+from simgrad.errors import SimgradError, SimgradValueError, TaichiRuntimeError, caller_loc
 from simgrad.ir.fieldref import Level
 
 if TYPE_CHECKING:
@@ -436,8 +436,27 @@ class SNodeTree:
         self.root = SNode(None, "root")
         self.root.tree = self
         self.materialized = False
+        self.destroyed = False
         self.buffer = None
         self.size = 0
+
+    def destroy(self) -> None:
+        """`tree.destroy()` (Taichi's SNodeTree.destroy): its fields refuse every further use (a located
+        TaichiRuntimeError), the tree's buffer is dropped, and every kernel compiles again (as Taichi clears
+        its compiled functions), so none reaches the old memory. A second destroy is Taichi's error."""
+        if self.destroyed:
+            raise TaichiRuntimeError("SNode tree has been destroyed", caller_loc())
+        from simgrad.lang.program import get_program
+
+        if self.program is not get_program():  # a tree of a program ti.reset released: nothing to do (Taichi)
+            return
+        self.destroyed = True
+        for node in self.root._walk():
+            if node.kind == "place":
+                node.field.view = None
+                node.field.gather = None
+        self.buffer = None
+        self.program.bump_generation()
 
     def materialize(self) -> None:
         if self.materialized:

@@ -278,21 +278,37 @@ class StructElement:
         return repr(self.to_dict())
 
 
+def struct_type(members: dict) -> StructType:
+    """`ti.types.struct(**members)`, with Taichi's `__struct_methods` entry (a dict of methods) taken out."""
+    members = dict(members)
+    methods = members.pop("__struct_methods", None) or {}
+    if not isinstance(methods, dict):
+        raise SimgradTypeError(f"__struct_methods must be a dict of name: function, got {methods!r}", caller_loc())
+    stype = StructType(members)
+    _add_methods(stype, methods)
+    return stype
+
+
+def _add_methods(stype: StructType, namespace: dict) -> None:
+    from simgrad.lang.functions import Func
+
+    stype.methods = {k: v for k, v in namespace.items() if isinstance(v, Func)}
+    # plain Python methods work on Python-scope struct values (`b.add_python(b)`)
+    stype.py_methods = {k: v for k, v in namespace.items()
+                        if callable(v) and not isinstance(v, Func) and not k.startswith("__")}
+
+
 def dataclass(cls):
     """@ti.dataclass: a struct type from the class's annotations; its ti.func methods become the struct's
     methods (called on struct values, locals and field elements, `self` being the struct)."""
-    from simgrad.lang.functions import Func
 
     ann = dict(getattr(cls, "__annotations__", {}))
     defaults = [k for k in ann if k in vars(cls)]
     if defaults:
         raise SimgradSyntaxError(f"Default value in @dataclass is not supported (member '{defaults[0]}' of "
                                  f"{cls.__name__})", caller_loc())
-    methods = {k: v for k, v in vars(cls).items() if isinstance(v, Func)}
-    stype = StructType(ann, methods, name=cls.__name__)
-    # plain Python methods work on Python-scope struct values (`b.add_python(b)`)
-    stype.py_methods = {k: v for k, v in vars(cls).items()
-                        if callable(v) and not isinstance(v, Func) and not k.startswith("__")}
+    stype = StructType(ann, name=cls.__name__)
+    _add_methods(stype, vars(cls))
     return stype
 
 

@@ -318,9 +318,18 @@ _NATIVE_ZEROING = 1 << 16
 
 
 def no_grad(kernel):
-    """The kernel runs in forward; a Tape skips it in backward."""
+    """The kernel runs in forward; a Tape skips it in backward. A plain Python function (Taichi's use: it
+    calls kernels) is recorded on the Tape as one unit whose gradient, `fn.grad`, does nothing."""
+    if not hasattr(kernel, "grad"):  # not a kernel: a Python function
+        replaced = _Replaced(kernel)
+        replaced.grad = _no_gradient
+        return replaced
     kernel._no_grad = True
     return kernel
+
+
+def _no_gradient(*args, **kwargs) -> None:
+    return None
 
 
 class _Replaced:
@@ -342,6 +351,16 @@ class _Replaced:
         finally:
             ad_hooks.recorder = outer
 
+    def __get__(self, obj, owner=None):
+        """`obj.f(x)` for a method of a (@ti.data_oriented) class: the primal and its grad_for method both
+        bound to the object, so the Tape records and replays them with `self`."""
+        if obj is None:
+            return self
+        bound = _Replaced(functools.partial(self.fn, obj))
+        if self.grad is not None:
+            bound.grad = functools.partial(self.grad, obj)
+        return bound
+
 
 def grad_replaced(fn):
     return _Replaced(fn)
@@ -349,8 +368,13 @@ def grad_replaced(fn):
 
 def grad_for(primal):
     def register(fn):
-        if not isinstance(primal, _Replaced):
-            raise SimgradError("ti.ad.grad_for expects a function decorated with @ti.ad.grad_replaced")
+        if not isinstance(primal, _Replaced):  # RuntimeErrors, as Taichi raises them
+            if hasattr(primal, "grad"):
+                raise SimgradRuntimeError("ti.ad.grad_for: the primal function must be a **python** function "
+                                          f"instead of a taichi kernel ({primal.__name__}): wrap the kernel in a "
+                                          "@ti.ad.grad_replaced decorated python function", caller_loc())
+            raise SimgradRuntimeError(f"Primal function `{getattr(primal, '__name__', primal)}` must be "
+                                      "decorated by ti.ad.grad_replaced", caller_loc())
         primal.grad = fn
         return fn
 

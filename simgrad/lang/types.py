@@ -43,6 +43,13 @@ def by_reference(ann) -> bool:
     return is_template(ann) or isinstance(ann, RefType)
 
 
+class _Shape(tuple):
+    """A matrix type's shape: a tuple, and callable as Taichi's TensorType.shape() (a list)."""
+
+    def __call__(self) -> list[int]:
+        return list(self)
+
+
 class MatrixType:
     """`ti.types.vector(3, ti.f32)` / `ti.types.matrix(2, 2, ti.f64)`; callable to build a value."""
 
@@ -60,7 +67,17 @@ class MatrixType:
 
     @property
     def shape(self):
-        return (self.n,) if self.m == 0 else (self.n, self.m)
+        return _Shape((self.n,) if self.m == 0 else (self.n, self.m))
+
+    def element_type(self) -> dt.DataType:
+        """The scalar type of the entries (Taichi's TensorType.element_type(), e.g. of `ndarray.element_type`)."""
+        return self.dtype
+
+    def to_string(self) -> str:
+        """Taichi's text of the type: `VectorType[3, f32]`, `MatrixType[2,3, f32]`."""
+        if self.m == 0:
+            return f"VectorType[{self.n}, {self.dtype.name}]"
+        return f"MatrixType[{self.n},{self.m}, {self.dtype.name}]"
 
     def make(self, value):
         from simgrad.lang.matrix import Matrix
@@ -207,10 +224,11 @@ class _Types:
 
     @staticmethod
     def struct(**members):
-        """`ti.types.struct(pos=vec3, m=ti.f32)` (lang/struct.py)."""
-        from simgrad.lang.struct import StructType
+        """`ti.types.struct(pos=vec3, m=ti.f32)` (lang/struct.py); `__struct_methods={name: fn}` gives it methods
+        as @ti.dataclass does (ti.funcs in kernels, plain functions on Python-scope values)."""
+        from simgrad.lang.struct import struct_type
 
-        return StructType(members)
+        return struct_type(members)
 
     def __getattr__(self, name):
         return getattr(dt, name)

@@ -2,8 +2,7 @@
 matrix-free CG / BiCGSTAB over fields with simgrad kernels. scipy is imported when a sparse matrix or solver
 is first made (pip install simgrad[linalg]); the matrix-free solvers do not need it."""
 
-from simgrad.errors import SimgradTypeError as TaichiTypeError
-from simgrad.errors import TaichiRuntimeError
+from simgrad.errors import TaichiRuntimeError, TaichiTypeError
 from simgrad.linalg.matrixfree_cg import LinearOperator, MatrixFreeBICGSTAB, MatrixFreeCG
 from simgrad.linalg.sparse_cg import SparseCG
 from simgrad.linalg.sparse_matrix import SparseMatrix, SparseMatrixBuilder

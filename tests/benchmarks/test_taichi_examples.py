@@ -61,6 +61,7 @@ for i in range(10**9):
 SEGFAULT = """\
 import ctypes
 import taichi as ti
+ti.init()  # a field before ti.init() is Taichi's TaichiRuntimeError
 y = ti.field(ti.f32, shape=3)
 ctypes.string_at(0)
 """

@@ -13,9 +13,11 @@ def test_wrong_argument_count_names_kernel_and_parameters():
     def add_two(a: ti.i32, b: ti.f32) -> ti.f32:
         return a + b
 
-    with pytest.raises(TypeError, match=r"kernel add_two takes 2 argument\(s\) \(a, b\), got 1"):
+    # Taichi's texts (its tests match them), a TaichiSyntaxError and a TypeError
+    with pytest.raises(ti.TaichiSyntaxError, match=r"kernel add_two: Parameter `b : f32` missing"):
         add_two(1)
-    with pytest.raises(TypeError, match=r"add_two.*got 3"):
+    with pytest.raises(TypeError, match=r"add_two: Too many arguments. Expected \(a : i32, b : f32\), "
+                                        r"got \(1, 2.0, 3\)"):
         add_two(1, 2.0, 3)
     with pytest.raises(TypeError, match=r"add_two"):
         add_two(1, c=3)
@@ -213,7 +215,7 @@ def test_func_called_from_python_scope_is_rejected():
     def f():
         return 1
 
-    with pytest.raises(TypeError, match="ti.func f can only be called from a kernel"):
+    with pytest.raises(ti.TaichiSyntaxError, match="ti.func f can only be called from a kernel"):  # as Taichi
         f()
 
 
@@ -372,11 +374,10 @@ def test_unknown_keyword_is_reported_before_missing_parameter():
     def calls_func() -> ti.i32:
         return f(b=1)
 
-    with pytest.raises(TypeError, match=r"kernel k: got an unexpected keyword argument 'b' \(its parameters "
-                                        r"are: a\)") as e:
+    with pytest.raises(TypeError, match=r"kernel k: Unexpected argument 'b' \(its parameters are: a\)") as e:
         k(b=1)
     assert FILE in str(e.value) and "k(b=1)" in str(e.value)
-    _raises_located(calls_func, match=r"ti.func f: got an unexpected keyword argument 'b'",
+    _raises_located(calls_func, match=r"ti.func f: Unexpected argument 'b'",
                     line_text="return f(b=1)", exc=TypeError)
     assert k(a=2) == 2
 
