@@ -56,7 +56,7 @@ class WorkerPool:
         n = max(1, min(n, wanted))
         # build travels by value with each actor (a kernel or field inside it refuses here, at its line); the
         # bundle is fetched here, not passed as a reference: a restarted actor needs its arguments again
-        first_actor = self._actor_class.remote(self.build, self.cache_dir)
+        first_actor: Any = self._actor_class.remote(self.build, self.cache_dir)
         self.actors = [first_actor]
         started = []
         if first is not None:

@@ -69,9 +69,9 @@ def same(a, b):
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray")
-    import ray.cloudpickle
+    cloudpickle = pytest.importorskip("ray.cloudpickle")
 
-    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import the tests package
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import the tests package
     started = not ray.is_initialized()
     if started:
         ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
