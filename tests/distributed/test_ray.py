@@ -221,3 +221,15 @@ def test_core_does_not_import_ray_and_missing_ray_names_the_extra():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "pip install simgrad[ray]" in out.stdout
+
+
+def test_lr_sweep_example_writes_the_best_curve(ray_local, tmp_path, monkeypatch):
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "examples"))
+    import ray_lr_sweep
+
+    monkeypatch.setattr(sys, "argv", ["ray_lr_sweep.py", "--iters", "2", "--lrs", "20,60", "--steps", "24",
+                                      "--n-side", "6", "--n-grid", "16", "--workers", "2", "--out", str(tmp_path)])
+    curves, best = ray_lr_sweep.main()
+    assert len(curves) == 2 and all(len(c) == 2 for c in curves)
+    assert curves[best][-1] < curves[best][0]
+    assert (tmp_path / "loss.png").exists()
