@@ -240,3 +240,30 @@ def test_lr_sweep_example_writes_the_best_curve(ray_local, tmp_path, monkeypatch
     assert len(curves) == 2 and all(len(c) == 2 for c in curves)
     assert curves[best][-1] < curves[best][0]
     assert (tmp_path / "loss.png").exists()
+
+
+def test_interrupt_stops_the_sweep_and_kills_its_workers(ray_local):
+    """Ctrl-C while iterating (KeyboardInterrupt at the consumer's yield) propagates after the workers are killed."""
+    from simgrad.distributed import WorkerPool
+
+    pool = WorkerPool(build, num_workers=2)
+    it = pool.imap(params_list(8), progress=False)
+    next(it)
+    actors = list(pool.actors)
+    assert len(actors) == 2
+    with pytest.raises(KeyboardInterrupt):
+        it.throw(KeyboardInterrupt)
+    assert pool.actors == []
+    for a in actors:
+        with pytest.raises(ray_local.exceptions.RayActorError):
+            ray_local.get(a.stats.remote(), timeout=120)
+
+
+def test_imap_value_and_grad_yields_every_index_with_its_result(ray_local):
+    from simgrad.distributed import imap_value_and_grad
+
+    plist = params_list(3)
+    got = dict(imap_value_and_grad(build, plist, num_workers=1, progress=True))
+    assert sorted(got) == [0, 1, 2]
+    expected = in_process(build, plist)
+    assert all(same(got[k], expected[k]) for k in range(3))
