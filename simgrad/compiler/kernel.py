@@ -25,6 +25,7 @@ from simgrad.errors import (
 )
 from simgrad.lang import ad_hooks
 from simgrad.lang.functions import KernelDef, binding_error, resolved_signature
+from simgrad.lang.pickling import function_loc, refuse_pickle
 from simgrad.lang.program import Program, get_program
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
@@ -61,6 +62,9 @@ class Kernel(KernelDef):
         self.grad = GradKernel(self)
         self.__doc__ = func.__doc__
         self.__wrapped__ = func
+
+    def __reduce__(self):
+        refuse_pickle(f"kernel {self.name}", function_loc(self.func))
 
     def __call__(self, *args, **kwargs):
         if kwargs or (self._has_defaults and len(args) != self._nparams):
@@ -158,6 +162,9 @@ class GradKernel:
         self.kernel = kernel
         self.name = kernel.name + ".grad"
 
+    def __reduce__(self):
+        refuse_pickle(f"kernel {self.name}", function_loc(self.kernel.func))
+
     def launcher(self, args):
         """The adjoint's launcher for these (bound) arguments, compiled on first use: what a captured backward
         pass replays (lang/tape.py)."""
@@ -206,6 +213,9 @@ class BoundKernel:
         self.__name__ = kernel.__name__
         self.grad = _BoundGrad(kernel.grad, obj)
 
+    def __reduce__(self):
+        refuse_pickle(f"kernel {self.name}", function_loc(self.kernel.func))
+
     def __call__(self, *args, **kwargs):
         return self.kernel(self.obj, *args, **kwargs)
 
@@ -213,6 +223,9 @@ class BoundKernel:
 class _BoundGrad:
     def __init__(self, grad: GradKernel, obj):
         self.grad, self.obj = grad, obj
+
+    def __reduce__(self):
+        refuse_pickle(f"kernel {self.grad.name}", function_loc(self.grad.kernel.func))
 
     def __call__(self, *args, **kwargs):
         return self.grad(self.obj, *args, **kwargs)

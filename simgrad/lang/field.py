@@ -57,6 +57,11 @@ class Field:
     def _name(self) -> str:
         return self.name
 
+    def __reduce__(self):
+        from simgrad.lang.pickling import refuse_pickle
+
+        refuse_pickle(f"field {self.name}")
+
     def __iter__(self):
         raise SimgradNotSupportedError("Struct for is only available in Taichi scope: iterate over a field "
                                        "inside a kernel, or over range(n) / np.ndindex(*x.shape) here", caller_loc())

@@ -60,7 +60,16 @@ def data_oriented(cls):
     like a ti.template() argument). Kernels and funcs bind to instances by themselves; the decorator only
     marks the class, as Taichi's does, so that passing such an object as a template argument reads well."""
     cls._data_oriented = True
+    if not any(k in vars(cls) for k in ("__reduce__", "__reduce_ex__", "__getstate__")):
+        cls.__reduce__ = _refuse_data_oriented  # its fields and kernels are this process's: build it in the worker
     return cls
+
+
+def _refuse_data_oriented(self):
+    from simgrad.lang.pickling import function_loc, refuse_pickle
+
+    init = getattr(type(self), "__init__", None)
+    refuse_pickle(f"data_oriented object {type(self).__qualname__}", function_loc(init))
 
 
 def func(fn=None, **kw):
