@@ -140,8 +140,6 @@ class ScalarParam(Param):
 
     def bind(self, a, slots: Slots) -> tuple[object, Packing]:
         t = dt.from_any(self.ann)
-        if t is dt.u1:  # a ti.u1 (bool) argument travels as an i32, 0 or 1
-            t = dt.i32
         value, slot = slots.arg(t)
         return value, ScalarPacking(self.name, slot, t)
 

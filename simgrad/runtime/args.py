@@ -79,7 +79,8 @@ class ScalarPacking(Packing):
         gen.env[check] = check_float if t.is_float else check_int
         gen.env["_bad"] = bad_arg
         return lines + [f"if {v}.__class__ is not {exact}: {check}({kernel!r}, {v!r}, {v}, {t.name!r})",
-                        f"try: {view}[{gen.word(self.slot) * scale}] = {v}",
+                        # a u1 is any nonzero integer as 1 (as Taichi converts it)
+                        f"try: {view}[{gen.word(self.slot) * scale}] = {'1 if ' + v + ' else 0' if t is dt.u1 else v}",
                         f"except (TypeError, ValueError, OverflowError): _bad({kernel!r}, {v!r}, {v}, {t.name!r})"]
 
     def slot_values(self, value) -> dict:
