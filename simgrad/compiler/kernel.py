@@ -10,8 +10,9 @@ from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
 from simgrad.compiler.driver import COMPILE_LOCK, CompiledKernel, compile_kernel
 from simgrad.compiler.params import make_param
-from simgrad.errors import SimgradTypeError, caller_loc
+from simgrad.errors import Loc, SimgradSyntaxError, SimgradTypeError, caller_loc
 from simgrad.lang import ad_hooks
+from simgrad.lang.argpack import ArgPackType
 from simgrad.lang.functions import KernelDef, resolved_signature, unexpected_keywords
 from simgrad.lang.program import Program, get_program
 
@@ -35,6 +36,10 @@ class Kernel(KernelDef):
         self.params = [make_param(n, p.annotation, self.name, first=k == 0)
                        for k, (n, p) in enumerate(self.signature.parameters.items())]
         self._nparams = len(self.params)
+        if isinstance(self.signature.return_annotation, ArgPackType):  # as Taichi: packs only pass arguments
+            code = func.__code__
+            raise SimgradSyntaxError(f"kernel {self.name}: an argpack ({self.signature.return_annotation!r}) "
+                                     "cannot be a return type", Loc(code.co_filename, code.co_firstlineno))
         # the parameters whose arguments pick the instantiation; without any, one instance serves every call
         self._keyed = [(k, p) for k, p in enumerate(self.params) if p.keyed]
         self._simple = not self._keyed

@@ -118,6 +118,25 @@ class StructPacking(Packing):
         return {k: v for leaf in self.leaves for k, v in leaf.slot_values(value).items()}
 
 
+class ArgPackPacking(Packing):
+    """A ti.types.argpack argument: each member's own packing, applied to the member (`pack.a`)."""
+
+    def __init__(self, name: str, members: list[tuple[str, Packing]]):
+        super().__init__(name)
+        self.members = members
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        lines = []
+        for k, packing in self.members:
+            local = f"{src}__{k}"
+            lines.append(f"{local} = {src}.{k}")
+            lines += packing.launch_code(gen, local)
+        return lines
+
+    def slot_values(self, value) -> dict:
+        return {s: v for k, p in self.members for s, v in p.slot_values(getattr(value, k)).items()}
+
+
 class ArrayPacking(Packing):
     """An ndarray argument by reference: its base pointer, one extent per array axis (the element axes are
     compiled in), and its gradient's base pointer when the kernel sees one (`grad_slot`, else -1)."""
