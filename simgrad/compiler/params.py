@@ -358,7 +358,8 @@ class ArgPackParam(Param):
 
 
 # The kinds in the order they are tried; `register` puts a new one first.
-KINDS: list[type[Param]] = [TemplateParam, ArgPackParam, NdarrayParam, MatrixParam, BuilderParam, StructParam, ScalarParam]
+KINDS: list[type[Param]] = [TemplateParam, ArgPackParam, NdarrayParam, MatrixParam, BuilderParam, StructParam,
+                            ScalarParam]
 
 
 def register(kind: type[Param]) -> type[Param]:

@@ -564,9 +564,9 @@ class KernelLowering:
             self._check_overflow(node, r)
         return r
 
-    def _check_overflow(self, node: ast.AST, r) -> None:
+    def _check_overflow(self, node: ast.BinOp, r) -> None:
         """Debug mode: an integer + - * << the user wrote reports its overflow as Taichi does (printed with the
-        line, the wrapped value kept: codegen/arith.py checked_overflow); arithmetic simgrad emits itself (an
+        line, the wrapped value kept: codegen/arith.py _checked_overflow); arithmetic simgrad emits itself (an
         index's offset, a power's squarings) is never checked."""
         for e in (r.entries if isinstance(r, Matrix) else [r]):
             s = e.stmt if isinstance(e, Expr) else None
