@@ -73,7 +73,7 @@ def lower_elementwise(f, s) -> str:
     """An elementwise op, as its registry entry says (ir/opdefs.py): an instruction, an intrinsic, a libm
     call, a comparison or one of the named emitters in `SPECIAL`."""
     t = s.operands[0].type
-    if "overflow" in s.attrs and t.is_int:
+    if "overflow" in s.attrs and t.is_int and s.op in _OVERFLOW:  # (a pass may have rewritten the op)
         return _checked_overflow(f, s, t)
     d = OPS[s.op]
     how = d.lower_float if t.is_float else d.lower_int

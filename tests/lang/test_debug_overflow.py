@@ -103,3 +103,20 @@ def test_simgrads_own_arithmetic_is_not_checked(capfd):
     _, out = _run(capfd, big)
     assert out.count("Multiplication overflow detected") == 5  # i = 3 .. 7
     assert "x[i] = i * 1000000000" in out
+
+
+def test_report_only_where_the_code_runs(capfd):
+    """A loop-invariant product in a parallel loop stays in the loop (passes/hoist.py): no iteration, no
+    report; one per iteration that computes it otherwise."""
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(ti.i32, shape=4)
+
+    @ti.kernel
+    def k(n: ti.i32, a: ti.i32):
+        for i in range(n):
+            x[i] = a * a
+
+    _, out = _run(capfd, k, 0, 100000)
+    assert out == ""
+    _, out = _run(capfd, k, 3, 100000)
+    assert out.count("Multiplication overflow detected") == 3
