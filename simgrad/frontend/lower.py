@@ -361,6 +361,13 @@ class KernelLowering:
                 cur = self.eval(node.target)
                 self._python_setitem(node.target, _BINOPS[type(node.op)](cur, value))
                 return
+        if self.debug and kind in ("mul", "shl"):  # a plain update (load, op, store): checked as Taichi does
+            block = context.builder().block
+            first = len(block.stmts)
+            ref.atomic(kind, value)
+            for st in block.stmts[first:]:
+                self._check_overflow(node, Expr(st))
+            return
         ref.atomic(kind, value)
 
     def visit_If(self, node: ast.If) -> None:
@@ -564,7 +571,7 @@ class KernelLowering:
             self._check_overflow(node, r)
         return r
 
-    def _check_overflow(self, node: ast.BinOp, r) -> None:
+    def _check_overflow(self, node: ast.BinOp | ast.AugAssign, r) -> None:
         """Debug mode: an integer + - * << the user wrote reports its overflow as Taichi does (printed with the
         line, the wrapped value kept: codegen/arith.py _checked_overflow); arithmetic simgrad emits itself (an
         index's offset, a power's squarings) is never checked."""

@@ -120,3 +120,25 @@ def test_report_only_where_the_code_runs(capfd):
     assert out == ""
     _, out = _run(capfd, k, 3, 100000)
     assert out.count("Multiplication overflow detected") == 3
+
+
+def test_augmented_multiplication_is_checked(capfd):
+    """`a *= 3` and `x[i] *= 4` are plain updates (load, multiply, store): reported with the statement, as
+    Taichi does (taichi names the second a shift: it strength-reduces * 4); `x[i] += v` is an atomic, unchecked
+    in both."""
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(ti.i32, shape=2)
+
+    @ti.kernel
+    def foo(v: ti.i32) -> ti.i32:
+        a = v
+        a *= 3
+        x[0] += v
+        x[1] = v
+        x[1] *= 4
+        return a
+
+    r, out = _run(capfd, foo, 1073741824)
+    assert r == -1073741824
+    assert out.count("Multiplication overflow detected") == 2
+    assert "        a *= 3\n        ^^^^^^\n" in out and "        x[1] *= 4\n        ^^^^^^^^^\n" in out
