@@ -99,9 +99,11 @@ globals().update(_math_functions("ti"))  # the registry's math functions (ir/opd
 from simgrad.lang.snode import SNode, i, ij, ijk, ijkl, ijl, ik, ikl, il, j, jk, jkl, jl, k, kl, l, axes
 from simgrad.lang.types import Layout, ref, sparse_matrix_builder, template, types
 from simgrad.lang.quant import BitpackedFields
+from simgrad.lang.argpack import ArgPack, ArgPackType, argpack as _argpack
 from simgrad.lang import impl as _impl
 
 types.quant.impl = _impl  # ti.types.quant.impl is Taichi's ti.lang.impl
+types.argpack = _argpack  # lang/types.py sits below lang/argpack.py
 from simgrad.lang.atomics import (
     atomic_add,
     atomic_and,
@@ -141,7 +143,7 @@ def get_runtime():
 _NOT_SUPPORTED = {
     "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
               "bitmasked / dynamic)",
-    **{n: "Taichi's AOT deployment is not part of simgrad" for n in ("aot", "ArgPack", "argpack")},
+    "aot": "Taichi's AOT deployment is not part of simgrad",
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},

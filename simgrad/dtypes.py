@@ -87,7 +87,7 @@ def from_any(t) -> DataType:
     if t is float:
         return Defaults.fp
     if t is bool:
-        return Defaults.ip
+        return u1  # as Taichi (cook_dtype)
     try:
         return _FROM_NP[np.dtype(t)]
     except TypeError:

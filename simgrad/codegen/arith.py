@@ -3,6 +3,7 @@ and %, masked shifts, ...), conversions and random numbers."""
 
 from __future__ import annotations
 
+import linecache
 from collections.abc import Callable
 
 from simgrad import dtypes as dt
@@ -72,6 +73,8 @@ def lower_elementwise(f, s) -> str:
     """An elementwise op, as its registry entry says (ir/opdefs.py): an instruction, an intrinsic, a libm
     call, a comparison or one of the named emitters in `SPECIAL`."""
     t = s.operands[0].type
+    if "overflow" in s.attrs and t.is_int and s.op in _OVERFLOW:  # (a pass may have rewritten the op)
+        return _checked_overflow(f, s, t)
     d = OPS[s.op]
     how = d.lower_float if t.is_float else d.lower_int
     if how is None:
@@ -109,6 +112,53 @@ def _shift(f, s, t: dt.DataType, x: str, y: str) -> str:
     kind = "shl" if s.op is Op.SHL else "ashr" if t.is_signed else "lshr"
     f.emit(f"{r} = {kind} {t.llvm} {x}, {amt}")
     return r
+
+
+_OVERFLOW = {Op.ADD: ("add", "Addition"), Op.SUB: ("sub", "Subtraction"), Op.MUL: ("mul", "Multiplication"),
+             Op.SHL: ("shl", "Shift left")}
+
+
+def _checked_overflow(f, s, t: dt.DataType) -> str:
+    """Debug mode's + - * << the user wrote (frontend/lower.py marks them `overflow`): the wrapped value, and on
+    overflow Taichi's report printed with the user's line (its debug_add/sub/mul/shl: the kernel goes on).
+    + - * through llvm.[su]{add,sub,mul}.with.overflow; << overflows when shifting back does not give x."""
+    x, y = (f.v(o) for o in s.operands)
+    ty = t.llvm
+    name, what = _OVERFLOW[s.op]
+    if s.op is Op.SHL:
+        r = _shift(f, s, t, x, y)
+        amt, back, bad = f.tmp("sh"), f.tmp("back"), f.tmp("ovf")
+        f.emit(f"{amt} = and {ty} {y}, {t.bits - 1}")
+        f.emit(f"{back} = {'ashr' if t.is_signed else 'lshr'} {ty} {r}, {amt}")
+        f.emit(f"{bad} = icmp ne {ty} {back}, {x}")
+    else:
+        fn = f"@llvm.{'s' if t.is_signed else 'u'}{name}.with.overflow.{ty}"
+        f.gen.module.declare(f"declare {{ {ty}, i1 }} {fn}({ty}, {ty})")
+        pair, r, bad = f.tmp("ov"), f.tmp("v"), f.tmp("ovf")
+        f.emit(f"{pair} = call {{ {ty}, i1 }} {fn}({ty} {x}, {ty} {y})")
+        f.emit(f"{r} = extractvalue {{ {ty}, i1 }} {pair}, 0")
+        f.emit(f"{bad} = extractvalue {{ {ty}, i1 }} {pair}, 1")
+    ok, report, done = f.tmp("nov"), f.label("overflow"), f.label("no_overflow")
+    f.emit(f"{ok} = xor i1 {bad}, true")
+    f.emit(f"br i1 {ok}, label %{done}, label %{report}, !prof !1")
+    f.gen.need_branch_weights()
+    f.start_block(report)
+    text = f"{what} overflow detected in {overflow_traceback(*s.attrs['overflow'])}\n"
+    f.gen.emit_print(f, f.gen.module.string(text.replace("%", "%%")), [])
+    f.emit(f"br label %{done}")
+    f.start_block(done)
+    return r
+
+
+def overflow_traceback(file: str, line: int, col: int, end_line: int, end_col: int, func: str) -> str:
+    """Taichi's text for the place of an overflow: file, line and function, the source line, carets under the
+    expression."""
+    src = linecache.getline(file, line).rstrip("\n")
+    head = f'File "{file}", line {line}, in {func}:\n'
+    if not src:
+        return head
+    end = end_col if end_line == line else len(src)
+    return f"{head}{src}\n{' ' * col}{'^' * max(1, end - col)}\n"
 
 
 def _power_of_two(v) -> bool:

@@ -525,6 +525,8 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     else:
         op = {"add": "add", "mul": "mul", "and": "and", "or": "or", "xor": "xor", "xchg": "xchg",
               "min": "min" if t.is_signed else "umin", "max": "max" if t.is_signed else "umax"}[kind]
+    if t is dt.u1:  # one bit wraps: + is xor, * and min are and, max is or
+        op = {"add": "xor", "mul": "and", "umin": "and", "umax": "or"}.get(op, op)
     r = f.tmp("old")
     form = atomic_form(f, s)
     if form == REDUCE:  # this thread's own partial sum
@@ -540,6 +542,11 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         f.emit(f"store {ty} {n}, ptr {f.v(p)}")
     elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
         r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))
+    elif t is dt.u1:  # LLVM has no atomics on i1: update the byte that holds it (0 or 1 stays 0 or 1)
+        wide, old = f.tmp("wv"), f.tmp("wold")
+        f.emit(f"{wide} = zext i1 {f.v(v)} to i8")
+        f.emit(f"{old} = atomicrmw {op} ptr {f.v(p)}, i8 {wide} monotonic")
+        f.emit(f"{r} = trunc i8 {old} to i1")
     else:
         f.emit(f"{r} = atomicrmw {op} ptr {f.v(p)}, {ty} {f.v(v)} monotonic")
     f.names[s] = r

@@ -24,6 +24,7 @@ from simgrad.errors import (
     caller_loc,
 )
 from simgrad.lang import ad_hooks
+from simgrad.lang.argpack import ArgPackType
 from simgrad.lang.functions import KernelDef, binding_error, resolved_signature
 from simgrad.lang.pickling import function_loc, refuse_pickle
 from simgrad.lang.program import Program, get_program
@@ -49,6 +50,10 @@ class Kernel(KernelDef):
         self.params = [_make_param(k, n, p.annotation, self.name)
                        for k, (n, p) in enumerate(self.signature.parameters.items())]
         self._nparams = len(self.params)
+        if isinstance(self.signature.return_annotation, ArgPackType):  # as Taichi: packs only pass arguments
+            code = func.__code__
+            raise SimgradSyntaxError(f"kernel {self.name}: an argpack ({self.signature.return_annotation!r}) "
+                                     "cannot be a return type", Loc(code.co_filename, code.co_firstlineno))
         # the parameters whose arguments pick the instantiation; without any, one instance serves every call
         self._keyed = [(k, p) for k, p in enumerate(self.params) if p.keyed]
         self._simple = not self._keyed

@@ -33,11 +33,13 @@ from simgrad.frontend.fingerprint import KeyBuilder
 from simgrad.frontend.refs import tensor_text
 from simgrad.ir.builder import Builder
 from simgrad.ir.ops import Op
+from simgrad.lang.argpack import ArgPack, ArgPackType
 from simgrad.lang.expr import Expr
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import StructType
 from simgrad.lang.types import MatrixType, NdarrayType, is_sparse_matrix_builder, is_template
 from simgrad.runtime.args import (
+    ArgPackPacking,
     ArrayPacking,
     BuilderPacking,
     MatrixPacking,
@@ -142,8 +144,6 @@ class ScalarParam(Param):
 
     def bind(self, a, slots: Slots) -> tuple[object, Packing]:
         t = dt.from_any(self.ann)
-        if t is dt.u1:  # a ti.u1 (bool) argument travels as an i32, 0 or 1
-            t = dt.i32
         value, slot = slots.arg(t)
         return value, ScalarPacking(self.name, slot, t)
 
@@ -347,9 +347,46 @@ class TensorParam(NdarrayParam):
                                   arg.grad_slot, pair=isinstance(a, GradPair))
 
 
+class ArgPackParam(Param):
+    """A ti.types.argpack parameter (lang/argpack.py): each member is the parameter it would be on its own
+    (scalar, matrix, struct, ndarray, nested argpack), named `pack.member`; the body sees an ArgPack of their
+    values; the instantiation is keyed by the members' keys (an ndarray member's dtype and dimensions)."""
+
+    keyed = True
+
+    def __init__(self, name: str, ann, kernel_name: str):
+        super().__init__(name, ann, kernel_name)
+        self.members = {k: make_param(f"{name}.{k}", t, kernel_name) for k, t in ann.members.items()}
+
+    @classmethod
+    def accepts(cls, ann) -> bool:
+        return isinstance(ann, ArgPackType)
+
+    def _values(self, a) -> dict:
+        if not isinstance(a, ArgPack) or a._type is not self.ann:
+            raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects a value of "
+                                   f"{self.ann!r}, got {type(a).__name__}", caller_loc())
+        return {k: getattr(a, k) for k in self.members}
+
+    def key(self, a, keep: list):
+        return tuple(p.key(v, keep) if p.keyed else None for p, v in zip(self.members.values(),
+                                                                         self._values(a).values()))
+
+    def fingerprint(self, a, kb: KeyBuilder):
+        return tuple(p.fingerprint(v, kb) if p.keyed else None for p, v in zip(self.members.values(),
+                                                                               self._values(a).values()))
+
+    def bind(self, a, slots: Slots) -> tuple[object, Packing]:
+        values, packings = {}, []
+        for (k, p), v in zip(self.members.items(), self._values(a).values()):
+            values[k], packing = p.bind(v, slots)
+            packings.append((k, packing))
+        return ArgPack(self.ann, values), ArgPackPacking(self.name, packings)
+
+
 # The kinds in the order they are tried; `register` puts a new one first.
-KINDS: list[type[Param]] = [TemplateParam, TensorParam, NdarrayParam, MatrixParam, BuilderParam, StructParam,
-                            ScalarParam]
+KINDS: list[type[Param]] = [TemplateParam, ArgPackParam, TensorParam, NdarrayParam, MatrixParam, BuilderParam,
+                            StructParam, ScalarParam]
 
 
 def register(kind: type[Param]) -> type[Param]:

@@ -47,6 +47,8 @@ _AUG_KIND = {
     ast.Mod: "mod", ast.Pow: "pow", ast.BitAnd: "and", ast.BitOr: "or", ast.BitXor: "xor",
     ast.LShift: "shl", ast.RShift: "shr",
 }
+_OVERFLOW_CHECKED = (ast.Add, ast.Sub, ast.Mult, ast.LShift)
+_OVERFLOW_OPS = (Op.ADD, Op.SUB, Op.MUL, Op.SHL)
 _CMPOPS = {
     ast.Lt: operators.lt, ast.LtE: operators.le, ast.Gt: operators.gt, ast.GtE: operators.ge,
     ast.Eq: operators.eq, ast.NotEq: operators.ne,
@@ -359,6 +361,13 @@ class KernelLowering:
                 cur = self.eval(node.target)
                 self._python_setitem(node.target, _BINOPS[type(node.op)](cur, value))
                 return
+        if self.debug and kind in ("mul", "shl"):  # a plain update (load, op, store): checked as Taichi does
+            block = context.builder().block
+            first = len(block.stmts)
+            ref.atomic(kind, value)
+            for st in block.stmts[first:]:
+                self._check_overflow(node, Expr(st))
+            return
         ref.atomic(kind, value)
 
     def visit_If(self, node: ast.If) -> None:
@@ -557,7 +566,20 @@ class KernelLowering:
             from simgrad.frontend.printing import percent_format
 
             return percent_format(a, b)
-        return _BINOPS[type(node.op)](a, b)
+        r = _BINOPS[type(node.op)](a, b)
+        if self.debug and type(node.op) in _OVERFLOW_CHECKED:
+            self._check_overflow(node, r)
+        return r
+
+    def _check_overflow(self, node: ast.BinOp | ast.AugAssign, r) -> None:
+        """Debug mode: an integer + - * << the user wrote reports its overflow as Taichi does (printed with the
+        line, the wrapped value kept: codegen/arith.py _checked_overflow); arithmetic simgrad emits itself (an
+        index's offset, a power's squarings) is never checked."""
+        for e in (r.entries if isinstance(r, Matrix) else [r]):
+            s = e.stmt if isinstance(e, Expr) else None
+            if s is not None and s.op in _OVERFLOW_OPS and s.type.is_int and s.type is not dt.u1:
+                s.attrs["overflow"] = (self.frame.src.file, node.lineno, node.col_offset, node.end_lineno,
+                                       node.end_col_offset, self.frame.src.tree.name)
 
     def eval_UnaryOp(self, node: ast.UnaryOp):
         v = self.eval(node.operand)

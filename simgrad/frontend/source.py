@@ -47,6 +47,9 @@ def get_source(func) -> FunctionSource:
         for node in ast.walk(module):
             if hasattr(node, "col_offset"):
                 node.col_offset += indent
+                end = getattr(node, "end_col_offset", None)
+                if end is not None:
+                    node.end_col_offset = end + indent  # type: ignore[attr-defined]
     fdef = module.body[0]
     if not isinstance(fdef, (ast.FunctionDef, ast.AsyncFunctionDef)):
         raise SimgradSyntaxError(f"{func.__qualname__} is not a plain function definition")

@@ -286,9 +286,11 @@ class ScalarField(Field):
         if self.sparse:
             return scope_hooks.sparse.get(self, self._unshift(key))
         if self.view is not None:
-            return self.view[key].item()
-        flat, gather = self._indirect()
-        return flat[gather[key]].item()
+            v = self.view[key].item()
+        else:
+            flat, gather = self._indirect()
+            v = flat[gather[key]].item()
+        return int(v) if self.dtype is dt.u1 else v  # Taichi reads a u1 as an int, 0 or 1
 
     def __setitem__(self, key, value):
         if self.view is None:
@@ -402,8 +404,8 @@ def _wrapped(value, dtype: dt.DataType):
 def _check_value(value, dtype: dt.DataType, name: str) -> None:
     """An integer that does not fit an integer field is refused, not wrapped (numpy would raise its own
     OverflowError for a Python int, and wrap a numpy one silently)."""
-    if dtype.is_float or isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        return
+    if dtype.is_float or dtype is dt.u1 or isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return  # a u1 takes any integer as its truth value (as Taichi)
     info = np.iinfo(dtype.np)
     if not info.min <= int(value) <= info.max:
         raise SimgradOverflowError(f"value {int(value)} does not fit field {name} of type {dtype} "

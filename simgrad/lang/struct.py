@@ -9,7 +9,7 @@ Inside kernels the frontend handles struct locals and elements as refs of their 
 from __future__ import annotations
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.lang import operators
 from simgrad.lang.field import Field, FieldElement, ScalarField
 from simgrad.lang.matrix import Matrix
@@ -17,6 +17,8 @@ from simgrad.lang.types import MatrixType
 
 
 def _member_type(t):
+    if getattr(t, "_argpack", False):  # an argpack only passes kernel arguments (Taichi's message)
+        raise SimgradValueError(f"Invalid data type {t!r}", caller_loc())
     if isinstance(t, (MatrixType, StructType)):
         return t
     if isinstance(t, dict):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from enum import Enum
 
 from simgrad import dtypes as dt
@@ -206,6 +207,10 @@ def is_tensor(t) -> bool:
     return isinstance(t, MatrixType)
 
 
+def _no_argpack(**members):
+    raise RuntimeError("import simgrad first: it installs ti.types.argpack")
+
+
 class _Types:
     """The `ti.types` namespace."""
 
@@ -221,6 +226,7 @@ class _Types:
     vector = staticmethod(vector)
     matrix = staticmethod(matrix)
     quant = quant_types
+    argpack: Callable = _no_argpack  # ti.types.argpack, set by simgrad/__init__.py (lang/argpack.py is above)
 
     @staticmethod
     def struct(**members):

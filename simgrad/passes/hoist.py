@@ -3,8 +3,8 @@
 LLVM would hoist these too; we do it in our IR so that codegen's analyses see them as loop-invariant:
 `a = t * jacobi + k; p[a, i, j] += ...` then indexes one slice `a` of p in every iteration, which is
 what lets an update go to a per-thread copy of that slice (codegen/privatize.py) or count as owned.
-Only operations that cannot trap are moved (a division only by a constant other than 0 and -1), so a
-loop that runs zero times cannot fail because of what was hoisted out of it.
+Only operations that cannot trap or report are moved (a division only by a constant other than 0 and -1, no
+debug-mode overflow check), so a loop that runs zero times cannot fail because of what was hoisted out of it.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ _DIVISIONS = {Op.FLOORDIV, Op.MOD, Op.RAW_DIV, Op.RAW_MOD}
 
 
 def _movable(s: Stmt, loop: Stmt, inside: set) -> bool:
-    if s.blocks or s.type is None or s.type.is_float:
-        return False
+    if s.blocks or s.type is None or s.type.is_float or "overflow" in s.attrs:
+        return False  # (a debug-mode overflow report is printed where, and only if, the user's code runs)
     if not all(id(o) not in inside and o is not loop for o in s.operands):
         return False
     if s.op is Op.CAST:

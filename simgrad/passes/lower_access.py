@@ -250,7 +250,7 @@ def _array_offset(b: Builder, s: Stmt, arg: ArrayRef, debug: bool) -> Stmt:
         lin = _add(b, lin, i)
     if arg.num_components > 1:
         lin = _add(b, _mul(b, lin, arg.num_components), b.const(arg.comp, dt.u64))
-    return _mul(b, lin, arg.dtype.bits // 8)
+    return _mul(b, lin, arg.dtype.nbytes)
 
 
 def _affine_form(s: Stmt, terms, loop: Stmt, inside: set) -> tuple[int, int, list] | None:

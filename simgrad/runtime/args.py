@@ -81,7 +81,8 @@ class ScalarPacking(Packing):
         gen.env[check] = check_float if t.is_float else check_int
         gen.env["_bad"] = bad_arg
         return lines + [f"if {v}.__class__ is not {exact}: {check}({kernel!r}, {v!r}, {v}, {t.name!r})",
-                        f"try: {view}[{gen.word(self.slot) * scale}] = {v}",
+                        # a u1 is any nonzero integer as 1 (as Taichi converts it)
+                        f"try: {view}[{gen.word(self.slot) * scale}] = {'1 if ' + v + ' else 0' if t is dt.u1 else v}",
                         f"except (TypeError, ValueError, OverflowError): _bad({kernel!r}, {v!r}, {v}, {t.name!r})"]
 
     def slot_values(self, value) -> dict:
@@ -117,6 +118,25 @@ class StructPacking(Packing):
 
     def slot_values(self, value) -> dict:
         return {k: v for leaf in self.leaves for k, v in leaf.slot_values(value).items()}
+
+
+class ArgPackPacking(Packing):
+    """A ti.types.argpack argument: each member's own packing, applied to the member (`pack.a`)."""
+
+    def __init__(self, name: str, members: list[tuple[str, Packing]]):
+        super().__init__(name)
+        self.members = members
+
+    def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
+        lines = []
+        for k, packing in self.members:
+            local = f"{src}__{k}"
+            lines.append(f"{local} = {src}.{k}")
+            lines += packing.launch_code(gen, local)
+        return lines
+
+    def slot_values(self, value) -> dict:
+        return {s: v for k, p in self.members for s, v in p.slot_values(getattr(value, k)).items()}
 
 
 class ArrayPacking(Packing):

@@ -61,7 +61,8 @@ class Launcher:
         self.buf[CTX_NTHREADS] = program.pool.num_threads
         self.tape: np.ndarray | None = None
         self.ret_slot = CTX_ARGS + nslots
-        self.views = {t.name: self.buf.view(t.np) for t in dt.ALL if t is not dt.u1}
+        # a u1 travels as one byte, 0 or 1 (LLVM's i1 in memory), read back as an int as Taichi returns it
+        self.views = {t.name: self.buf.view(np.uint8 if t is dt.u1 else t.np) for t in dt.ALL}
         self.entry_address = entry_address
         self.entry = self.native_entry(entry_address)
         self.pack = None  # pack(*args): the context words alone, when nothing but the native call follows them
