@@ -267,3 +267,16 @@ def test_imap_value_and_grad_yields_every_index_with_its_result(ray_local):
     assert sorted(got) == [0, 1, 2]
     expected = in_process(build, plist)
     assert all(same(got[k], expected[k]) for k in range(3))
+
+
+def test_tune_example_runs_and_writes_its_plot(ray_local, tmp_path, monkeypatch):
+    """examples/ray_tune_search.py (needs `ray[tune]`, not in the test extra: skipped where it is absent)."""
+    pytest.importorskip("ray.tune")
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "examples"))
+    import ray_tune_search
+
+    monkeypatch.setattr(sys, "argv", ["ray_tune_search.py", "--iters", "2", "--samples", "2", "--n-side", "6",
+                                      "--n-grid", "16", "--out", str(tmp_path)])
+    curves, best = ray_tune_search.main()
+    assert len(curves) == 2 and all(len(c) == 2 for _, c in curves)
+    assert (tmp_path / "loss.png").exists() and best["steps"] in (64, 96, 128)
