@@ -271,7 +271,7 @@ def test_imap_value_and_grad_yields_every_index_with_its_result(ray_local):
 
 def test_tune_example_runs_and_writes_its_plot(ray_local, tmp_path, monkeypatch):
     """examples/ray_tune_search.py (needs `ray[tune]`, not in the test extra: skipped where it is absent)."""
-    pytest.importorskip("ray.tune")
+    pytest.importorskip("ray.tune", exc_type=ImportError)  # ray without its tune extras raises ImportError
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "examples"))
     import ray_tune_search
 
