@@ -35,42 +35,40 @@ class QuantInt:
         return f"q{'i' if self.signed else 'u'}{self.bits}"
 
 
+class _OnDigits:
+    """A quant type whose bits and sign are those of its digits (fixed and float)."""
+
+    digits: QuantInt
+
+    @property
+    def storage_bits(self) -> builtins.int:
+        return self.digits.bits
+
+    @property
+    def signed(self) -> builtins.bool:
+        return self.digits.signed
+
+
 @dataclass(frozen=True)
-class QuantFixed:
+class QuantFixed(_OnDigits):
     """`ti.types.quant.fixed(...)`: value = digits * scale, the digits a QuantInt (computed in i32)."""
 
     digits: QuantInt
     compute: dt.DataType
     scale: builtins.float
 
-    @property
-    def storage_bits(self) -> builtins.int:
-        return self.digits.bits
-
-    @property
-    def signed(self) -> builtins.bool:
-        return self.digits.signed
-
     def __repr__(self) -> str:
         return f"qfx(d={self.digits!r} c={self.compute} s={self.scale})"
 
 
 @dataclass(frozen=True)
-class QuantFloat:
+class QuantFloat(_OnDigits):
     """`ti.types.quant.float(exp, frac, signed)`: an unsigned exponent member (placed just before the digits,
     or shared with other floats) and `frac` digit bits (the sign bit among them when signed); f32 compute."""
 
     digits: QuantInt
     exponent: QuantInt
     compute: dt.DataType
-
-    @property
-    def storage_bits(self) -> builtins.int:
-        return self.digits.bits
-
-    @property
-    def signed(self) -> builtins.bool:
-        return self.digits.signed
 
     def __repr__(self) -> str:
         return f"qfl(d={self.digits!r} e={self.exponent!r} c={self.compute})"
