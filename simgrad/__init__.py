@@ -130,7 +130,7 @@ def sync():
     from simgrad.lang.program import get_program
 
     prog = get_program()
-    if getattr(prog.config.arch, "name", None) == "cuda":
+    if prog.on_gpu:
         prog.device.synchronize()
 
 

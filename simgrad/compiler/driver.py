@@ -104,15 +104,12 @@ def compile_kernel(kernel: KernelSource, prog: Program, args: tuple, transform=N
     return CompiledKernel(launcher, ir, text, meta["ret_matrix"], in_place=meta["in_place"])
 
 
-def _on_gpu(prog: Program) -> bool:
-    arch = prog.config.arch
-    return arch is not None and arch.name == "cuda"
 
 
 def _object(prog: Program, text: str, meta: dict) -> bytes:
     """What the kernel runs as: native code (the CPU, the simulated GPU) or PTX for the device's compute
     capability."""
-    if not _on_gpu(prog) or prog.gpu_sim:
+    if not prog.on_gpu or prog.gpu_sim:
         return prog.jit.object_for(text)
     from simgrad.codegen import nvptx
 
@@ -122,7 +119,7 @@ def _object(prog: Program, text: str, meta: dict) -> bytes:
 
 def _target_id(prog: Program) -> tuple:
     """What compiled code depends on besides the kernel: the host target, and the GPU's compute capability."""
-    if _on_gpu(prog) and not prog.gpu_sim:
+    if prog.on_gpu and not prog.gpu_sim:
         return (*prog.jit.target_id(), "cuda", prog.device.compute_capability)
     return prog.jit.target_id()
 
@@ -189,7 +186,7 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
         else 1
     cg: KernelCodegen
-    if _on_gpu(prog):  # arch=cuda: the GPU's PTX, or the same segments on the host for the simulated GPU
+    if prog.on_gpu:  # arch=cuda: the GPU's PTX, or the same segments on the host for the simulated GPU
         from simgrad.codegen import nvptx
 
         _refuse_on_gpu(ir)
@@ -252,7 +249,7 @@ def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
     """The launcher of one instantiation, from the metadata its compilation recorded (or the cache kept) and its
     code (linked into the program, or loaded on the device)."""
     launcher: Launcher
-    if _on_gpu(prog):
+    if prog.on_gpu:
         from simgrad.runtime.gpu_launch import GpuLauncher
 
         names = [s for s, _, _ in meta["launches"]]

@@ -118,7 +118,7 @@ class Graph:
     def __init__(self, launches):
         self.launches = list(launches)
         self.args = {a.name: a for _, args in self.launches for a in args if isinstance(a, Arg)}
-        self._captured = None  # (generation, key, Sequence) of the last capture
+        self._captured = None  # (generation, key, Sequence, the bound values kept alive) of the last capture
 
     def run(self, args):
         loc = caller_loc()
@@ -147,7 +147,7 @@ def _capturable() -> bool:
 
     prog = get_program()
     return (ad_hooks.recorder is None and ad_hooks.forward_mode is None and not prog.config.kernel_profiler
-            and getattr(prog.config.arch, "name", None) != "cuda")
+            and not prog.on_gpu)
 
 
 def _capture(kernels: list, bound: list):

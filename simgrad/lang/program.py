@@ -71,8 +71,7 @@ class Program:
         self._pool = None
         self._device = None
         self.set_default_types(self.config.default_fp, self.config.default_ip)
-        on_device = getattr(self.config.arch, "name", None) == "cuda"
-        self.memory = Memory(self.device.alloc_shared) if on_device else Memory()
+        self.memory = Memory(self.device.alloc_shared) if self.on_gpu else Memory()
         gb = kw.get("device_memory_GB")
         self.sparse = SparseMemory(int(gb * 2**30) if gb else MAX_RESERVE)
         self.trees: list = []
@@ -139,19 +138,26 @@ class Program:
         self.sparse.release()
 
     @property
-    def gpu_sim(self) -> bool:
-        """arch=cuda runs on the simulated GPU (SIMGRAD_GPU_SIM=1, or no usable GPU runtime)."""
-        from simgrad.lang.archs import gpu_mode
+    def on_gpu(self) -> bool:
+        """arch=cuda: kernels run on the program's device (the GPU or the simulated one)."""
+        return getattr(self.config.arch, "name", None) == "cuda"
 
-        return gpu_mode() != "cuda"
+    @property
+    def gpu_sim(self) -> bool:
+        """arch=cuda runs on the simulated GPU (SIMGRAD_GPU_SIM=1, or no usable GPU runtime): decided once, with
+        the device."""
+        from simgrad.runtime.device import HostDriver
+
+        return isinstance(self.device, HostDriver)
 
     @property
     def device(self):
         """The device arch=cuda launches on (runtime/device.py): the GPU, or the simulated one on the host."""
         if self._device is None:
+            from simgrad.lang.archs import gpu_mode
             from simgrad.runtime import device
 
-            self._device = device.HostDriver() if self.gpu_sim else device.CudaDriver()
+            self._device = device.CudaDriver() if gpu_mode() == "cuda" else device.HostDriver()
         return self._device
 
     @property
@@ -166,7 +172,7 @@ class Program:
     def rng_states(self) -> np.ndarray:
         """xorshift128 state per thread, seeded from random_seed."""
         if self._rng is None:  # one per pool thread (the serial code: the last), one per GPU thread on arch=cuda
-            if getattr(self.config.arch, "name", None) == "cuda":
+            if self.on_gpu:
                 from simgrad.runtime.device import max_threads
 
                 n = max_threads(self.device) + 1
@@ -179,7 +185,7 @@ class Program:
 
     def zeros(self, shape, dtype) -> np.ndarray:
         """A zeroed array kernels can use: host memory, or the device's shared memory on arch=cuda."""
-        if getattr(self.config.arch, "name", None) != "cuda":
+        if not self.on_gpu:
             return np.zeros(shape, dtype)
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
         n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize

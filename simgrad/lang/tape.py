@@ -195,7 +195,7 @@ def _backward_sequence(entries: list):
 
     prog = get_program()
     if ad_hooks.forward_mode is not None or prog.config.kernel_profiler or \
-            getattr(prog.config.arch, "name", None) == "cuda":
+            prog.on_gpu:
         return None
     key = tuple((id(fn), tuple(replay_key(a) for a in args)) for fn, args in entries)
     if _backward is not None and _backward[:2] == (prog.generation, key):

@@ -38,13 +38,18 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_counters_add_up(tmp_path):
+def _stats_of(script_text: str, tmp_path) -> dict:
+    """The pool's counters printed by `script_text`, run in a child with SIMGRAD_POOL_STATS=1."""
     script = tmp_path / "stats.py"
-    script.write_text(SCRIPT)
+    script.write_text(script_text)
     env = dict(os.environ, SIMGRAD_POOL_STATS="1", SIMGRAD_CACHE_DIR=str(tmp_path / "cache"))
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
-    st = json.loads(out.stdout.strip().splitlines()[-1])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_counters_add_up(tmp_path):
+    st = _stats_of(SCRIPT, tmp_path)
     assert st["launches"] == 50 and st["direct"] == 50  # the 3-iteration loop runs on the caller
     # 2 threads: 8 chunks of 8192 per launch, each run once, by the caller or a worker
     assert st["chunks_caller"] + st["chunks_workers"] == 50 * 8
@@ -89,11 +94,6 @@ def test_a_woken_worker_is_not_woken_again_before_it_runs(tmp_path):
     """Every futex wake is for a worker that went to sleep: one woken but not yet scheduled (here it shares the
     caller's only CPU) is not counted asleep by the next launch. Before, each of the 200 launches woke it again
     (under load: ~5,000 futile wake syscalls in a diffmpm run; benchmarks/pool_stalls.py)."""
-    script = tmp_path / "one_cpu.py"
-    script.write_text(ONE_CPU)
-    env = dict(os.environ, SIMGRAD_POOL_STATS="1", SIMGRAD_CACHE_DIR=str(tmp_path / "cache"))
-    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env)
-    assert out.returncode == 0, out.stderr[-2000:]
-    st = json.loads(out.stdout.strip().splitlines()[-1])
+    st = _stats_of(ONE_CPU, tmp_path)
     assert st["launches"] == 200
     assert st["wakes"] <= st["worker_sleeps"] + 1, st
