@@ -1,6 +1,6 @@
 """The real-GPU runtime of arch=cuda (runtime/gpu_launch.py over CudaDriver, fields in managed memory), run on a
 GPU by benchmarks/gpu/run_on_device.sh with SIMGRAD_CUDA_RUNTIME=1: a few kernels against numpy (fields, an
-ndarray, a returned reduction, a Tape gradient), then launch overhead and a 1M-element saxpy in us per launch,
+ndarray, a returned reduction, a Tape gradient, sparse pointer and bitmasked fields), then launch overhead and a 1M-element saxpy in us per launch,
 the figures to put beside taichi's CUDA backend. Prints one line per check; exits non-zero on any failure."""
 
 from __future__ import annotations
@@ -61,6 +61,50 @@ def checks() -> list[tuple[str, bool, str]]:
     with ti.ad.Tape(loss=loss):
         energy()
     out.append(("Tape gradient", np.allclose(w.grad.to_numpy(), ws + 0.001 * np.exp(0.001 * ws), rtol=1e-5), ""))
+    out += sparse_checks()
+    return out
+
+
+def sparse_checks() -> list[tuple[str, bool, str]]:
+    """Pools in device memory (Device.reserve), blocks zeroed by the GPU allocator, activation from 100k threads."""
+    n = 100_000
+    p = ti.field(ti.f32)
+    ti.root.pointer(ti.i, n // 8).dense(ti.i, 8).place(p)
+    b = ti.field(ti.i32)
+    ti.root.bitmasked(ti.i, n).place(b)
+
+    @ti.kernel
+    def fill():
+        for i in range(n):
+            if i % 3 == 0:
+                p[i] = 1.0
+                b[i] = 2
+
+    @ti.kernel
+    def count() -> ti.types.vector(2, ti.f64):
+        sp, sb = 0.0, 0.0
+        for i in p:
+            sp += 1.0
+        for i in b:
+            sb += b[i]
+        return ti.Vector([sp, sb])
+
+    @ti.kernel
+    def drop():
+        for i in range(n // 8):
+            if i % 2 == 0:
+                ti.deactivate(p.parent(), i)
+
+    fill()
+    got = count().to_numpy()
+    blocks = (np.arange(n) % 3 == 0).reshape(-1, 8).any(axis=1)
+    want = [blocks.sum() * 8, 2 * (n + 2) // 3]
+    out = [("sparse activation and struct-for", np.allclose(got, want), f"{got} vs {want}")]
+    drop()
+    fill()
+    vals = p.to_numpy()
+    out.append(("sparse deactivate, reuse, to_numpy", np.array_equal(vals, (np.arange(n) % 3 == 0).astype(np.float32)),
+                ""))
     return out
 
 

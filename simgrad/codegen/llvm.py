@@ -238,6 +238,10 @@ class KernelCodegen:
     """Emits a kernel whose loops and atomics passes/parallel_strategy.py has annotated. How a parallel
     loop runs is the target's (`parallel_loop`, codegen/cpu.py for the CPU); everything else is here."""
 
+    #: sparse pools hand a thread BATCH fresh blocks at a time (runtime/sparse.py): the pool's threads, each with
+    #: a slot of its own; a GPU's threads are far more than the slots, so its blocks are bumped one at a time
+    batched_alloc = True
+
     def __init__(self, kernel: Kernel, symbol: str, debug: bool = False, fast_math: bool = True):
         self.kernel = kernel
         self.symbol = symbol

@@ -22,7 +22,6 @@ import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from simgrad.codegen.llvm import LOWERING, FunctionText, KernelCodegen, const_text, llvm_type
 from simgrad.ir.nodes import Kernel, Stmt, walk
@@ -31,17 +30,10 @@ from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
 from simgrad.runtime import abi
 
-if TYPE_CHECKING:
-    from simgrad.errors import Loc
-
 TRIPLE = "nvptx64-nvidia-cuda"
 DEFAULT_BLOCK = 128
 LIBDEVICE_CANDIDATES = ("/usr/local/cuda/nvvm/libdevice/libdevice.10.bc",
                         "/usr/local/cuda-13.0/nvvm/libdevice/libdevice.10.bc")
-
-# constructs a first stage does not lower for arch=cuda: a located NotImplementedError, never a wrong result
-UNSUPPORTED = {Op.SNODE_OP: "sparse SNodes",
-               Op.SPARSE_CELL: "sparse SNodes", Op.SPARSE_ACTION: "sparse SNodes", Op.TREE_ROOT: "sparse SNodes"}
 
 # statements without effects or memory reads: a later segment recomputes them instead of spilling them
 # (every elementwise op of the registry, ir/opdefs.py, is one)
@@ -49,17 +41,11 @@ PURE = {Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.CAST, Op.BITCAST, Op.SELECT, *
 
 SREGS = ("tid.x", "ntid.x", "ctaid.x", "nctaid.x")
 
-# Tape entries a thread keeps in local memory at most (8 KB; Taichi's CUDA adstack is small too): a deeper tape
-# reports the located adstack overflow, never a wrong gradient. A global-memory tape is a later stage.
+# Tape entries a thread keeps in local memory at most (8 KB; Taichi's CUDA adstack is small too). A deeper tape is
+# a region per thread of a device buffer of GLOBAL_TAPE_BYTES at most: its loops launch only as many threads as
+# the buffer has regions for (the grid-stride loop covers the rest).
 GPU_TAPE_LIMIT = 1024
-
-
-def unsupported(kernel: Kernel) -> tuple[str, Loc | None] | None:
-    """(construct, loc) of the first statement arch=cuda cannot lower yet, or None."""
-    for s in walk(kernel.body):
-        if s.op in UNSUPPORTED:
-            return UNSUPPORTED[s.op], s.loc
-    return None
+GLOBAL_TAPE_BYTES = 1 << 28
 
 
 @dataclass(frozen=True)
@@ -106,8 +92,13 @@ class GpuFunction(FunctionText):
         if self._tape is None:
             n = self.gpu.tape_entries
             base, top = self.tmp("tbase"), self.tmp("ttop")
-            self.prologue += [f"  {base} = alloca [{n} x i64], align 8", f"  {top} = alloca i64",
-                              f"  store i64 0, ptr {top}"]
+            if n <= GPU_TAPE_LIMIT:
+                self.prologue.append(f"  {base} = alloca [{n} x i64], align 8")
+            else:  # this thread's region of the launcher's buffer (its grid is capped to the regions there are)
+                all_, t64, off = self.ctx_slot(abi.CTX_TAPE, "ptr"), self.tmp("tt"), self.tmp("toff")
+                self.prologue += [f"  {t64} = zext i32 {self.tid} to i64", f"  {off} = mul i64 {t64}, {n}",
+                                  f"  {base} = getelementptr i64, ptr {all_}, i64 {off}"]
+            self.prologue += [f"  {top} = alloca i64", "  store i64 0, ptr " + top]
             self._tape = (base, top, str(n))
         return self._tape
 
@@ -119,11 +110,14 @@ class GpuCodegen(KernelCodegen):
     """LLVM IR of a kernel's segments for NVPTX (`sim=False`) or for the simulated GPU on the host (`sim=True`,
     with an entry `void symbol(ptr ctx)` that the CPU launcher calls unchanged)."""
 
+    batched_alloc = False
+
     def __init__(self, kernel: Kernel, symbol: str, *, sim: bool, tape_entries: int = 256, debug: bool = False,
                  fast_math: bool = True):
         super().__init__(kernel, symbol, debug=debug, fast_math=fast_math)
         self.sim = sim
-        self.tape_entries = min(max(int(tape_entries), 1), GPU_TAPE_LIMIT)
+        self.tape_entries = max(int(tape_entries), 1)
+        self.tape_threads = 0  # regions of the deep-tape buffer the launcher allocates (0: none)
         self.launches: list[Launch] = []
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
         self.scratch_slots = 0
@@ -158,12 +152,6 @@ class GpuCodegen(KernelCodegen):
     def scratch_base(self) -> int:
         return abi.CTX_ARGS + self.kernel.ret_slot + len(self.kernel.returns) + 1
 
-    def error_code(self, kind: str, loc, detail) -> int:
-        if kind == "adstack" and not self._serial:  # the serial tape is the context's, as on the CPU
-            detail = (f"{detail} (arch=cuda keeps at most {GPU_TAPE_LIMIT} entries per thread in local memory; "
-                      f"this kernel's tape has {self.tape_entries})")
-        return super().error_code(kind, loc, detail)
-
     # -- segments ----------------------------------------------------------------------------------------
     def _segments(self) -> list[tuple[bool, list[Stmt]]]:
         """(is parallel loop, statements) in program order."""
@@ -187,11 +175,13 @@ class GpuCodegen(KernelCodegen):
                     for x in walk(b):
                         seg_of[id(x)] = k
         base = self.scratch_base()
+        seen: set[int] = set()  # pure values whose inputs are planned (a DAG: each visited once)
 
         def need(o: Stmt) -> None:
-            if o.op is Op.CONST or id(o) in self.spills:
+            if o.op is Op.CONST or id(o) in self.spills or id(o) in seen:
                 return
             if o.op in PURE:
+                seen.add(id(o))
                 for x in o.operands:
                     need(x)
                 return
@@ -321,6 +311,10 @@ class GpuCodegen(KernelCodegen):
         if lo.op is Op.CONST and hi.op is Op.CONST:
             n = max(int(hi.attrs["value"]) - int(lo.attrs["value"]), 0)
             grid = max(1, min(-(-n // block), 65535))
+        if f._tape is not None and self.tape_entries > GPU_TAPE_LIMIT:  # as many threads as tape regions
+            blocks = max(1, GLOBAL_TAPE_BYTES // (8 * self.tape_entries * block))
+            grid = min(grid or blocks, blocks)
+            self.tape_threads = max(self.tape_threads, grid * block)
         self.launches.append(Launch(name, grid, block))
 
 

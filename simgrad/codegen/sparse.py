@@ -9,14 +9,17 @@ from __future__ import annotations
 from simgrad.runtime import abi, ll
 from simgrad.runtime import sparse as rt
 
-_HELPERS = ll.load("sparse_alloc", CTX_SPARSE=abi.CTX_SPARSE, BATCH=rt.BATCH,
-                   **{k: getattr(rt, k) for k in ll.parameters("sparse_alloc") if k.startswith("POOL_")})
+_HELPERS = {batched: ll.load("sparse_alloc", CTX_SPARSE=abi.CTX_SPARSE, BATCH=rt.BATCH,
+                              BATCHED="true" if batched else "false",
+                              **{k: getattr(rt, k) for k in ll.parameters("sparse_alloc") if k.startswith("POOL_")})
+            for batched in (True, False)}
 
 
 def _helpers(g) -> None:
     g.module.declare("declare void @llvm.memset.p0.i64(ptr, i8, i64, i1)")
-    if _HELPERS not in g.module.functions:
-        g.module.functions.append(_HELPERS)
+    helpers = _HELPERS[g.batched_alloc]
+    if helpers not in g.module.functions:
+        g.module.functions.append(helpers)
 
 
 def _pool_word(f, pool: int, word: int) -> str:

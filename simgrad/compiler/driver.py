@@ -18,7 +18,6 @@ from simgrad import dtypes as dt
 from simgrad.autodiff.validate import in_place_targets
 from simgrad.compiler.params import Param, Slots
 from simgrad.debug import debug_level
-from simgrad.errors import SimgradNotSupportedError
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.source import get_source
@@ -128,23 +127,10 @@ def ptx_check_enabled() -> bool:
     return os.environ.get("SIMGRAD_PTX_CHECK", "") not in ("", "0")
 
 
-def _refuse_on_gpu(ir: IRKernel) -> None:
-    """What arch=cuda cannot lower yet is a located error naming the construct, never a wrong result."""
-    from simgrad.codegen import nvptx
-
-    bad = nvptx.unsupported(ir)
-    if bad is not None:
-        what, loc = bad
-        raise SimgradNotSupportedError(f"{what} is not supported with arch=cuda yet (issue 22)", loc)
-
-
 def _ptx_check(ir: IRKernel, symbol: str, tape_entries: int, prog: Program) -> None:
-    """SIMGRAD_PTX_CHECK=1: lower the kernel to PTX and assemble it with ptxas (sm_80, sm_90); an error raises.
-    A kernel with constructs arch=cuda refuses is checked only when arch=cuda (where it raised above)."""
+    """SIMGRAD_PTX_CHECK=1: lower the kernel to PTX and assemble it with ptxas (sm_80, sm_90); an error raises."""
     from simgrad.codegen import nvptx
 
-    if nvptx.unsupported(ir) is not None:
-        return
     ptx, _ = nvptx.kernel_ptx(ir, symbol, tape_entries=tape_entries, debug=prog.config.debug,
                               fast_math=prog.config.fast_math)
     nvptx.ptxas_check(ptx)
@@ -189,7 +175,6 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
     if prog.on_gpu:  # arch=cuda: the GPU's PTX, or the same segments on the host for the simulated GPU
         from simgrad.codegen import nvptx
 
-        _refuse_on_gpu(ir)
         cg = nvptx.GpuCodegen(ir, symbol, sim=prog.gpu_sim, tape_entries=tape_entries, debug=prog.config.debug,
                               fast_math=prog.config.fast_math)
     else:
@@ -208,6 +193,7 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
             # the forward reads fields it overwrites: a Tape keeps their values from before each launch
             "in_place": transform is None and bool(in_place_targets(ir)),
             "tape_bound": ir.tape_bound if uses_tape else None,
+            "tape_threads": getattr(cg, "tape_threads", 0),  # arch=cuda: per-thread regions of a deep tape
             "launches": [(ln.symbol.replace(symbol, "sg_kernel"), ln.grid, ln.block)
                          for ln in getattr(cg, "launches", ())]}
     return ir, stable, meta
@@ -256,7 +242,7 @@ def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
         fns = prog.device.load_module(prog.link(obj, names) if prog.gpu_sim else obj.decode(), names)
         launcher = GpuLauncher(prog.device, [(fns[s], grid, block) for s, grid, block in meta["launches"]],
                                meta["name"], meta["params"], meta["nslots"], meta["returns"], meta["errors"], prog,
-                               meta["ret_matrix"], meta.get("scratch_slots", 0))
+                               meta["ret_matrix"], meta.get("scratch_slots", 0), meta.get("tape_threads", 0))
     else:
         launcher = Launcher(meta["name"], meta["params"], prog.link(obj, ["sg_kernel"])["sg_kernel"], meta["nslots"],
                             meta["returns"], meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),

@@ -73,7 +73,14 @@ class Program:
         self.set_default_types(self.config.default_fp, self.config.default_ip)
         self.memory = Memory(self.device.alloc_shared) if self.on_gpu else Memory()
         gb = kw.get("device_memory_GB")
-        self.sparse = SparseMemory(int(gb * 2**30) if gb else MAX_RESERVE)
+        limit = int(gb * 2**30) if gb else MAX_RESERVE
+        if self.on_gpu:  # a pool's body is device memory: at most a quarter of the GPU's unless asked for more
+            device = self.device
+            limit = limit if gb else min(limit, getattr(device, "total_memory", limit) // 4)
+            self.sparse = SparseMemory(limit, lambda n, zeroed: device.alloc_shared(n).ctypes.data if zeroed
+                                       else device.reserve(n))
+        else:
+            self.sparse = SparseMemory(limit)
         self.trees: list = []
         self._open_tree = None
         self.profiler = Profiler()

@@ -11,6 +11,7 @@ subclasses, at the user's line).
 from __future__ import annotations
 
 import ctypes
+import mmap
 import os
 import time
 from typing import Any
@@ -75,6 +76,11 @@ class Device:
         managed memory): field trees, ndarrays, the roots table, the error buffer, random states."""
         raise NotImplementedError
 
+    def reserve(self, nbytes: int) -> int:
+        """Memory for a sparse pool that kernels use (the host only reads its table): not necessarily zeroed,
+        pages need not be resident until touched."""
+        raise NotImplementedError
+
     def to_device(self, dst: int, src: np.ndarray) -> None:
         raise NotImplementedError
 
@@ -113,6 +119,7 @@ class HostDriver(Device):
 
     def __init__(self) -> None:
         self._blocks: dict[int, np.ndarray] = {}
+        self._reserved: dict[int, mmap.mmap] = {}
         self._grid: Any = None
         self.launches = 0  # kernels launched (tests count them)
 
@@ -130,9 +137,18 @@ class HostDriver(Device):
         ptr = self.alloc(nbytes)
         return np.ctypeslib.as_array((ctypes.c_uint8 * max(int(nbytes), 1)).from_address(ptr))[:nbytes]
 
+    def reserve(self, nbytes: int) -> int:
+        """Address space without commitment (as a GPU's managed memory, pages are made on first touch)."""
+        flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | getattr(mmap, "MAP_NORESERVE", 0x4000)
+        region = mmap.mmap(-1, max(int(nbytes), 1), flags=flags)
+        ptr = ctypes.addressof(ctypes.c_char.from_buffer(region))
+        self._reserved[ptr] = region
+        return ptr
+
     def owns(self, ptr: int) -> bool:
         """Whether `ptr` lies in memory this device allocated (tests check kernels see only device memory)."""
-        return any(base <= ptr < base + len(buf) - 64 for base, buf in self._blocks.items())
+        return any(base <= ptr < base + len(buf) - 64 for base, buf in self._blocks.items()) or \
+            any(base <= ptr < base + len(region) for base, region in self._reserved.items())
 
     def to_device(self, dst: int, src: np.ndarray) -> None:
         src = np.ascontiguousarray(src)
@@ -197,6 +213,7 @@ class CudaDriver(Device):
         self.compute_capability = (int(major), int(minor))
         self.sm_count = int(self._check(cu.cuDeviceGetAttribute(
             cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT, self.device)))
+        self.total_memory = int(self._check(self.cu.cuDeviceTotalMem(self.device)))
         self.modules: list[Any] = []
         self.shared: list[int] = []
 
@@ -227,6 +244,11 @@ class CudaDriver(Device):
         self._check(self.cu.cuCtxSynchronize())
         self.shared.append(ptr)  # freed with the context (the program's memory lives as long as the process)
         return np.ctypeslib.as_array((ctypes.c_uint8 * n).from_address(ptr))[:nbytes]
+
+    def reserve(self, nbytes: int) -> int:
+        ptr = int(self._check(self.cu.cuMemAllocManaged(max(int(nbytes), 1), 1)))  # pages migrate on first touch
+        self.shared.append(ptr)
+        return ptr
 
     def to_device(self, dst: int, src: np.ndarray) -> None:
         src = np.ascontiguousarray(src)

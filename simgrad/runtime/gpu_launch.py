@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from simgrad.errors import SimgradNotSupportedError, caller_loc
-from simgrad.runtime.abi import CTX_TAPE_CAP, CTX_TAPE_SERIAL
+from simgrad.runtime.abi import CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
 from simgrad.runtime.device import Device, saturating_grid
 from simgrad.runtime.launch import Launcher
 
@@ -24,8 +24,9 @@ class GpuLauncher(Launcher):
 
     def __init__(self, device: Device, launches: list[tuple[Any, int | None, int]], kernel_name: str, params: list,
                  nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
-                 scratch_slots: int = 0):
+                 scratch_slots: int = 0, tape_threads: int = 0):
         self.device = device
+        self.tape_threads = tape_threads  # threads with a region of the deep tape (codegen/nvptx.py)
         self.launches = [(fn, min(grid or (1 << 31), saturating_grid(device, block)), block)
                          for fn, grid, block in launches]
         self.dctx = self.dtape = 0
@@ -62,8 +63,11 @@ class GpuLauncher(Launcher):
                 d.to_host(self._ret, self.dctx + 8 * self.ret_slot)
 
     def attach_tape(self, entries: int) -> None:
-        """The serial part's tape in device memory (the parallel segments keep theirs in local memory)."""
-        self.dtape = self.device.alloc(8 * entries)
+        """The serial part's tape in device memory, and, for a tape too deep for a thread's local memory, a
+        region of `entries` per thread of the parallel segments (codegen/nvptx.py caps their grids to
+        `tape_threads`)."""
+        self.dtape = self.device.alloc(8 * entries * (self.tape_threads + 1))
+        self.buf[CTX_TAPE] = self.dtape + 8 * entries
         self.buf[CTX_TAPE_SERIAL] = self.dtape
         self.buf[CTX_TAPE_CAP] = entries
 

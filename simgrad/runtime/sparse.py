@@ -11,12 +11,16 @@ allocate in codegen/sparse.py `@sg_sparse_alloc`; a pool that runs out reports a
 kernel's error buffer and hands out the node's discard block, so the kernel's remaining writes land
 nowhere harmful. Reads of an inactive
 cell are pointed at the node's zero block (they see 0 and activate nothing).
+
+On arch=cuda the memory comes from the device (`Device.alloc_shared` for the table, lists and side blocks,
+`Device.reserve` for pool bodies, which need not be zeroed: the GPU's allocator zeroes each fresh block).
 """
 
 from __future__ import annotations
 
 import ctypes
 import mmap
+from collections.abc import Callable
 
 import numpy as np
 
@@ -53,8 +57,10 @@ def _reserve(nbytes: int) -> int:
 class SparseMemory:
     """The pool table of one program (lang/program.py) and the memory behind it."""
 
-    def __init__(self, reserve_limit: int = MAX_RESERVE) -> None:
+    def __init__(self, reserve_limit: int = MAX_RESERVE,
+                 device_alloc: Callable[[int, bool], int] | None = None) -> None:
         self.reserve_limit = reserve_limit  # bytes one pool may reserve (ti.init(device_memory_GB=...))
+        self.device_alloc = device_alloc  # (bytes, zeroed) -> address of device memory; None: host mmap
         # the table is mapped with the first pool (a program without sparse nodes maps nothing; a
         # per-program malloc of this size would leave the allocator's heap fragmented over init cycles)
         self.table = np.zeros((0, POOL_WORDS), dtype=np.int64)
@@ -89,15 +95,17 @@ class SparseMemory:
             capacity = min(capacity + BATCH * MAX_THREADS, self.reserve_limit // block_size)
         row[POOL_CAPACITY] = capacity
         if capacity:
-            row[POOL_BASE] = self._map(capacity * block_size)
+            row[POOL_BASE] = self._map(capacity * block_size, zeroed=False)
         side = self._map(2 * block_size)  # the zero block, then the discard block
         row[POOL_ZERO], row[POOL_DISCARD] = side, side + block_size
         row[POOL_LISTS] = self._map(MAX_LISTS * 4 * max(cells, 1))
         row[POOL_BATCHES] = self._map(MAX_THREADS * 64)  # per thread [next, end], 64 bytes apart
         return pid
 
-    def _map(self, nbytes: int) -> int:
+    def _map(self, nbytes: int, zeroed: bool = True) -> int:
         nbytes = (nbytes + mmap.PAGESIZE - 1) // mmap.PAGESIZE * mmap.PAGESIZE
+        if self.device_alloc is not None:  # freed with the device's memory
+            return self.device_alloc(nbytes, zeroed)
         addr = _reserve(nbytes)
         self._maps.append((addr, nbytes))
         return addr

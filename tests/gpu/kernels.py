@@ -1,6 +1,6 @@
 """A representative set of kernels (arith, math, atomics, loops, while/break, local matrices, a Tape adjoint with
-a serial inner loop, f16, ndarray args) for the GPU tests: each `case` compiles and runs its kernels and returns
-(result, numpy reference)."""
+a serial inner loop, f16, ndarray args, sparse SNodes, a tape deeper than local memory) for the GPU tests: each
+`case` compiles and runs its kernels and returns (result, numpy reference)."""
 
 from __future__ import annotations
 
@@ -200,5 +200,66 @@ def serial_and_return():
     return [(r, 12.0, 0), (x.to_numpy(), np.arange(N, dtype=np.float32) + 12.0, 0)]
 
 
+def sparse_nodes():
+    """pointer / bitmasked / dynamic: activation by writes, struct-fors, deactivation (the pool allocator)."""
+    p = ti.field(ti.f32)
+    ti.root.pointer(ti.i, 64).dense(ti.i, 4).place(p)
+    b = ti.field(ti.i32)
+    ti.root.bitmasked(ti.i, N).place(b)
+    d = ti.field(ti.i32)
+    ti.root.dense(ti.i, 4).dynamic(ti.j, 32).place(d)
+
+    @ti.kernel
+    def k() -> ti.types.vector(3, ti.f64):
+        for i in range(128):  # distinct cells
+            p[i * 2] = i * 1.0
+            b[i * 3 % N] = 1
+        for i in range(40):
+            ti.append(d.parent(), i % 4, i)
+        for i in range(16):
+            ti.deactivate(p.parent(2), i * 4)
+        t = ti.Vector([0.0, 0.0, 0.0], ti.f64)
+        for i in p:
+            t[0] += p[i]
+        for i in b:
+            t[1] += b[i]
+        for i, j in d:
+            t[2] += d[i, j]
+        return t
+
+    i = np.arange(128)
+    pv = np.zeros(256)
+    pv[i * 2] = i
+    pv = pv.reshape(64, 4)
+    pv[np.arange(64) % 4 == 0] = 0
+    want = [pv.sum(), len(set(i * 3 % N)), np.arange(40).sum()]
+    return [(k().to_numpy(), want, 0)]
+
+
+def deep_tape():
+    """A tape deeper than a GPU thread's local memory (codegen/nvptx.py GPU_TAPE_LIMIT): the device-buffer tape."""
+    x = ti.field(ti.f64, shape=8, needs_grad=True)
+    y = ti.field(ti.f64, shape=8, needs_grad=True)
+
+    @ti.kernel
+    def f(n: ti.i32):
+        for i in x:
+            v = x[i]
+            for _ in range(n):
+                v = ti.sin(v)
+            y[i] = v
+
+    xs = np.linspace(0.2, 1.0, 8)
+    x.from_numpy(xs)
+    f(1500)
+    y.grad.fill(1.0)
+    f.grad(1500)
+    v, d = xs.copy(), np.ones(8)
+    for _ in range(1500):
+        d *= np.cos(v)
+        v = np.sin(v)
+    return [(x.grad.to_numpy(), d, 1e-9)]
+
+
 CASES = [arith_math, registry_math, atomics, loops_while, local_matrix, tape_adjoint, half_and_ndarray,
-         serial_and_return]
+         serial_and_return, sparse_nodes, deep_tape]

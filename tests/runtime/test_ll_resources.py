@@ -41,10 +41,12 @@ def test_threadpool_ll_verifies(machine, futex_nr, stats):
     assert ("aarch64.hint" in text) == (machine in ("aarch64", "arm64"))
 
 
-def test_sparse_alloc_ll_verifies():
-    _verify(cg_sparse._HELPERS + _SPARSE_CONTEXT)
+@pytest.mark.parametrize("batched", [True, False], ids=["cpu", "gpu"])
+def test_sparse_alloc_ll_verifies(batched):
+    helpers = cg_sparse._HELPERS[batched]
+    _verify(helpers + _SPARSE_CONTEXT)
     for name in ("sg_sparse_alloc", "sg_sparse_free", "sg_pool_push"):
-        assert f"@{name}(" in cg_sparse._HELPERS
+        assert f"@{name}(" in helpers
 
 
 def test_half_ll_verifies():

@@ -1,7 +1,10 @@
 ; The allocator every kernel module that activates or frees sparse cells gets (codegen/sparse.py):
 ; @sg_sparse_alloc, @sg_sparse_free and their pool helpers. They call @sg_report (codegen/llvm.py) and
 ; @llvm.memset, declared by the kernel module. Parameters (substituted by runtime/ll/__init__.py `load`):
-; CTX_SPARSE (runtime/abi.py), the pool table's row layout POOL_* and BATCH (runtime/sparse.py).
+; CTX_SPARSE (runtime/abi.py), the pool table's row layout POOL_* and BATCH (runtime/sparse.py), and BATCHED
+; (true on the CPU: a pool thread takes BATCH fresh blocks at a time into its slot of POOL_BATCHES; false on the
+; GPU, whose threads are far more than the slots: each fresh block is one atomic add, and is zeroed when taken,
+; as device pool memory is not zeroed in advance).
 
 define internal ptr @sg_pool(ptr %ctx, i64 %pool) alwaysinline {
   %tp = getelementptr i64, ptr %ctx, i64 ${CTX_SPARSE}
@@ -42,7 +45,14 @@ entry:
   %cp = getelementptr i64, ptr %row, i64 ${POOL_CAPACITY}
   %cap = load i64, ptr %cp
   br i1 %has_free0, label %locked, label %bump
-bump:                      ; this thread's batch of fresh blocks: one shared atomic add per BATCH blocks
+bump:
+  br i1 ${BATCHED}, label %batch, label %single
+single:                    ; one shared atomic add per block
+  %sp = getelementptr i64, ptr %row, i64 ${POOL_NEXT}
+  %sr = atomicrmw add ptr %sp, i64 1 monotonic
+  %sfull = icmp uge i64 %sr, %cap
+  br i1 %sfull, label %exhausted, label %take_n
+batch:                     ; this thread's batch of fresh blocks: one shared atomic add per BATCH blocks
   %tp = getelementptr i64, ptr %row, i64 ${POOL_BATCHES}
   %tbase = load ptr, ptr %tp
   %t64 = zext i32 %tid to i64
@@ -71,7 +81,7 @@ refilled:
   store i64 %re, ptr %endp
   br label %take_n
 take_n:
-  %n = phi i64 [ %bn, %from_batch ], [ %r, %refilled ]
+  %n = phi i64 [ %bn, %from_batch ], [ %r, %refilled ], [ %sr, %single ]
   br label %fresh
 fresh:
   %bp = getelementptr i64, ptr %row, i64 ${POOL_BASE}
@@ -80,6 +90,11 @@ fresh:
   %sz = load i64, ptr %szp
   %boff = mul i64 %n, %sz
   %blk = getelementptr i8, ptr %base, i64 %boff
+  br i1 ${BATCHED}, label %install, label %zero
+zero:                      ; device pool memory is not zeroed in advance (host mmap pages are)
+  call void @llvm.memset.p0.i64(ptr %blk, i8 0, i64 %sz, i1 false)
+  br label %install
+install:
   store i64 0, ptr %blk  ; after a pool restart the first word may still hold a free-list link
   %cas = cmpxchg ptr %slot, ptr null, ptr %blk acq_rel monotonic
   %won = extractvalue { ptr, i1 } %cas, 1
