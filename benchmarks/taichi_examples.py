@@ -66,6 +66,8 @@ class _State:
     ticks = 0
     image = None  # last shown image (numpy)
     script = ""  # the program's file
+    frame_s: list = []  # per shown frame: the program's work since the last show() plus the framework's show()
+    last_show = None  # real clock when the last show() returned
 
 
 def _clock_module():
@@ -138,6 +140,22 @@ def _fast_gui_image(gui):
     return np.stack([(words >> s) & 255 for s in (16, 8, 0)], axis=-1).astype(np.float32) / 255
 
 
+_real_clock = time.perf_counter
+
+
+def _timed_show(capture, show):
+    """capture() (the harness's copy of the picture, not timed), then show(); the frame's time is the program's
+    work since the previous show() returned plus show() itself (the real clock, not the program's frame clock)."""
+    t0 = _real_clock()
+    capture()
+    t1 = _real_clock()
+    show()
+    t2 = _real_clock()
+    if _State.last_show is not None:
+        _State.frame_s.append((t0 - _State.last_show) + (t2 - t1))
+    _State.last_show = t2
+
+
 def _headless(ti, cache_dir):
     """arch, seed, GUI and Window patches, applied to the framework module (never to the program's text)."""
     import numpy as np
@@ -176,13 +194,16 @@ def _headless(ti, cache_dir):
             gui_cls.running.fset(self, value)
 
         def show(self, file=None):
-            try:
-                _State.image = _fast_gui_image(self) if _is_fast(self) else np.array(self.get_image(), np.float32)
-            except Exception as e:  # noqa: BLE001 - recorded, not fatal
-                print(f"@@harness: get_image failed: {e!r}", file=sys.stderr)
+            def capture():
+                try:
+                    _State.image = (_fast_gui_image(self) if _is_fast(self)
+                                    else np.array(self.get_image(), np.float32))
+                except Exception as e:  # noqa: BLE001 - recorded, not fatal
+                    print(f"@@harness: get_image failed: {e!r}", file=sys.stderr)
+
             _State.frames += 1
             _State.ticks = 0
-            super().show(file)
+            _timed_show(capture, lambda: super(HeadlessGUI, self).show(file))
             if _State.frames > _State.limit:
                 raise FrameLimit()
 
@@ -216,13 +237,15 @@ def _headless(ti, cache_dir):
             win_cls.running.fset(self, value)
 
         def show(self):
-            try:
-                _State.image = np.array(self.get_image_buffer_as_numpy(), dtype=np.float32, copy=True)
-            except Exception as e:  # noqa: BLE001
-                print(f"@@harness: get_image_buffer_as_numpy failed: {e!r}", file=sys.stderr)
+            def capture():
+                try:
+                    _State.image = np.array(self.get_image_buffer_as_numpy(), dtype=np.float32, copy=True)
+                except Exception as e:  # noqa: BLE001
+                    print(f"@@harness: get_image_buffer_as_numpy failed: {e!r}", file=sys.stderr)
+
             _State.frames += 1
             _State.ticks = 0
-            super().show()
+            _timed_show(capture, lambda: super(HeadlessWindow, self).show())
             if _State.frames > _State.limit:
                 raise FrameLimit()
 
@@ -355,7 +378,7 @@ def child(framework, script, examples, frames, out):
         sys.stdout.flush()
     errors = dump_state(mod.__dict__, os.path.join(out, f"{framework}.npz"))
     with open(os.path.join(out, f"{framework}.json"), "w") as fh:
-        json.dump({"how": how, "frames": _State.frames, "dump_errors": errors}, fh)
+        json.dump({"how": how, "frames": _State.frames, "dump_errors": errors, "frame_s": _State.frame_s}, fh)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(rc)  # skip framework teardown: what happens at exit is not what is compared
@@ -376,7 +399,10 @@ def run_child(python, framework, script, args, out):
     env = dict(os.environ, MPLBACKEND="Agg", TI_ARCH="x64", TI_GUI_SHOW="0", TI_LOG_LEVEL="error")
     for k in ("DISPLAY", "WAYLAND_DISPLAY", "SIMGRAD_UI_FRAMES", "SIMGRAD_UI_MAX_FRAMES"):
         env.pop(k, None)
-    env["TAICHI_EXAMPLES_INIT"] = json.dumps(dict(args.taichi_init)) if framework == "taichi" else "{}"
+    init = dict(args.taichi_init) if framework == "taichi" else {}
+    if args.threads:
+        init["cpu_max_num_threads"] = args.threads
+    env["TAICHI_EXAMPLES_INIT"] = json.dumps(init)
     if framework == "simgrad":
         env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path, os.environ.get("PYTHONPATH", "")] if p)
     frames = FRAMES.get(os.path.relpath(script, args.examples), args.frames)
@@ -663,6 +689,30 @@ def table(entries, why=None):
     return "\n".join(rows)
 
 
+def steady_ms(rec):
+    """Median frame time from the 3rd shown frame on (the 1st and 2nd compile), or None."""
+    times = (rec or {}).get("frame_s") or []
+    if rec is None or rec.get("status") != "ok" or len(times) < 2:
+        return None
+    return 1e3 * sorted(times[1:])[(len(times) - 2) // 2]
+
+
+def speed_table(entries):
+    rows = ["| example | taichi ms/frame | simgrad ms/frame | simgrad / taichi |", "|---|---|---|---|"]
+    ratios = []
+    for e in entries:
+        t, g = steady_ms(e.get("taichi")), steady_ms(e.get("simgrad"))
+        if t is None or g is None:
+            continue
+        ratios.append(g / t)
+        rows.append(f"| {e['example']} | {t:.2f} | {g:.2f} | {g / t:.2f} |")
+    if ratios:
+        ratios.sort()
+        rows.append(f"\n{len(ratios)} examples timed by both: median ratio {ratios[len(ratios) // 2]:.2f}, "
+                    f"{sum(r <= 0.5 for r in ratios)} at <= 0.5, {sum(r > 1 for r in ratios)} slower than taichi")
+    return "\n".join(rows)
+
+
 def main():
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         framework, script, examples, frames, out = sys.argv[2:7]
@@ -680,6 +730,9 @@ def main():
     ap.add_argument("--taichi-python", default=os.environ.get("TAICHI_PYTHON", "/work/tivenv/bin/python"))
     ap.add_argument("--taichi-init", type=_keyval, action="append", default=[],
                     help="extra ti.init argument for taichi, e.g. fast_math=False (taichi's default is True)")
+    ap.add_argument("--threads", type=int, default=0, help="ti.init(cpu_max_num_threads=N) for both frameworks")
+    ap.add_argument("--speed", action="store_true",
+                    help="print the steady frame times (median from the 3rd shown frame on) and their ratios")
     ap.add_argument("--timeout", type=float, default=300)
     ap.add_argument("--nice", type=int, default=0)
     ap.add_argument("--keep", action="store_true", help="keep each example's output folder")
@@ -691,7 +744,8 @@ def main():
     args = ap.parse_args()
     if args.table_only:
         with open(args.json) as fh:
-            print(table(json.load(fh)["entries"], WHY))
+            entries = json.load(fh)["entries"]
+        print(speed_table(entries) if args.speed else table(entries, WHY))
         return 0
     args.examples = os.path.abspath(args.examples)
     names = list_examples(args.examples)
@@ -701,7 +755,8 @@ def main():
     pythons = {"simgrad": args.simgrad_python, "taichi": args.taichi_python}
     entries = []
     header = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.node(),
-              "cpus": os.cpu_count(), "command": " ".join(sys.argv), "frames": args.frames}
+              "cpus": os.cpu_count(), "command": " ".join(sys.argv), "frames": args.frames,
+              "load": os.getloadavg()}
     if args.update and args.json and os.path.exists(args.json):
         with open(args.json) as fh:
             old = json.load(fh)
@@ -719,6 +774,8 @@ def main():
             os.replace(args.json + ".tmp", args.json)
     if args.table:
         print(table(entries, WHY))
+    if args.speed:
+        print(speed_table(entries))
     bad = [e for e in entries if e.get("simgrad", {}).get("status", "ok") != "ok"]
     return 1 if bad else 0
 
