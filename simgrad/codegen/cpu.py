@@ -16,6 +16,7 @@ from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
 from simgrad.passes.privatize import Region
 from simgrad.runtime import abi
+from simgrad.runtime.jit import NO_SLP
 
 Capture = tuple[int, str, bool]  # (closure slot, LLVM type, passed by value)
 
@@ -29,6 +30,11 @@ class CpuCodegen(KernelCodegen):
 
     def parallel_loop(self, f: FunctionText, s: Stmt) -> None:
         plan: LoopStrategy = s.attrs["strategy"]
+        if any(x.op is Op.WHILE for x in walk(s.blocks[0])) and NO_SLP not in self.module.globals:
+            # LLVM's SLP vectoriser packs the values a data-dependent loop carries (a complex number z) into
+            # <2 x float> and unpacks them every iteration: the shuffles lengthen the carried chain (Julia and
+            # Mandelbrot sets: 1.3-1.4x slower than scalar code); runtime/jit.py reads the marker
+            self.module.globals.append(NO_SLP)
         captured = _free_values(s)
         regions = plan.regions
         clo = f.tmp("clo")

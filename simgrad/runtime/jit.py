@@ -17,6 +17,10 @@ import llvmlite.binding as llvm
 from simgrad.debug import debug_level
 from simgrad.runtime.isel_guard import merge_same_address_loads
 
+#: a line in a module's text that turns LLVM's SLP vectoriser off for it (codegen/cpu.py says when); being in
+#: the text, it is in the object cache's key
+NO_SLP = "; simgrad: no-slp"
+
 _COMPILER_VERSION = "simgrad-jit-1"
 
 
@@ -45,10 +49,10 @@ class Jit:
         self.code = CodeSpace(self)  # native code for the life of the process (the thread pool)
 
     # -- compilation -------------------------------------------------------------------------
-    def _optimize(self, module: llvm.ModuleRef) -> None:
+    def _optimize(self, module: llvm.ModuleRef, slp: bool = True) -> None:
         pto = llvm.create_pipeline_tuning_options(speed_level=3)
         pto.loop_vectorization = True
-        pto.slp_vectorization = True
+        pto.slp_vectorization = slp
         pto.loop_unrolling = True
         builder = llvm.create_pass_builder(self.target_machine, pto)
         builder.getModulePassManager().run(module, builder)
@@ -96,7 +100,7 @@ class Jit:
         module.triple = self.triple
         module.data_layout = self.data_layout
         module.verify()
-        self._optimize(module)
+        self._optimize(module, slp=NO_SLP not in ir_text)
         if level >= 3:
             print(str(module))
         if level >= 4:

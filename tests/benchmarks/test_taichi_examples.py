@@ -87,7 +87,7 @@ def examples(tmp_path):
 
 def _args(examples, frames=3, timeout=120):
     return argparse.Namespace(examples=examples, frames=frames, timeout=timeout, nice=0, keep=False,
-                              taichi_init=[], frameworks="simgrad", simgrad_path=tex.ROOT)
+                              taichi_init=[], frameworks="simgrad", simgrad_path=tex.ROOT, threads=0)
 
 
 def _run(examples, name, tmp_path, frames=3):
@@ -116,6 +116,12 @@ def test_gui_loop_ends_after_n_frames_on_a_frame_clock_and_dumps_state(examples,
     np.testing.assert_allclose(dump["pixels"], np.modf(t * 3.0 + i * 0.01 + j * 0.001)[0], atol=1e-4)
     np.testing.assert_allclose(dump["speed"], [[k * t, -t] for k in range(4)], atol=1e-5)
     np.testing.assert_allclose(dump["@image"][..., 0], dump["pixels"], atol=1 / 255)
+    # frame times on the real clock: one per shown frame after the first; the steady time is their median from
+    # the 3rd frame on
+    assert len(rec["frame_s"]) == 3 and all(0 < t < 10 for t in rec["frame_s"])
+    assert tex.steady_ms(rec) == pytest.approx(1e3 * sorted(rec["frame_s"][1:])[0])
+    table = tex.speed_table([{"example": "a.py", "simgrad": rec, "taichi": dict(rec, frame_s=[1.0, 0.2, 0.2])}])
+    assert f"| a.py | 200.00 | {tex.steady_ms(rec):.2f} |" in table and "1 examples timed by both" in table
 
 
 def test_a_loop_that_never_asks_running_is_stopped(examples, tmp_path):
