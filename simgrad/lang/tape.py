@@ -231,7 +231,7 @@ def _check_array_loss(loss) -> None:
     """A Tape's loss may also be a one-element ti.ndarray with needs_grad=True or a torch tensor that
     requires grad (as in Taichi, whose RuntimeError texts these are); gradients of ndarrays are not cleared on
     entry."""
-    if hasattr(loss, "_ndarray"):
+    if hasattr(loss, "_ndarray_data"):
         if loss._ndarray.size != 1:
             raise SimgradRuntimeError(f"The loss of `Tape` must be an ndarray with only one element, got shape "
                                       f"{loss.shape}", caller_loc())
