@@ -171,7 +171,10 @@ class Program:
 
     def release(self) -> None:
         """Free this program's native code (ti.reset / the next ti.init). Kernels notice the new program
-        generation and compile again; fields of this program refuse further use."""
+        generation and compile again; fields of this program refuse further use. Kernels still queued on the
+        device finish first (their code is freed here)."""
+        if self._device is not None and self._device.pending:
+            self._device.synchronize()
         self.released = True
         for tree in self.trees:  # Python-scope access of its fields goes the checked way from now on
             for node in tree.root._walk():

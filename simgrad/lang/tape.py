@@ -268,12 +268,12 @@ def _save_memory() -> list:
 
     prog = get_program()
     prog.materialize_all()
-    return [(t.buffer, t.buffer.copy()) for t in prog.trees if t.buffer is not None]
+    return [(t, t.buffer.copy()) for t in prog.trees if t.buffer is not None]
 
 
 def _restore_memory(saved: list) -> None:
-    for buf, copy in saved:
-        buf[...] = copy
+    for tree, copy in saved:
+        tree.buffer[...] = copy  # through the accessor: after the kernels still running on the device
 
 
 class SNodeGradType(enum.Enum):

@@ -11,8 +11,10 @@ subclasses, at the user's line).
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -100,6 +102,15 @@ class Device:
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         """Run `fn(ctx)` on grid x block threads (asynchronously on the GPU)."""
         raise NotImplementedError
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        """`launch(fn, grid, block, ctx)` as a call without arguments, its checks and parameters made once (a
+        launcher's segment: runtime/gpu_launch.py)."""
+        return functools.partial(self.launch, fn, grid, block, ctx)
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        """`upload(dst, src)` as a call without arguments (`src`: the launcher's context, alive as long)."""
+        return functools.partial(self.upload, dst, src)
 
     def synchronize(self) -> None:
         raise NotImplementedError
@@ -200,9 +211,25 @@ class HostDriver(Device):
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         """`fn` is the native address of `void fn(ptr ctx, ptr sreg)`; `ctx` a context whose header holds the
         thread pool's parallel_for (runtime/abi.py CTX_PFOR), as every kernel context does."""
+        self._check_config(grid, block)
+        self._launch(fn, grid, block, ctx)
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        self._check_config(grid, block)
+        return functools.partial(self._launch, fn, grid, block, ctx)
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        if self.deferred or not src.flags.c_contiguous:
+            return functools.partial(self.upload, dst, src)
+        return functools.partial(ctypes.memmove, dst, src.ctypes.data, src.nbytes)
+
+    @staticmethod
+    def _check_config(grid: int, block: int) -> None:
         if grid < 1 or block < 1 or block > 1024:
             raise DeviceError(f"invalid launch configuration: grid={grid}, block={block} (block must be 1..1024)",
                               caller_loc())
+
+    def _launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         self.launches += 1
         if self.deferred:
             self._queue.append(("launch", fn, grid, block, ctx))
@@ -323,10 +350,29 @@ class CudaDriver(Device):
         return {s: self._check(self.cu.cuModuleGetFunction(module, s.encode())) for s in symbols}
 
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
-        arg = np.array([ctx], dtype=np.uint64)  # the kernel's one parameter: the context's device address
+        self.prepare_launch(fn, grid, block, ctx)()
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        """cuLaunchKernel with its kernelParams built once: the kernel's one parameter, the context's device
+        address (the driver copies the parameters when the launch is queued)."""
+        arg = np.array([ctx], dtype=np.uint64)
         params = np.array([arg.ctypes.data], dtype=np.uint64)
-        self._check(self.cu.cuLaunchKernel(fn, grid, 1, 1, block, 1, 1, 0, 0, params.ctypes.data, 0))
-        self.pending = True
+        launch, check, pp = self.cu.cuLaunchKernel, self._check, params.ctypes.data
+
+        def run(_keep=(arg, params)) -> None:
+            check(launch(fn, grid, 1, 1, block, 1, 1, 0, 0, pp, 0))
+            self.pending = True
+
+        return run
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        copy, check, p, n = self.cu.cuMemcpyHtoDAsync, self._check, src.ctypes.data, src.nbytes
+
+        def run(_keep=src) -> None:
+            check(copy(dst, p, n, 0))
+            self.pending = True
+
+        return run
 
     def synchronize(self) -> None:
         """cuCtxSynchronize: also where a fault of a kernel that did not wait is reported (a DeviceError)."""

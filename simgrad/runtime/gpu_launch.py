@@ -61,7 +61,10 @@ class Staging:
 
 
 class GpuLauncher(Launcher):
-    """`launches`: (function handle, grid or None for a saturating grid, block) in launch order."""
+    """`launches`: (function handle, grid or None for a saturating grid, block) in launch order. The generated
+    launch function (runtime/launch.py) makes the device calls itself: the upload, one prepared call per segment
+    (`Device.prepare_launch`: the configuration checked and the kernel parameters built once), and the wait and
+    read-back when there is one; no loop or per-launch Python beyond those calls."""
 
     def __init__(self, device: Device, launches: list[tuple[Any, int | None, int]], kernel_name: str, params: list,
                  nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
@@ -71,11 +74,11 @@ class GpuLauncher(Launcher):
                          for fn, grid, block in launches]
         self.dctx = self.dtape = 0
         self.staging = Staging(device)
-        super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
-        self.dctx = device.alloc(self.buf.nbytes)
         # values to read back, or an error to report at its line: wait for the device; else return at once
         self.waits = bool(returns) or bool(error_table)
-        self._ret = self.buf[self.ret_slot:self.ret_slot + len(returns)]
+        self.nreturns = len(returns)
+        super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
+        self.pack = None  # no native Sequence replays it (lang/graph.py and the Tape launch from Python on a GPU)
 
     def launch_code(self, env: dict) -> LaunchCode:
         """On an asynchronous device host arrays are staged (`Staging`) and Python after the call synchronizes."""
@@ -84,18 +87,25 @@ class GpuLauncher(Launcher):
         env["_sync"] = self.device.synchronize
         return LaunchCode(self.kernel_name, env, self.views, on_device=True, staging=self.staging)
 
-    def native_entry(self, address: int):
-        return self.run
-
-    def run(self, _addr: int) -> None:
+    def call_lines(self, env: dict) -> list[str]:
         d = self.device
-        d.upload(self.dctx, self.buf)
-        for fn, grid, block in self.launches:
-            d.launch(fn, grid, block, self.dctx)
+        self.dctx = d.alloc(self.buf.nbytes)
+        env["_upload"] = d.prepare_upload(self.dctx, self.buf)
+        lines = ["_upload()"]
+        for k, (fn, grid, block) in enumerate(self.launches):
+            env[f"_segment{k}"] = d.prepare_launch(fn, grid, block, self.dctx)
+            lines.append(f"_segment{k}()")
         if self.waits:
-            d.synchronize()
-            if len(self._ret):
-                d.to_host(self._ret, self.dctx + 8 * self.ret_slot)
+            env["_wait"] = d.synchronize
+            lines.append("_wait()")
+            ret = self.buf[self.ret_slot:self.ret_slot + self.nreturns]
+            if len(ret):
+                env["_returns"], env["_to_host"] = ret, d.to_host
+                lines.append(f"_to_host(_returns, {self.dctx + 8 * self.ret_slot})")
+        return lines
+
+    def native_entry(self, address: int):
+        return None  # the generated launch calls the device (call_lines)
 
     def attach_tape(self, entries: int) -> None:
         """The serial part's tape in device memory (the parallel segments keep theirs in local memory)."""

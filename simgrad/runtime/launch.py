@@ -93,6 +93,11 @@ class Launcher:
         """What the packings write their lines with (the GPU launcher's stages host arrays)."""
         return LaunchCode(self.kernel_name, env, self.views)
 
+    def call_lines(self, env: dict) -> list[str]:
+        """The launcher's lines that run the kernel once the context is packed: one native call here; the GPU
+        launcher's upload, its segments' launches and its wait (runtime/gpu_launch.py)."""
+        return ["_call(_addr)"]
+
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_interrupted": self.clear_interrupt,
@@ -102,7 +107,7 @@ class Launcher:
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
         lines = ["    " + ln for ln in gen.before] + lines
-        lines.append("    _call(_addr)")
+        lines += ["    " + ln for ln in self.call_lines(env)]
         lines.append("    if _err[0]: _fail()")
         lines += ["    " + ln for ln in gen.after]
         if returns:
