@@ -615,8 +615,8 @@ WHY = {
     "algorithm/mgpcg.py": "float32 sums over 2M cells in another order: printed residuals 3e-4 apart",
     "algorithm/mgpcg_advanced.py": "as mgpcg; and the kernel profiler's tables differ (format, timings)",
     "algorithm/poisson_disk_sampling.py": _VULKAN,
-    "algorithm/print_offset.py": "stdout only: taichi prints its IR (ti.init(print_ir=True)); the offsets (ti.get_addr) "
-                                 "and the picture are equal",
+    "algorithm/print_offset.py": "stdout only: taichi prints its IR (ti.init(print_ir=True)); the offsets "
+                                 "(ti.get_addr) and the picture are equal",
     "autodiff/diff_sph/diff_sph.py": _VULKAN,
     "features/gui/gui_image_io.py": _RANDOM,
     "features/io/export_ply.py": _RANDOM,

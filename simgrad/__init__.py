@@ -129,9 +129,7 @@ def sync():
     """Wait for the kernels launched so far (on the CPU they finish before their launch returns)."""
     from simgrad.lang.program import get_program
 
-    prog = get_program()
-    if prog.on_gpu:
-        prog.device.synchronize()
+    get_program().sync()
 
 
 def get_runtime():

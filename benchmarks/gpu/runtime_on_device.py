@@ -1,10 +1,13 @@
 """The real-GPU runtime of arch=cuda (runtime/gpu_launch.py over CudaDriver, fields in managed memory), run on a
 GPU by benchmarks/gpu/run_on_device.sh with SIMGRAD_CUDA_RUNTIME=1: a few kernels against numpy (fields, an
-ndarray, a returned reduction, a Tape gradient, sparse pointer and bitmasked fields), then launch overhead and a 1M-element saxpy in us per launch,
-the figures to put beside taichi's CUDA backend. Prints one line per check; exits non-zero on any failure."""
+ndarray, a returned reduction, a Tape gradient, sparse pointer and bitmasked fields), then launch overhead and a
+1M-element saxpy in us per launch, the figures to put beside taichi's CUDA backend; then asynchronous launches,
+staged numpy arguments and the profiler from CUDA events. Prints one line per check; exits non-zero on any failure.
+On the simulated GPU: SIMGRAD_GPU_SIM=async SIMGRAD_RUNTIME_N=20000 python benchmarks/gpu/runtime_on_device.py"""
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import traceback
@@ -13,7 +16,7 @@ import numpy as np
 
 import simgrad as ti
 
-N = 1 << 20
+N = int(os.environ.get("SIMGRAD_RUNTIME_N", 1 << 20))  # smaller for a run on the simulated GPU
 
 
 def checks() -> list[tuple[str, bool, str]]:
@@ -62,6 +65,7 @@ def checks() -> list[tuple[str, bool, str]]:
         energy()
     out.append(("Tape gradient", np.allclose(w.grad.to_numpy(), ws + 0.001 * np.exp(0.001 * ws), rtol=1e-5), ""))
     out += sparse_checks()
+    out += async_checks(x, y, xs)
     return out
 
 
@@ -84,7 +88,7 @@ def sparse_checks() -> list[tuple[str, bool, str]]:
     def count() -> ti.types.vector(2, ti.f64):
         sp, sb = 0.0, 0.0
         for i in p:
-            sp += 1.0
+            sp += 1.0 + 0 * p[i]
         for i in b:
             sb += b[i]
         return ti.Vector([sp, sb])
@@ -93,7 +97,7 @@ def sparse_checks() -> list[tuple[str, bool, str]]:
     def drop():
         for i in range(n // 8):
             if i % 2 == 0:
-                ti.deactivate(p.parent(), i)
+                ti.deactivate(p.parent(2), i)
 
     fill()
     got = count().to_numpy()
@@ -106,6 +110,77 @@ def sparse_checks() -> list[tuple[str, bool, str]]:
     out.append(("sparse deactivate, reuse, to_numpy", np.array_equal(vals, (np.arange(n) % 3 == 0).astype(np.float32)),
                 ""))
     return out
+
+
+def async_checks(x, y, xs) -> list[tuple[str, bool, str]]:
+    """Asynchronous launches (cuMemcpyHtoDAsync of the context, cuLaunchKernel, no wait) and Taichi's
+    synchronisation at Python-scope access; numpy arguments staged (cuMemAlloc, cuMemcpyHtoDAsync,
+    cuCtxSynchronize, cuMemcpyDtoH, cuMemFree)."""
+    from simgrad.lang.program import get_program
+
+    out = []
+    dev = get_program().device
+
+    @ti.kernel
+    def slow(s: ti.f32):
+        for i in x:
+            v = x[i]
+            for _ in range(200):
+                v = ti.sin(v) * s + 0.5
+            y[i] = v
+
+    @ti.kernel
+    def bump(a: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(a.shape[0]):
+            a[i] = a[i] * 2.0 + y[i]
+
+    slow(1.0)
+    queued = dev.pending or not dev.asynchronous  # (a synchronous simulated GPU never queues)
+    ref = xs.copy()
+    for _ in range(200):
+        ref = np.sin(ref) * np.float32(1.0) + np.float32(0.5)
+    got = y.to_numpy()
+    out.append(("launch does not wait; to_numpy synchronizes", queued and not dev.pending and
+                np.allclose(got, ref, rtol=1e-4, atol=1e-5), f"pending after launch: {queued}"))
+    slow(1.0)
+    y[0] = -1.0  # after the queued kernel's write
+    out.append(("element write after a queued kernel", y[0] == -1.0, ""))
+    h = np.ones(1000, np.float32)
+    bump(h)
+    want = 2.0 + got[:1000]
+    want[0] = 1.0  # y[0] = -1 above
+    out.append(("numpy argument copied in and back", np.allclose(h, want, rtol=1e-5), ""))
+    slow(1.0)
+    ti.sync()
+    out.append(("ti.sync", not dev.pending, ""))
+    return out
+
+
+def profiler_checks() -> list[tuple[str, bool, str]]:
+    """ti.profiler from CUDA events (cuEventCreate, cuEventRecord, cuEventSynchronize, cuEventElapsedTime,
+    cuEventDestroy); the profiled launches do not wait."""
+    from simgrad.lang.program import get_program
+
+    ti.init(arch=ti.cuda, kernel_profiler=True)
+    dev = get_program().device
+    x = ti.field(ti.f32, shape=N)
+
+    @ti.kernel
+    def heavy():
+        for i in x:
+            v = 0.0
+            for j in range(100):
+                v += ti.sin(v + j)
+            x[i] = v
+
+    for _ in range(5):
+        heavy()
+    queued = dev.pending or not dev.asynchronous  # (a synchronous simulated GPU never queues)
+    r = ti.profiler.query_kernel_profiler_info("heavy")
+    ti.profiler.print_kernel_profiler_info()
+    ti.profiler.clear_kernel_profiler_info()
+    return [("profiler from CUDA events", queued and r.counter == 5 and 0 < r.min <= r.avg <= r.max,
+             f"counter {r.counter}, avg {r.avg:.4f} ms, pending after launches: {queued}")]
 
 
 def timings() -> list[str]:
@@ -147,6 +222,9 @@ def main() -> int:
             print(f"{'ok  ' if ok else 'FAIL'} {name} {detail}")
         for line in timings():
             print(line)
+        for name, ok, detail in profiler_checks():
+            failed += not ok
+            print(f"{'ok  ' if ok else 'FAIL'} {name} {detail}")
     except Exception:
         traceback.print_exc()
         return 1

@@ -84,10 +84,7 @@ class Kernel(KernelDef):
             launch = self._launch_for(args, "fwd" if ad_hooks.forward_mode is not None else "")
         try:
             if prog.config.kernel_profiler:
-                t0 = time.perf_counter()
-                out = launch(*args)
-                prog.profiler.add(self.name, time.perf_counter() - t0)
-                return out
+                return prog.profiled_launch(self.name, launch, args)
             return launch(*args)
         except SimgradTypeError as e:
             raise _argument_error(e, ArgumentTypeError) from None
@@ -199,9 +196,7 @@ class GradKernel:
         launch = k._launch_for(args, "gradfwd" if ad_hooks.forward_mode is not None else "grad")
         try:
             if prog.config.kernel_profiler:
-                t0 = time.perf_counter()
-                launch(*args)
-                prog.profiler.add(self.name, time.perf_counter() - t0)
+                prog.profiled_launch(self.name, launch, args)
                 return None
             launch(*args)
         except SimgradTypeError as e:

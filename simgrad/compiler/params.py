@@ -102,7 +102,7 @@ class TemplateParam(Param):
         return is_template(ann)
 
     def key(self, a, keep: list):
-        if hasattr(a, "_ndarray"):
+        if hasattr(a, "_ndarray_data"):
             raise SimgradTypeError(f"kernel {self.kernel_name}: Ndarray shouldn't be passed in via `ti.template()` "
                                    f"(parameter '{self.name}'), please annotate your kernel using "
                                    "`ti.types.ndarray(...)` instead", caller_loc())
@@ -231,13 +231,13 @@ class NdarrayParam(Param):
         if not hasattr(a, "dtype") or not hasattr(a, "shape"):
             raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects an ndarray, got "
                                    f"{type(a).__name__}")
-        arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
+        arr = getattr(a, "_ndarray_data", a)  # a ti.ndarray object: its numpy data
         return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a))
 
     def with_grad(self, a) -> bool:
         """Whether kernels see the gradient of argument `a`: the annotation's needs_grad, else whether it has
         one (a ti.ndarray with needs_grad=True, a torch tensor that requires grad)."""
-        has = getattr(a, "grad", None) is not None if hasattr(a, "_ndarray") else \
+        has = getattr(a, "grad", None) is not None if hasattr(a, "_ndarray_data") else \
             bool(getattr(a, "requires_grad", False))
         want = self.ann.needs_grad
         if want and not has:
@@ -248,7 +248,7 @@ class NdarrayParam(Param):
 
     def element_shape(self, a) -> tuple:
         """The element shape of argument `a`: the annotation's, else a ti.ndarray object's own."""
-        arr = getattr(a, "_ndarray", a)
+        arr = getattr(a, "_ndarray_data", a)
         ann = self.ann
         if isinstance(ann.dtype, MatrixType) and (ann.dtype.n is None or ann.dtype.m is None):
             # ti.types.vector() / matrix(): the element shape is the argument's own, of that rank
@@ -276,11 +276,11 @@ class NdarrayParam(Param):
         messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
         ann: NdarrayType = self.ann
         kernel_name, name = self.kernel_name, self.name
-        arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
+        arr = getattr(a, "_ndarray_data", a) if hasattr(a, "dtype") else np.asarray(a)
         t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else array_dtype(arr)
         want: dt.DataType | None
         elem = self.element_shape(a)
-        own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray") else None
+        own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray_data") else None
         if isinstance(ann.dtype, MatrixType):
             want = ann.dtype.dtype if ann.dtype._dtype is not None or ann.dtype.n is not None else None
         else:

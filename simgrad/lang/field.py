@@ -23,6 +23,7 @@ from simgrad.errors import (
 from simgrad.ir.fieldref import FieldRef
 from simgrad.lang import scope_hooks
 from simgrad.lang.matrix import Matrix
+from simgrad.lang.program import sync_for_host
 
 if TYPE_CHECKING:
     from simgrad.lang.snode import AccessTerm
@@ -180,9 +181,9 @@ class ScalarField(Field):
         self.grad = None
         self.dual = None
         self.offset: tuple[int, ...] | None = None
-        self.view: np.ndarray | None = None  # strided numpy view of the elements, when one exists
+        self._view: np.ndarray | None = None  # strided numpy view of the elements, when one exists
         self.gather: np.ndarray | None = None  # flat element indices, for layouts that are not strided
-        self.flat: np.ndarray | None = None
+        self._flat: np.ndarray | None = None
         self.layout: Layout | None = None  # set when its tree is materialised
         self._shape: tuple[int, ...] | None = None
         self.is_primal = True
@@ -217,6 +218,26 @@ class ScalarField(Field):
                            levels=levels, value_offset=value_offset, quant=quant)
             self._ref = cached = (key, ref)
         return cached[1]
+
+    # the field's memory for Python scope: reached only through these two, which first wait for the kernels an
+    # asynchronous device still runs (lang/program.py sync_for_host), as Taichi's field access synchronizes
+    @property
+    def view(self) -> np.ndarray | None:
+        sync_for_host()
+        return self._view
+
+    @view.setter
+    def view(self, v: np.ndarray | None) -> None:
+        self._view = v
+
+    @property
+    def flat(self) -> np.ndarray | None:
+        sync_for_host()
+        return self._flat
+
+    @flat.setter
+    def flat(self, v: np.ndarray | None) -> None:
+        self._flat = v
 
     @property
     def snode(self):  # type: ignore[override]

@@ -1,6 +1,8 @@
-"""ti.ndarray objects: arrays in host memory that kernels take by reference (`ti.types.ndarray()` parameters),
-with Taichi's Python-scope API. The data is one C-contiguous numpy array whose trailing axes are the
-element's (a vector or matrix); kernels receive its address and shape (runtime/launch.py reads `_ndarray`)."""
+"""ti.ndarray objects: arrays that kernels take by reference (`ti.types.ndarray()` parameters), with Taichi's
+Python-scope API. The data is one C-contiguous numpy array (host memory, the device's on arch=cuda) whose
+trailing axes are the element's (a vector or matrix); kernels receive its address and shape (runtime/args.py
+reads `_ndarray_data`). Python scope reaches it through `_ndarray`, which first waits for the kernels still
+running on an asynchronous device (lang/program.py sync_for_host), as Taichi's ndarray access synchronizes."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import numpy as np
 from simgrad import dtypes as dt
 from simgrad.errors import SimgradIndexError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.lang.field import FieldElement
-from simgrad.lang.program import get_program, require_init
+from simgrad.lang.program import get_program, require_init, sync_for_host
 from simgrad.lang.types import MatrixType
 
 
@@ -43,7 +45,7 @@ class Ndarray:
         self.m = self.element_shape[1] if len(self.element_shape) > 1 else 0
         self.ncols = self.m  # what element views read (0: vectors)
         self.name = "ndarray"
-        self._ndarray = get_program().zeros(self.shape + self.element_shape, self.dtype.np)
+        self._ndarray_data = get_program().zeros(self.shape + self.element_shape, self.dtype.np)
         self.comps = [_Component(self, e) for e in np.ndindex(*self.element_shape)] if self.element_shape else []
         self.grad: Ndarray | None = None
         if needs_grad:
@@ -53,6 +55,12 @@ class Ndarray:
             # the adjoint buffer kernels' .grad accumulate into (and a Tape seeds, for a loss)
             grad = self.grad = object.__new__(type(self))
             Ndarray.__init__(grad, self.dtype, self.shape, self.element_shape)
+
+    @property
+    def _ndarray(self) -> np.ndarray:
+        """The data for Python scope (element access, to/from_numpy, fill, linalg): after the device is done."""
+        sync_for_host()
+        return self._ndarray_data
 
     @property
     def element_type(self):

@@ -4,8 +4,9 @@ pool, RNG states, the error buffer and the kernel profiler."""
 from __future__ import annotations
 
 import os
+import time
 import warnings
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,22 +38,47 @@ class Config:
 
 
 class Profiler:
-    """Per-kernel launch count and wall time (ti.profiler)."""
+    """Per-kernel launch count and time (ti.profiler): host wall time on the CPU; on arch=cuda the device's time
+    between two events recorded around the launch (CUDA events on a GPU), read when the records are asked for,
+    so profiling does not make launches wait."""
 
     def __init__(self) -> None:
-        self.records: dict[str, list[float]] = {}
+        self._records: dict[str, list[float]] = {}
+        self._events: list[tuple[str, Any, Any, Any]] = []  # (kernel, device, start, end) not read yet
+        self.device_time = False  # the records are device event times (arch=cuda)
+
+    @property
+    def records(self) -> dict[str, list[float]]:
+        """Kernel name -> seconds per launch (device events read now: waits for the kernels they bracket)."""
+        if self._events:
+            events, self._events = self._events, []
+            for name, device, start, end in events:
+                self._records.setdefault(name, []).append(device.elapsed_ms(start, end) / 1e3)
+                device.destroy_event(start)
+                device.destroy_event(end)
+        return self._records
 
     def add(self, name: str, seconds: float) -> None:
-        self.records.setdefault(name, []).append(seconds)
+        self._records.setdefault(name, []).append(seconds)
+
+    def add_events(self, name: str, device, start, end) -> None:
+        self._events.append((name, device, start, end))
+        self.device_time = True
 
     def clear(self) -> None:
-        self.records.clear()
+        for _, device, start, end in self._events:
+            device.destroy_event(start)
+            device.destroy_event(end)
+        self._events.clear()
+        self._records.clear()
 
     def report(self) -> str:
-        lines = ["=" * 78, "simgrad kernel profiler (CPU wall time)", "=" * 78,
+        records = self.records
+        clock = "device time, events" if self.device_time else "CPU wall time"
+        lines = ["=" * 78, f"simgrad kernel profiler ({clock})", "=" * 78,
                  f"{'[%]':>7} {'total ms':>11} {'count':>8} {'avg ms':>10} {'min ms':>10} {'max ms':>10}  name"]
-        total = sum(sum(v) for v in self.records.values()) or 1.0
-        for name, ts in sorted(self.records.items(), key=lambda kv: -sum(kv[1])):
+        total = sum(sum(v) for v in records.values()) or 1.0
+        for name, ts in sorted(records.items(), key=lambda kv: -sum(kv[1])):
             s = sum(ts)
             lines.append(f"{100 * s / total:6.2f}% {1e3 * s:11.3f} {len(ts):8d} {1e3 * s / len(ts):10.4f} "
                          f"{1e3 * min(ts):10.4f} {1e3 * max(ts):10.4f}  {name}")
@@ -108,6 +134,26 @@ class Program:
         """Seconds spent compiling kernels in this program (taichi's `impl.get_runtime().prog` asks it)."""
         return self.compile_seconds
 
+    def profiled_launch(self, name: str, launch, args):
+        """`launch(*args)` with its time in the profiler: device events around it on arch=cuda (the launch does
+        not wait for them), the host clock otherwise."""
+        if self.on_gpu:
+            d = self.device
+            start = d.event()
+            out = launch(*args)
+            self.profiler.add_events(name, d, start, d.event())
+            return out
+        t0 = time.perf_counter()
+        out = launch(*args)
+        self.profiler.add(name, time.perf_counter() - t0)
+        return out
+
+    def sync(self) -> None:
+        """ti.sync(): wait for the kernels launched so far (on the CPU they finish before their launch returns);
+        a device fault of one that did not wait is raised here."""
+        if self.on_gpu:
+            self.device.synchronize()
+
     # -- native services ---------------------------------------------------------------------------
     def link(self, obj: bytes, symbols: list[str]) -> dict[str, int]:
         """Link a kernel's object code into this program's code space; addresses of `symbols`."""
@@ -132,7 +178,10 @@ class Program:
 
     def release(self) -> None:
         """Free this program's native code (ti.reset / the next ti.init). Kernels notice the new program
-        generation and compile again; fields of this program refuse further use."""
+        generation and compile again; fields of this program refuse further use. Kernels still queued on the
+        device finish first (their code is freed here)."""
+        if self._device is not None and self._device.pending:
+            self._device.synchronize()
         self.released = True
         for tree in self.trees:  # Python-scope access of its fields goes the checked way from now on
             for node in tree.root._walk():
@@ -164,7 +213,8 @@ class Program:
             from simgrad.lang.archs import gpu_mode
             from simgrad.runtime import device
 
-            self._device = device.CudaDriver() if gpu_mode() == "cuda" else device.HostDriver()
+            self._device = device.CudaDriver() if gpu_mode() == "cuda" else \
+                device.HostDriver(deferred=self.on_gpu and device.sim_deferred())
         return self._device
 
     @property
@@ -216,6 +266,17 @@ def get_program() -> Program:
     if _program is None:
         _program = Program()
     return _program
+
+
+def sync_for_host() -> None:
+    """The one hook in front of Python-scope access of device memory (field views and tree buffers,
+    lang/field.py and lang/snode.py; ndarray data, lang/ndarray.py): on an asynchronous device, wait for the
+    kernels still queued before the host reads or writes what they may use, as Taichi synchronizes there."""
+    p = _program
+    if p is not None:
+        d = p._device
+        if d is not None and d.pending:
+            d.synchronize()
 
 
 def require_init(what: str) -> Program:

@@ -19,6 +19,7 @@ import numpy as np
 from simgrad.dtypes import DataType
 from simgrad.errors import SimgradError, SimgradValueError, TaichiRuntimeError, caller_loc
 from simgrad.ir.fieldref import Level
+from simgrad.lang.program import sync_for_host
 
 if TYPE_CHECKING:
     from simgrad.lang.field import ScalarField
@@ -437,8 +438,18 @@ class SNodeTree:
         self.root.tree = self
         self.materialized = False
         self.destroyed = False
-        self.buffer = None
+        self._buffer: np.ndarray | None = None
         self.size = 0
+
+    @property
+    def buffer(self) -> np.ndarray | None:
+        """The tree's memory for Python scope (a Tape's snapshot): after the device is done with it."""
+        sync_for_host()
+        return self._buffer
+
+    @buffer.setter
+    def buffer(self, v: np.ndarray | None) -> None:
+        self._buffer = v
 
     def destroy(self) -> None:
         """`tree.destroy()` (Taichi's SNodeTree.destroy): its fields refuse every further use (a located

@@ -231,7 +231,7 @@ def _check_array_loss(loss) -> None:
     """A Tape's loss may also be a one-element ti.ndarray with needs_grad=True or a torch tensor that
     requires grad (as in Taichi, whose RuntimeError texts these are); gradients of ndarrays are not cleared on
     entry."""
-    if hasattr(loss, "_ndarray"):
+    if hasattr(loss, "_ndarray_data"):
         if loss._ndarray.size != 1:
             raise SimgradRuntimeError(f"The loss of `Tape` must be an ndarray with only one element, got shape "
                                       f"{loss.shape}", caller_loc())
@@ -268,12 +268,12 @@ def _save_memory() -> list:
 
     prog = get_program()
     prog.materialize_all()
-    return [(t.buffer, t.buffer.copy()) for t in prog.trees if t.buffer is not None]
+    return [(t, t.buffer.copy()) for t in prog.trees if t.buffer is not None]
 
 
 def _restore_memory(saved: list) -> None:
-    for buf, copy in saved:
-        buf[...] = copy
+    for tree, copy in saved:
+        tree.buffer[...] = copy  # through the accessor: after the kernels still running on the device
 
 
 class SNodeGradType(enum.Enum):

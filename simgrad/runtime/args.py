@@ -22,12 +22,27 @@ class LaunchCode:
     """What a packing writes launcher lines with: the generated function's globals (`env`), the typed views of
     the context buffer, the kernel's name (for messages) and the lines that run after the native call."""
 
-    def __init__(self, kernel_name: str, env: dict, views: dict, on_device: bool = False):
+    def __init__(self, kernel_name: str, env: dict, views: dict, on_device: bool = False, staging=None):
         self.kernel_name = kernel_name
-        self.on_device = on_device  # the kernel runs on an asynchronous GPU: arrays must be device memory
+        self.on_device = on_device  # the kernel runs on an asynchronous GPU: host arrays are staged
         self.env = env
         self.views = views
+        self.before: list[str] = []  # lines before the packing
         self.after: list[str] = []
+        # runtime/gpu_launch.py Staging: host arrays copied to the device and back (on_device only)
+        self.staging = staging
+
+    def stage(self) -> str:
+        """The launcher's name of the function that gives a host array's device copy ("None" off the device);
+        the first use adds the staging's start and its copy back after the call."""
+        if self.staging is None:
+            return "None"
+        if "_stage" not in self.env:
+            self.env["_stage"] = self.staging.stage
+            self.env["_stage_begin"], self.env["_stage_finish"] = self.staging.begin, self.staging.finish
+            self.before.append("_stage_begin()")
+            self.after.append("_stage_finish()")
+        return "_stage"
 
     @staticmethod
     def word(slot: int) -> int:
@@ -150,13 +165,14 @@ class ArrayPacking(Packing):
     def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
         kernel = gen.kernel_name
         gen.env["_array"] = array_info
-        lines = [f"_p, _s = _array({src}, {kernel!r}, {self.name!r}, {self.ndim_total})",
+        stage = gen.stage()
+        lines = [f"_p, _s = _array({src}, {kernel!r}, {self.name!r}, {self.ndim_total}, {stage})",
                  f"_buf[{gen.word(self.slot)}] = _p"]
         lines += [f"_buf[{gen.word(self.slot + 1 + d)}] = _s[{d}]" for d in range(self.ndim)]
         if self.grad_slot >= 0:
             gen.env["_grad_of"] = grad_info
             lines.append(f"_buf[{gen.word(self.grad_slot)}] = _grad_of({src}, _s, {kernel!r}, {self.name!r}, "
-                         f"{self.ndim_total})")
+                         f"{self.ndim_total}, {stage})")
         return lines
 
 
@@ -174,12 +190,13 @@ class TensorPacking(ArrayPacking):
         kernel = gen.kernel_name
         gen.env["_tensor"], gen.env["_tensor_grad"] = tensor_info, tensor_grad_info
         value = f"{src}.value" if self.pair else src
-        lines = [f"_p, _s = _tensor({value}, {kernel!r}, {self.name!r}, {gen.on_device})",
+        stage = gen.stage()
+        lines = [f"_p, _s = _tensor({value}, {kernel!r}, {self.name!r}, {stage})",
                  f"_buf[{gen.word(self.slot)}] = _p"]
         lines += [f"_buf[{gen.word(self.slot + 1 + d)}] = _s[{d}]" for d in range(self.ndim)]
         if self.grad_slot >= 0:
             lines.append(f"_buf[{gen.word(self.grad_slot)}] = _tensor_grad({src}, _s, {kernel!r}, {self.name!r}, "
-                         f"{gen.on_device})")
+                         f"{stage})")
         return lines
 
 
@@ -194,6 +211,8 @@ class BuilderPacking(Packing):
     def launch_code(self, gen: LaunchCode, src: str) -> list[str]:
         kernel = gen.kernel_name
         gen.env["_builder"], gen.env["_builder_done"] = builder_info, builder_done
+        if gen.on_device:  # the count is the device's: wait for the kernel (its triplets are device memory)
+            gen.after.append("_sync()")
         gen.after.append(f"_builder_done({src}, {kernel!r}, {self.name!r})")
         return [f"_buf[{gen.word(self.slot)}:{gen.word(self.slot + 8)}] = _builder({src}, {kernel!r}, "
                 f"{self.name!r}, {self.dtype.name!r})"]
@@ -239,27 +258,28 @@ def member(value, path):
     return value
 
 
-def grad_info(a, shape, kernel, param, ndim):
+def grad_info(a, shape, kernel, param, ndim, stage=None):
     """The base address of the gradient of ndarray argument `a` (a ti.ndarray's .grad; tensors: TensorPacking)."""
     grad = getattr(a, "grad", None)
     if grad is None:
         raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' has no gradient")
-    ptr, gshape = array_info(grad, kernel, param + ".grad", ndim)
+    ptr, gshape = array_info(grad, kernel, param + ".grad", ndim, stage)
     if tuple(gshape) != tuple(shape):
         raise SimgradTypeError(f"kernel {kernel}: the gradient of '{param}' has shape {tuple(gshape)}, "
                                f"its array {tuple(shape)}")
     return ptr
 
 
-def array_info(a, kernel, param, ndim):
-    """(base address, shape) of an ndarray argument: a numpy array or a ti.ndarray (tensors: TensorPacking)."""
+def array_info(a, kernel, param, ndim, stage=None):
+    """(base address, shape) of an ndarray argument: a numpy array or a ti.ndarray (tensors: TensorPacking).
+    `stage` (an asynchronous device's launcher): a numpy array's device copy (runtime/gpu_launch.py Staging)."""
     if isinstance(a, np.ndarray):
         if not a.flags.c_contiguous:
             raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' must be C-contiguous "
                                    "(use np.ascontiguousarray)")
-        return a.ctypes.data, a.shape
-    if hasattr(a, "_ndarray"):
-        return array_info(a._ndarray, kernel, param, ndim)
+        return (a.ctypes.data if stage is None else stage(a)), a.shape
+    if hasattr(a, "_ndarray_data"):  # device memory already: no staging, and no synchronization
+        return array_info(a._ndarray_data, kernel, param, ndim)
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")
 
 

@@ -11,9 +11,11 @@ subclasses, at the user's line).
 from __future__ import annotations
 
 import ctypes
+import functools
 import mmap
 import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -43,6 +45,12 @@ def sim_requested() -> bool:
     return os.environ.get("SIMGRAD_GPU_SIM", "") not in ("", "0")
 
 
+def sim_deferred() -> bool:
+    """SIMGRAD_GPU_SIM=async: the simulated GPU queues its work until a synchronize (HostDriver(deferred=True)),
+    so a Python-scope access that reads device memory without synchronizing first reads stale data in tests."""
+    return os.environ.get("SIMGRAD_GPU_SIM", "") == "async"
+
+
 def cuda_available() -> bool:
     """A CUDA driver that initialises and at least one device (cuda-python installed)."""
     try:
@@ -64,6 +72,7 @@ class Device:
 
     name = "device"
     asynchronous = False  # launches return before the kernel ends (the host must synchronize to see results)
+    pending = False  # work was queued since the last synchronize (what the host's access hook asks)
 
     def alloc(self, nbytes: int) -> int:
         raise NotImplementedError
@@ -87,6 +96,11 @@ class Device:
     def to_host(self, dst: np.ndarray, src: int) -> None:
         raise NotImplementedError
 
+    def upload(self, dst: int, src: np.ndarray) -> None:
+        """Copy `src` to device address `dst` in stream order (after the work queued before it, before the work
+        queued after it) without waiting for the device; `src` may be changed as soon as this returns."""
+        raise NotImplementedError
+
     def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
         """Load a module (PTX text on the GPU, native function addresses on the host): symbol -> function."""
         raise NotImplementedError
@@ -94,6 +108,15 @@ class Device:
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         """Run `fn(ctx)` on grid x block threads (asynchronously on the GPU)."""
         raise NotImplementedError
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        """`launch(fn, grid, block, ctx)` as a call without arguments, its checks and parameters made once (a
+        launcher's segment: runtime/gpu_launch.py)."""
+        return functools.partial(self.launch, fn, grid, block, ctx)
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        """`upload(dst, src)` as a call without arguments (`src`: the launcher's context, alive as long)."""
+        return functools.partial(self.upload, dst, src)
 
     def synchronize(self) -> None:
         raise NotImplementedError
@@ -103,25 +126,49 @@ class Device:
         raise NotImplementedError
 
     def elapsed_ms(self, start: Any, end: Any) -> float:
+        """Milliseconds between two recorded events (waits for `end`)."""
         raise NotImplementedError
+
+    def destroy_event(self, e: Any) -> None:
+        """Release an event once its times were read."""
 
 
 _GRID_FN = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64)
 
 
+class HostEvent:
+    """A timing event of the HostDriver: the host clock when the queue reached it (None until then)."""
+
+    __slots__ = ("t",)
+
+    def __init__(self, t: float | None = None) -> None:
+        self.t = t
+
+
 class HostDriver(Device):
     """The simulated GPU: host memory; a launch runs the grid's blocks on the thread pool and, in a block, its
-    threads one after another, each with its own special registers (runtime/ll/sim_grid.ll). Launches are
-    synchronous: the host sees their effects at once, as after a cuCtxSynchronize."""
+    threads one after another, each with its own special registers (runtime/ll/sim_grid.ll).
+
+    By default launches run at once (the host sees their effects as after a cuCtxSynchronize). `deferred=True`
+    (SIMGRAD_GPU_SIM=async) makes it an asynchronous device that queues launches, uploads and events and runs
+    them only at synchronize(), or before a synchronous copy (as cuMemcpyHtoD/DtoH wait for the stream): a
+    Python-scope access that forgot to synchronize reads stale values, which tests then see."""
 
     name = "simulated GPU (host)"
     compute_capability = (0, 0)
 
-    def __init__(self) -> None:
+    def __init__(self, deferred: bool = False) -> None:
         self._blocks: dict[int, np.ndarray] = {}
         self._reserved: dict[int, mmap.mmap] = {}
         self._grid: Any = None
         self.launches = 0  # kernels launched (tests count them)
+        self.deferred = self.asynchronous = deferred
+        self.syncs = 0  # synchronize() calls that ran queued work (tests count them)
+        self._queue: list[tuple] = []
+
+    @property
+    def pending(self) -> bool:  # type: ignore[override]
+        return bool(self._queue)
 
     def alloc(self, nbytes: int) -> int:
         buf = np.zeros(max(int(nbytes), 1) + 64, dtype=np.uint8)
@@ -130,8 +177,12 @@ class HostDriver(Device):
         return ptr
 
     def free(self, ptr: int) -> None:
-        if self._blocks.pop(ptr, None) is None:
+        if ptr not in self._blocks:
             raise DeviceError(f"free of an address this device did not allocate: {ptr:#x}", caller_loc())
+        if self._queue:  # queued work may still use it: freed in its turn
+            self._queue.append(("free", ptr))
+        else:
+            del self._blocks[ptr]
 
     def alloc_shared(self, nbytes: int) -> np.ndarray:
         ptr = self.alloc(nbytes)
@@ -151,13 +202,20 @@ class HostDriver(Device):
             any(base <= ptr < base + len(region) for base, region in self._reserved.items())
 
     def to_device(self, dst: int, src: np.ndarray) -> None:
+        self.synchronize()
         src = np.ascontiguousarray(src)
         ctypes.memmove(dst, src.ctypes.data, src.nbytes)
 
     def to_host(self, dst: np.ndarray, src: int) -> None:
         if not dst.flags.c_contiguous:
             raise ValueError("to_host needs a C-contiguous array")
+        self.synchronize()
         ctypes.memmove(dst.ctypes.data, src, dst.nbytes)
+
+    def upload(self, dst: int, src: np.ndarray) -> None:
+        if not self.deferred:
+            return self.to_device(dst, src)
+        self._queue.append(("copy", dst, np.array(src, copy=True, order="C")))  # the bytes as they are now
 
     def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
         """`image` maps symbols to native addresses of `void fn(ptr ctx, ptr sreg)` (already linked)."""
@@ -169,26 +227,69 @@ class HostDriver(Device):
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         """`fn` is the native address of `void fn(ptr ctx, ptr sreg)`; `ctx` a context whose header holds the
         thread pool's parallel_for (runtime/abi.py CTX_PFOR), as every kernel context does."""
+        self._check_config(grid, block)
+        self._launch(fn, grid, block, ctx)
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        self._check_config(grid, block)
+        return functools.partial(self._launch, fn, grid, block, ctx)
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        if self.deferred or not src.flags.c_contiguous:
+            return functools.partial(self.upload, dst, src)
+        return functools.partial(ctypes.memmove, dst, src.ctypes.data, src.nbytes)
+
+    @staticmethod
+    def _check_config(grid: int, block: int) -> None:
         if grid < 1 or block < 1 or block > 1024:
             raise DeviceError(f"invalid launch configuration: grid={grid}, block={block} (block must be 1..1024)",
                               caller_loc())
+
+    def _launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
+        self.launches += 1
+        if self.deferred:
+            self._queue.append(("launch", fn, grid, block, ctx))
+        else:
+            self._run_grid(fn, grid, block, ctx)
+
+    def _run_grid(self, fn: int, grid: int, block: int, ctx: int) -> None:
         if self._grid is None:
             from simgrad.runtime import abi, ll
             from simgrad.runtime.jit import get_jit
 
             text = ll.load("sim_grid", pfor_slot=abi.CTX_PFOR) + ll.load("sim_blocks", symbol="simgrad_sim_blocks")
             self._grid = _GRID_FN(get_jit().load(text, ["simgrad_sim_grid"])["simgrad_sim_grid"])
-        self.launches += 1
         self._grid(ctx, fn, block, grid)
 
     def synchronize(self) -> None:
-        pass
+        """Run the queued work in order (deferred mode; nothing to do otherwise)."""
+        if not self._queue:
+            return
+        self.syncs += 1
+        queue, self._queue = self._queue, []
+        for op in queue:
+            if op[0] == "launch":
+                self._run_grid(*op[1:])
+            elif op[0] == "copy":
+                _, dst, src = op
+                ctypes.memmove(dst, src.ctypes.data, src.nbytes)
+            elif op[0] == "free":
+                self._blocks.pop(op[1], None)
+            else:
+                op[1].t = time.perf_counter()
 
-    def event(self) -> float:
-        return time.perf_counter()
+    def event(self) -> HostEvent:
+        if not self.deferred:
+            return HostEvent(time.perf_counter())
+        e = HostEvent()
+        self._queue.append(("event", e))
+        return e
 
-    def elapsed_ms(self, start: float, end: float) -> float:
-        return (end - start) * 1e3
+    def elapsed_ms(self, start: HostEvent, end: HostEvent) -> float:
+        if end.t is None or start.t is None:
+            self.synchronize()
+        assert start.t is not None and end.t is not None
+        return (end.t - start.t) * 1e3
 
 
 class CudaDriver(Device):
@@ -257,6 +358,13 @@ class CudaDriver(Device):
     def to_host(self, dst: np.ndarray, src: int) -> None:
         self._check(self.cu.cuMemcpyDtoH(dst.ctypes.data, src, dst.nbytes))
 
+    def upload(self, dst: int, src: np.ndarray) -> None:
+        """cuMemcpyHtoDAsync on the default stream: from pageable memory the driver stages the bytes before it
+        returns, without synchronizing (CUDA's "API synchronization behavior"), so `src` may change at once."""
+        src = np.ascontiguousarray(src)
+        self._check(self.cu.cuMemcpyHtoDAsync(dst, src.ctypes.data, src.nbytes, 0))
+        self.pending = True
+
     def load_module(self, image: Any, symbols: list[str]) -> dict[str, Any]:
         data = image.encode() + b"\0" if isinstance(image, str) else image
         module = self._check(self.cu.cuModuleLoadData(data))
@@ -264,21 +372,48 @@ class CudaDriver(Device):
         return {s: self._check(self.cu.cuModuleGetFunction(module, s.encode())) for s in symbols}
 
     def launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
-        arg = np.array([ctx], dtype=np.uint64)  # the kernel's one parameter: the context's device address
+        self.prepare_launch(fn, grid, block, ctx)()
+
+    def prepare_launch(self, fn: Any, grid: int, block: int, ctx: int) -> Callable[[], object]:
+        """cuLaunchKernel with its kernelParams built once: the kernel's one parameter, the context's device
+        address (the driver copies the parameters when the launch is queued)."""
+        arg = np.array([ctx], dtype=np.uint64)
         params = np.array([arg.ctypes.data], dtype=np.uint64)
-        self._check(self.cu.cuLaunchKernel(fn, grid, 1, 1, block, 1, 1, 0, 0, params.ctypes.data, 0))
+        launch, check, pp = self.cu.cuLaunchKernel, self._check, params.ctypes.data
+
+        def run(_keep=(arg, params)) -> None:
+            check(launch(fn, grid, 1, 1, block, 1, 1, 0, 0, pp, 0))
+            self.pending = True
+
+        return run
+
+    def prepare_upload(self, dst: int, src: np.ndarray) -> Callable[[], object]:
+        copy, check, p, n = self.cu.cuMemcpyHtoDAsync, self._check, src.ctypes.data, src.nbytes
+
+        def run(_keep=src) -> None:
+            check(copy(dst, p, n, 0))
+            self.pending = True
+
+        return run
 
     def synchronize(self) -> None:
+        """cuCtxSynchronize: also where a fault of a kernel that did not wait is reported (a DeviceError)."""
+        self.pending = False
         self._check(self.cu.cuCtxSynchronize())
 
     def event(self) -> Any:
-        e = self._check(self.cu.cuEventCreate(0))
+        e = self._check(self.cu.cuEventCreate(0))  # CU_EVENT_DEFAULT: timing enabled
         self._check(self.cu.cuEventRecord(e, 0))
         return e
 
     def elapsed_ms(self, start: Any, end: Any) -> float:
         self._check(self.cu.cuEventSynchronize(end))
-        return float(self._check(self.cu.cuEventElapsedTime(start, end)))
+        # cuda-bindings 12.8+ also has the _v2 form (same call, same result); older ones only the first
+        elapsed = getattr(self.cu, "cuEventElapsedTime", None) or self.cu.cuEventElapsedTime_v2
+        return float(self._check(elapsed(start, end)))
+
+    def destroy_event(self, e: Any) -> None:
+        self._check(self.cu.cuEventDestroy(e))
 
 
 def saturating_grid(device: Device, block: int) -> int:

@@ -1,11 +1,13 @@
 """The launcher of a kernel on a device (arch=cuda: the GPU through cuda-python, or the simulated GPU).
 
-The arguments are packed into the host context exactly as on the CPU (runtime/launch.py); a launch then copies
-the context to the device, runs the kernel's segments in order (codegen/nvptx.py `Launch`: grid, block), and,
-when the kernel returns values or can report an error, waits for the device and reads the return words back.
-On an asynchronous device (the GPU) every launch waits for now: fields live in managed memory that Python-scope
-access reads directly, and that access does not synchronize by itself yet (the next step: launches stay
-asynchronous and field access, ti.sync() and the next waiting launch meet the device)."""
+The arguments are packed into the host context exactly as on the CPU (runtime/launch.py); a launch then uploads
+the context to the device (stream-ordered, `Device.upload`), queues the kernel's segments in order
+(codegen/nvptx.py `Launch`: grid, block) and returns without waiting, as Taichi's launches do: Python-scope
+access of fields and ndarrays synchronizes first (lang/program.py `sync_for_host`), as do ti.sync() and the
+next launch that waits. A launch waits only when the kernel returns values or can report an error (its error
+table is not empty), or when host arrays were staged for it (`Staging`: numpy arrays and host tensors on an
+asynchronous device are copied in before the launch and back after it, as Taichi does for external arrays on
+CUDA). A fault of a kernel that did not wait surfaces at the next synchronize (a DeviceError there)."""
 
 from __future__ import annotations
 
@@ -13,14 +15,56 @@ from typing import Any
 
 import numpy as np
 
-from simgrad.errors import SimgradNotSupportedError, caller_loc
 from simgrad.runtime.abi import CTX_TAPE, CTX_TAPE_CAP, CTX_TAPE_SERIAL
+from simgrad.runtime.args import LaunchCode
 from simgrad.runtime.device import Device, saturating_grid
 from simgrad.runtime.launch import Launcher
 
 
+class Staging:
+    """Host arrays passed to one launcher's kernel on an asynchronous device: each copied to device memory when
+    its argument is packed (`stage`, one copy per array however often it is passed), and, after the launch,
+    back into the host array once the device is done (`finish`), the device copies freed."""
+
+    def __init__(self, device: Device) -> None:
+        self.device = device
+        self.items: list[tuple[np.ndarray, int]] = []
+
+    def begin(self) -> None:
+        """Drop what a launch that failed before its call left (never copied back: its kernel did not run)."""
+        if self.items:
+            items, self.items = self.items, []
+            for _, p in items:
+                self.device.free(p)
+
+    def stage(self, a: np.ndarray) -> int:
+        for host, p in self.items:
+            if host is a:
+                return p
+        p = self.device.alloc(a.nbytes)
+        self.items.append((a, p))
+        self.device.upload(p, a)
+        return p
+
+    def finish(self) -> None:
+        if not self.items:
+            return
+        items, self.items = self.items, []
+        try:
+            self.device.synchronize()
+            for host, p in items:
+                if host.flags.writeable:
+                    self.device.to_host(host, p)
+        finally:
+            for _, p in items:
+                self.device.free(p)
+
+
 class GpuLauncher(Launcher):
-    """`launches`: (function handle, grid or None for a saturating grid, block) in launch order."""
+    """`launches`: (function handle, grid or None for a saturating grid, block) in launch order. The generated
+    launch function (runtime/launch.py) makes the device calls itself: the upload, one prepared call per segment
+    (`Device.prepare_launch`: the configuration checked and the kernel parameters built once), and the wait and
+    read-back when there is one; no loop or per-launch Python beyond those calls."""
 
     def __init__(self, device: Device, launches: list[tuple[Any, int | None, int]], kernel_name: str, params: list,
                  nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
@@ -30,37 +74,39 @@ class GpuLauncher(Launcher):
         self.launches = [(fn, min(grid or (1 << 31), saturating_grid(device, block)), block)
                          for fn, grid, block in launches]
         self.dctx = self.dtape = 0
+        self.staging = Staging(device)
+        # values to read back, or an error to report at its line: wait for the device; else return at once
+        self.waits = bool(returns) or bool(error_table)
+        self.nreturns = len(returns)
         super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
-        self.dctx = device.alloc(self.buf.nbytes)
-        # values to read back, or an error to report at its line; and, until Python-scope access to fields
-        # synchronizes by itself, every launch on an asynchronous device (the GPU): the host sees its results
-        self.waits = bool(returns) or bool(error_table) or device.asynchronous
-        self._ret = self.buf[self.ret_slot:self.ret_slot + len(returns)]
-        if device.asynchronous:  # a GPU: host arrays are not its memory
-            self.launch = self._device_arrays_only(self.launch)
+        self.pack = None  # no native Sequence replays it (lang/graph.py and the Tape launch from Python on a GPU)
 
-    def _device_arrays_only(self, launch):
-        def checked(*args):
-            if any(isinstance(a, np.ndarray) for a in args):
-                raise SimgradNotSupportedError(
-                    f"kernel {self.kernel_name}: a numpy array argument on arch=cuda (its memory is the host's); "
-                    "pass a ti.ndarray (device memory) and copy with from_numpy/to_numpy", caller_loc())
-            return launch(*args)
+    def launch_code(self, env: dict) -> LaunchCode:
+        """On an asynchronous device host arrays are staged (`Staging`) and Python after the call synchronizes."""
+        if not self.device.asynchronous:
+            return super().launch_code(env)
+        env["_sync"] = self.device.synchronize
+        return LaunchCode(self.kernel_name, env, self.views, on_device=True, staging=self.staging)
 
-        return checked
+    def call_lines(self, env: dict) -> list[str]:
+        d = self.device
+        self.dctx = d.alloc(self.buf.nbytes)
+        env["_upload"] = d.prepare_upload(self.dctx, self.buf)
+        lines = ["_upload()"]
+        for k, (fn, grid, block) in enumerate(self.launches):
+            env[f"_segment{k}"] = d.prepare_launch(fn, grid, block, self.dctx)
+            lines.append(f"_segment{k}()")
+        if self.waits:
+            env["_wait"] = d.synchronize
+            lines.append("_wait()")
+            ret = self.buf[self.ret_slot:self.ret_slot + self.nreturns]
+            if len(ret):
+                env["_returns"], env["_to_host"] = ret, d.to_host
+                lines.append(f"_to_host(_returns, {self.dctx + 8 * self.ret_slot})")
+        return lines
 
     def native_entry(self, address: int):
-        return self.run
-
-    def run(self, _addr: int) -> None:
-        d = self.device
-        d.to_device(self.dctx, self.buf)
-        for fn, grid, block in self.launches:
-            d.launch(fn, grid, block, self.dctx)
-        if self.waits:
-            d.synchronize()
-            if len(self._ret):
-                d.to_host(self._ret, self.dctx + 8 * self.ret_slot)
+        return None  # the generated launch calls the device (call_lines)
 
     def attach_tape(self, entries: int) -> None:
         """The serial part's tape in device memory, and, for a tape too deep for a thread's local memory, a

@@ -89,15 +89,25 @@ class Launcher:
         self.buf[CTX_TAPE_CAP] = entries
         self.buf[CTX_TAPE_SERIAL] = tape.ctypes.data + 8 * entries * (regions - 1)
 
+    def launch_code(self, env: dict) -> LaunchCode:
+        """What the packings write their lines with (the GPU launcher's stages host arrays)."""
+        return LaunchCode(self.kernel_name, env, self.views)
+
+    def call_lines(self, env: dict) -> list[str]:
+        """The launcher's lines that run the kernel once the context is packed: one native call here; the GPU
+        launcher's upload, its segments' launches and its wait (runtime/gpu_launch.py)."""
+        return ["_call(_addr)"]
+
     def _generate(self, params: list, returns: list):
         env = {"_buf": self.buf, "_call": self.entry, "_addr": self.buf.ctypes.data, "_err": self.program.error,
                "_fail": self.fail, "_interrupted": self.clear_interrupt,
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
-        gen = LaunchCode(self.kernel_name, env, self.views, bool(getattr(self.program.device, "asynchronous", False)))
+        gen = self.launch_code(env)
         names = [p.name for p in params]
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
-        lines.append("    _call(_addr)")
+        lines = ["    " + ln for ln in gen.before] + lines
+        lines += ["    " + ln for ln in self.call_lines(env)]
         lines.append("    if _err[0]: _fail()")
         lines += ["    " + ln for ln in gen.after]
         if returns:
@@ -255,7 +265,7 @@ def replay_key(value):
     anew every time."""
     if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
         return (type(value).__name__, value)
-    if not isinstance(value, np.ndarray) and not hasattr(value, "_ndarray") and (
+    if not isinstance(value, np.ndarray) and not hasattr(value, "_ndarray_data") and (
             hasattr(value, "__dlpack__") or hasattr(value, "data_ptr") or hasattr(value, "__cuda_array_interface__")):
         return ("volatile", next(_VOLATILE))
     return ("object", id(value))

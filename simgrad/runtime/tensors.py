@@ -2,8 +2,9 @@
 CuPy, numpy), and explicit (value, gradient) pairs. Kernels read and write the caller's memory (zero copy),
 so what cannot be passed that way is refused at the user's line, never copied silently: a non-contiguous
 layout (the kernel addresses elements as a dense row-major block), a dtype kernels have no type for, or
-memory on another device than the program's (a CUDA tensor on arch=cpu, a host tensor on an asynchronous
-GPU). On arch=cuda a CUDA tensor's data pointer is a device address kernels can take as it is; DLPack's
+memory on another device than the program's (a CUDA tensor on arch=cpu). On arch=cuda a CUDA tensor's data
+pointer is a device address kernels can take as it is, and host arrays go through a device copy made for the
+launch and copied back after it (runtime/gpu_launch.py Staging, as Taichi does); DLPack's
 device tuple (`__dlpack_device__`, kDLCUDA = 2) says where an array lives without importing its library."""
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ def is_torch(a) -> bool:
 def is_foreign(a) -> bool:
     """Whether `a` is an array this module passes: a torch tensor, a GradPair, or a non-numpy object with
     `__dlpack__` (numpy arrays and ti.ndarray objects are the ndarray kind's own)."""
-    if isinstance(a, np.ndarray) or hasattr(a, "_ndarray"):
+    if isinstance(a, np.ndarray) or hasattr(a, "_ndarray_data"):
         return False
     return isinstance(a, GradPair) or is_torch(a) or hasattr(a, "__dlpack__")
 
@@ -109,14 +110,16 @@ def _dlpack_view(a, param: str) -> np.ndarray:
                                caller_loc()) from None
 
 
-def tensor_info(a, kernel: str, param: str, on_device: bool):
+def tensor_info(a, kernel: str, param: str, stage=None):
     """(base address, shape) of a torch tensor or DLPack array argument, checked: C-contiguous, and in the
-    program's memory (`on_device`: the program runs on an asynchronous GPU, whose kernels take CUDA tensors;
-    else host memory)."""
+    program's memory. `stage` (the program runs on an asynchronous GPU; runtime/gpu_launch.py Staging): CUDA
+    tensors are taken as they are, host arrays and tensors through their device copy, as Taichi copies external
+    arrays in and out; without it (the CPU) host memory only."""
+    on_device = stage is not None
     if is_torch(a):
         dev = a.device.type
-        if dev != ("cuda" if on_device else "cpu"):
-            where = "arch=cuda takes CUDA tensors" if on_device else "the program runs on the CPU"
+        if dev != "cpu" and not (on_device and dev == "cuda"):
+            where = "the program runs on the CPU" if not on_device else "arch=cuda takes CUDA and host tensors"
             raise SimgradTypeError(f"kernel {kernel}: tensor argument '{param}' is on device {a.device}: {where} "
                                    f"(move it explicitly: .to(...))", caller_loc())
         if not a.is_contiguous():
@@ -125,13 +128,12 @@ def tensor_info(a, kernel: str, param: str, on_device: bool):
                                     "t.contiguous() (a copy: write results back yourself)", caller_loc())
         if a.requires_grad and a.grad is None:  # as Taichi: every tensor that requires grad gets one at launch
             a.grad = a.new_zeros(a.shape)
+        if on_device and dev == "cpu":  # its memory as a numpy array (shared), staged
+            return stage(a.detach().numpy()), tuple(a.shape)
         return a.data_ptr(), tuple(a.shape)
     if isinstance(a, np.ndarray):
         arr = a
-    elif on_device:
-        if not hasattr(a, "__cuda_array_interface__"):
-            raise SimgradTypeError(f"kernel {kernel}: array argument '{param}' is not GPU memory (arch=cuda takes "
-                                   "CUDA tensors and objects with __cuda_array_interface__)", caller_loc())
+    elif on_device and hasattr(a, "__cuda_array_interface__"):
         cai = a.__cuda_array_interface__
         if cai.get("strides") is not None and \
                 tuple(cai["strides"]) != tuple(np.empty(cai["shape"], np.dtype(cai["typestr"])).strides):
@@ -145,12 +147,11 @@ def tensor_info(a, kernel: str, param: str, on_device: bool):
                                 f"strides {arr.strides} for shape {arr.shape}; pass a C-contiguous copy",
                                 caller_loc())
     if on_device:
-        raise SimgradTypeError(f"kernel {kernel}: array argument '{param}' is host memory; arch=cuda takes CUDA "
-                               "tensors (or pass a ti.ndarray)", caller_loc())
+        return stage(arr), arr.shape
     return arr.ctypes.data, arr.shape
 
 
-def tensor_grad_info(a, shape, kernel: str, param: str, on_device: bool) -> int:
+def tensor_grad_info(a, shape, kernel: str, param: str, stage=None) -> int:
     """The base address of the gradient of a tensor argument: a GradPair's `grad`, else the tensor's `.grad`
     (tensor_info made it zero when it had none yet, as Taichi does); its shape must be the argument's."""
     if isinstance(a, GradPair):
@@ -160,7 +161,7 @@ def tensor_grad_info(a, shape, kernel: str, param: str, on_device: bool) -> int:
         if grad is None:
             raise SimgradTypeError(f"kernel {kernel}: argument '{param}' has no gradient (a tensor that requires "
                                    "grad, or ti.ad.with_grad(value, grad))", caller_loc())
-    ptr, gshape = tensor_info(grad, kernel, param + ".grad", on_device)
+    ptr, gshape = tensor_info(grad, kernel, param + ".grad", stage)
     if tuple(gshape) != tuple(shape):
         raise SimgradTypeError(f"kernel {kernel}: the gradient of '{param}' has shape {tuple(gshape)}, its array "
                                f"{tuple(shape)}", caller_loc())

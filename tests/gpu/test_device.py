@@ -1,6 +1,8 @@
 """The device interface (runtime/device.py): the host implementation, and the CUDA one where cuda-python and
 a GPU exist."""
 
+import ctypes
+
 import numpy as np
 import pytest
 
@@ -40,9 +42,46 @@ def test_cuda_driver_roundtrip_and_oom():
     b = np.zeros_like(a)
     d.to_host(b, p)
     assert (a == b).all()
+    c = a + 1
+    d.prepare_upload(p, c)()  # cuMemcpyHtoDAsync: c may change at once, the device has its bytes
+    c[:] = 0
+    assert d.pending
+    e0 = d.event()
+    d.synchronize()
+    e1 = d.event()
+    assert not d.pending and d.elapsed_ms(e0, e1) >= 0
+    d.destroy_event(e0)
+    d.destroy_event(e1)
+    d.to_host(b, p)
+    assert (b == a + 1).all()
     d.free(p)
     with pytest.raises(device.DeviceMemoryError):
         d.alloc(1 << 50)
+
+
+def test_deferred_host_driver_runs_its_queue_at_synchronize():
+    """HostDriver(deferred=True): uploads are the bytes at upload time, run in order with launches and events at
+    synchronize(); a synchronous copy synchronizes first; frees of memory queued work may use wait their turn."""
+    d = device.HostDriver(deferred=True)
+    assert d.asynchronous and not d.pending
+    p = d.alloc(64)
+    a = np.arange(8, dtype=np.int64)
+    d.upload(p, a)
+    a[:] = -1  # after the upload: not what the device gets
+    e0 = d.event()
+    d.prepare_upload(p + 32, np.full(4, 7, np.int64))()
+    e1 = d.event()
+    raw = np.ctypeslib.as_array((ctypes.c_int64 * 8).from_address(p))
+    assert d.pending and (raw == 0).all()  # nothing ran yet
+    d.free(p)
+    assert p in d._blocks  # queued: the copies before it still write there
+    assert d.elapsed_ms(e0, e1) >= 0 and not d.pending  # reading an event's time ran the queue
+    assert p not in d._blocks
+    q = d.alloc(64)
+    d.upload(q, np.arange(8, dtype=np.int64))
+    b = np.zeros(8, np.int64)
+    d.to_host(b, q)
+    assert (b == np.arange(8)).all()
 
 
 def test_host_driver_runs_a_kernels_launch_sequence():

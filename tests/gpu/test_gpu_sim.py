@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import simgrad as ti
-from simgrad.errors import SimgradNotSupportedError
 from tests.gpu.kernels import CASES
 
 
@@ -370,26 +369,6 @@ def test_what_kernels_read_is_device_memory(sim):
     assert not dev.owns(np.zeros(4).ctypes.data)
     assert (a.to_numpy() == np.arange(10)).all() and (x.to_numpy() == 2).all()
     ti.sync()
-
-
-def test_numpy_arguments_are_refused_on_an_asynchronous_device(sim, monkeypatch):
-    """On a GPU a numpy array is host memory the kernel cannot read: a located error, not a wild pointer
-    (simulated here by marking the host device asynchronous)."""
-    from simgrad.lang.program import get_program
-
-    monkeypatch.setattr(get_program().device, "asynchronous", True)
-
-    @ti.kernel
-    def k(a: ti.types.ndarray()):
-        for i in range(4):
-            a[i] = i
-
-    with pytest.raises(SimgradNotSupportedError, match="numpy array argument on arch=cuda") as e:
-        k(np.zeros(4, np.int32))
-    assert "test_gpu_sim.py" in str(e.value)
-    a = ti.ndarray(ti.i32, 4)
-    k(a)
-    assert (a.to_numpy() == np.arange(4)).all()
 
 
 def test_random_numbers_on_the_gpu(sim):
