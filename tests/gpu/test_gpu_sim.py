@@ -77,7 +77,7 @@ def test_sparse_fields_on_the_gpu(sim):
 
     @ti.kernel
     def sums() -> ti.types.vector(4, ti.f64):
-        sp, sb, sd, cnt = ti.f64(0), ti.f64(0), ti.f64(0), ti.f64(0)
+        sp, sb, sd, cnt = ti.f64(0.0), ti.f64(0.0), ti.f64(0.0), ti.f64(0.0)
         for i in p:
             sp += p[i]
             cnt += 1
