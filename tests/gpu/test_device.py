@@ -33,6 +33,38 @@ def test_host_driver_bad_launch_is_located():
     assert "test_device.py" in str(e.value)
 
 
+class _FakeCu:
+    """The two error-text calls of cuda.bindings.driver that CudaDriver._check makes (bytes, as cuda-python
+    returns them), with the CUresult values the driver API documents."""
+
+    NAMES = {2: b"CUDA_ERROR_OUT_OF_MEMORY", 700: b"CUDA_ERROR_ILLEGAL_ADDRESS", 710: b"CUDA_ERROR_ASSERT",
+             701: b"CUDA_ERROR_LAUNCH_OUT_OF_RESOURCES"}
+
+    def cuGetErrorName(self, err):
+        return 0, self.NAMES[int(err)]
+
+    def cuGetErrorString(self, err):
+        return 0, b"text of " + self.NAMES[int(err)]
+
+
+@pytest.mark.parametrize("code, cls, words", [
+    (2, device.DeviceMemoryError, "CUDA_ERROR_OUT_OF_MEMORY (2)"),
+    (701, device.DeviceError, "CUDA_ERROR_LAUNCH_OUT_OF_RESOURCES (701)"),
+    (710, device.DeviceError, "a device-side assertion failed"),
+    (700, device.DeviceError, "CUDA_ERROR_ILLEGAL_ADDRESS (700)"),
+])
+def test_cuda_errors_become_located_python_errors(code, cls, words):
+    """Without a GPU: CudaDriver's result check on the driver's error codes (out of memory is also a MemoryError;
+    a bad launch, an illegal address, a device-side assertion are DeviceErrors), located at the caller's line."""
+    d = device.CudaDriver.__new__(device.CudaDriver)
+    d.cu = _FakeCu()
+    assert d._check((0, 42)) == 42 and d._check((0, 1, 2)) == (1, 2) and d._check((0,)) is None
+    with pytest.raises(cls, match=words.replace("(", r"\(").replace(")", r"\)")) as e:
+        d._check((code,))
+    assert "test_device.py" in str(e.value)
+    assert isinstance(e.value, MemoryError) == (code == 2)
+
+
 @pytest.mark.skipif(not device.cuda_available(), reason="no CUDA driver/device (cuda-python) on this machine")
 def test_cuda_driver_roundtrip_and_oom():
     d = device.CudaDriver()
