@@ -108,7 +108,8 @@ class Reverse:
 
     @staticmethod
     def _parallel(s: Stmt) -> bool:
-        return s.op is Op.RANGE_FOR and s.attrs.get("parallel", False)
+        """A loop with an adjoint loop; a parallel listgen (frontend/loops.py, the GPU) is replayed as it is."""
+        return s.op is Op.RANGE_FOR and s.attrs.get("parallel", False) and not s.attrs.get("listgen", False)
 
     def adjoint_loop(self, loop: Stmt) -> None:
         begin, end = (self.fmap[id(o)] if o.op is not Op.CONST else o for o in loop.operands)
@@ -177,7 +178,8 @@ class Reverse:
             # an outer local read by a recomputed loop: its value where the loop stood, in scope
             self.fmap[id(s)] = self.bmap[id(s)] = self.held[id(s.operands[0])]
         elif op is Op.RANGE_FOR:
-            attrs = dict(s.attrs, parallel=False)
+            # replayed serially, except a top-level parallel listgen (it records nothing on the tape)
+            attrs = dict(s.attrs, parallel=depth == 0 and bool(s.attrs.get("listgen") and s.attrs.get("parallel")))
             new = self.b.emit(Op.RANGE_FOR, s.type, tuple(self.v(o) for o in s.operands), attrs, nblocks=1)
             self.fmap[id(s)] = new
             with self.b.inside(new.blocks[0]):

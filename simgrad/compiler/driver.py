@@ -157,7 +157,7 @@ def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix
 def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
     """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
     ir = IRKernel(kernel.name + name_suffix)
-    comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug)
+    comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug, parallel_listgen=prog.on_gpu)
     comp.guard = guard
     trees = len(prog.trees)
     slots, ret_matrix = _bind_params(kernel, comp, args)

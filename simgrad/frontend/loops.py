@@ -219,10 +219,10 @@ def _is_top(comp) -> bool:
 
 
 def _listed_loop(comp, node: SNode, total: int, cell_coords, axes, inner) -> None:
-    """The outermost loop of a top-level sparse struct-for, as Taichi runs it: a serial pass lists the
-    active cells of `node` (the first sparse node, with its dense ancestors flattened), then the parallel
-    loop runs over that list. Cells the loop activates itself (an adjoint's scatter into neighbours) are
-    not visited, and the parallel loop does no work for inactive cells."""
+    """The outermost loop of a top-level sparse struct-for, as Taichi runs it: a pass lists the active cells
+    of `node` (the first sparse node, with its dense ancestors flattened; serial, or parallel with
+    `comp.parallel_listgen`), then the parallel loop runs over that list. Cells the loop activates itself (an
+    adjoint's scatter into neighbours) are not visited, and the parallel loop does no work for inactive cells."""
     from simgrad.lang import sparse
     from simgrad.runtime.sparse import MAX_LISTS
 
@@ -242,11 +242,16 @@ def _listed_loop(comp, node: SNode, total: int, cell_coords, axes, inner) -> Non
     def scan(flat):
         with _if_active(comp, node, cell_coords(flat), axes):
             bb = comp.builder
-            n = bb.emit(Op.LOCAL_LOAD, dt.i32, (count,))
+            one = bb.const(1, dt.i32)
+            if comp.parallel_listgen:  # each active cell takes the next entry
+                n = bb.emit(Op.ATOMIC, dt.i32, (count, one), {"kind": "add"})
+            else:
+                n = bb.emit(Op.LOCAL_LOAD, dt.i32, (count,))
+                bb.emit(Op.LOCAL_STORE, None, (count, bb.binary(Op.ADD, n, one)))
             bb.emit(Op.SNODE_OP, dt.i32, (n, flat.stmt), {"op": "list_set", "snode": ref, "list": list_id})
-            bb.emit(Op.LOCAL_STORE, None, (count, bb.binary(Op.ADD, n, bb.const(1, dt.i32))))
 
-    user_config, comp.next_loop_config = comp.next_loop_config, {"serialize": True}
+    user_config, comp.next_loop_config = comp.next_loop_config, {"serialize": not comp.parallel_listgen,
+                                                                 "listgen": True}
     _emit_loop(comp, 0, total, scan)
     n = Expr(comp.builder.emit(Op.LOCAL_LOAD, dt.i32, (count,)))
     comp.next_loop_config = user_config  # ti.loop_config(...) meant the loop over the cells
@@ -330,6 +335,8 @@ def _emit_loop(comp, begin, end, body) -> None:
     attrs = {"parallel": parallel, "top": top}
     if cfg.get("block_dim"):
         attrs["block_dim"] = cfg["block_dim"]
+    if cfg.get("listgen"):
+        attrs["listgen"] = True  # lists a struct-for's cells: forward code even when parallel (autodiff/reverse.py)
     loop = comp.builder.emit(Op.RANGE_FOR, t, (b.stmt, e.stmt), attrs, nblocks=1)
     comp.loop_stack.append("parallel" if parallel else "serial")
     try:

@@ -62,8 +62,11 @@ class KernelLowering:
 
     MAX_INLINE_DEPTH = 64
 
-    def __init__(self, ir: Kernel, src: FunctionSource, debug: bool = False):
+    def __init__(self, ir: Kernel, src: FunctionSource, debug: bool = False, parallel_listgen: bool = False):
         self.ir = ir
+        # a sparse struct-for lists its active cells in parallel, in no fixed order (the GPU: one thread would
+        # walk every cell), instead of in one serial pass in cell order (the CPU)
+        self.parallel_listgen = parallel_listgen
         self.builder = Builder(ir.body)
         self.frames = [Frame(src, True)]
         self.loop_stack: list[str] = []  # "parallel" | "serial" for enclosing run-time loops

@@ -248,6 +248,7 @@ class SNode:
                                caller_loc())
         assert self.tree is not None
         self.tree.materialize()
+        sync_for_host()  # the pool table is the kernels' (arch=cuda: device memory they may still be updating)
         return self.tree.program.sparse.usage_of(self.pool)
 
     def deactivate_all(self) -> None:
@@ -263,6 +264,7 @@ class SNode:
         for n in sorted(nodes, key=lambda n: -len(n.path())):
             scope_hooks.sparse.deactivate_all(n)  # freed blocks are zeroed and kept for the next activations
             if n.kind != "bitmasked":
+                sync_for_host()
                 n.tree.program.sparse.restart_if_empty(n.pool)
 
     def lazy_grad(self) -> None:

@@ -124,6 +124,38 @@ def test_sparse_fields_on_the_gpu(sim):
                for k, row in enumerate(table))
 
 
+def test_sparse_struct_for_lists_its_cells_in_parallel(sim):
+    """On arch=cuda a struct-for's list of active cells is built by a grid of threads (each active cell takes
+    the next entry with an atomic add), not by one thread walking every cell; the gradient kernel replays it
+    the same way. Every active cell is visited once."""
+    x = ti.field(ti.f32, needs_grad=True)
+    ti.root.pointer(ti.ij, 64).dense(ti.ij, 2).place(x, x.grad)
+    loss = ti.field(ti.f32, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def init():
+        for i, j in ti.ndrange(128, 128):
+            if (i // 2 + j // 2) % 5 == 0:
+                x[i, j] = 1.0 + (i % 2)
+
+    @ti.kernel
+    def f():
+        for i, j in x:
+            loss[None] += x[i, j] ** 2
+
+    init()
+    with ti.ad.Tape(loss=loss):
+        f()
+    active = np.add.outer(np.arange(128) // 2, np.arange(128) // 2) % 5 == 0
+    vals = np.where(active, 1.0 + (np.arange(128) % 2)[:, None], 0.0)
+    assert loss[None] == pytest.approx((vals ** 2).sum())
+    np.testing.assert_allclose(x.grad.to_numpy(), 2 * vals)
+    for launcher in (f.instance(()).launcher, f.grad.launcher(())):
+        # (function, grid, block): the count's reset, the listgen, the count read, the loop over the list;
+        # before, the count and the listgen were one one-thread kernel
+        assert [grid * block > 1 for _, grid, block in launcher.launches[:4]] == [False, True, False, True]
+
+
 def test_sparse_gradient_on_the_gpu(sim):
     """Reverse mode over a pointer field on arch=cuda against the analytic gradient (float64)."""
     ti.init(arch=ti.cuda, default_fp=ti.f64)
