@@ -78,6 +78,9 @@ class GpuLauncher(Launcher):
         # values to read back, an error to report at its line, or printed output (Taichi waits for a kernel
         # with print statements): wait for the device; else return at once
         self.waits = bool(returns) or bool(error_table) or prints
+        # a launch on the GPU that did not wait has nothing to report yet (and the host does not touch the error
+        # buffer's managed memory while the kernel may run); the synchronous simulated GPU's can be interrupted
+        self.reads_errors = self.waits or not device.asynchronous
         self.nreturns = len(returns)
         super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
         self.pack = None  # no native Sequence replays it (lang/graph.py and the Tape launch from Python on a GPU)
