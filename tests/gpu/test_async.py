@@ -14,6 +14,9 @@ from simgrad.lang.program import get_program
 
 @pytest.fixture
 def dev(monkeypatch):
+    from simgrad.runtime import device
+
+    monkeypatch.setattr(device, "cuda_runtime_enabled", lambda: False)  # the deferred simulated GPU, on a GPU too
     monkeypatch.setenv("SIMGRAD_GPU_SIM", "async")
     ti.init(arch=ti.cuda)
     d = get_program().device
