@@ -23,6 +23,8 @@ from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.source import get_source
 from simgrad.ir import context
 from simgrad.ir.nodes import Kernel as IRKernel
+from simgrad.ir.nodes import walk
+from simgrad.ir.ops import Op
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.program import Program
 from simgrad.lang.struct import StructType
@@ -195,7 +197,9 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
             "tape_bound": ir.tape_bound if uses_tape else None,
             "tape_threads": getattr(cg, "tape_threads", 0),  # arch=cuda: per-thread regions of a deep tape
             "launches": [(ln.symbol.replace(symbol, "sg_kernel"), ln.grid, ln.block)
-                         for ln in getattr(cg, "launches", ())]}
+                         for ln in getattr(cg, "launches", ())],
+            # a kernel that prints waits on arch=cuda, so its output comes before the next statement's (Taichi)
+            "prints": prog.on_gpu and any(s.op is Op.PRINT for s in walk(ir.body))}
     return ir, stable, meta
 
 
@@ -242,7 +246,8 @@ def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
         fns = prog.device.load_module(prog.link(obj, names) if prog.gpu_sim else obj.decode(), names)
         launcher = GpuLauncher(prog.device, [(fns[s], grid, block) for s, grid, block in meta["launches"]],
                                meta["name"], meta["params"], meta["nslots"], meta["returns"], meta["errors"], prog,
-                               meta["ret_matrix"], meta.get("scratch_slots", 0), meta.get("tape_threads", 0))
+                               meta["ret_matrix"], meta.get("scratch_slots", 0), meta.get("prints", False),
+                               meta.get("tape_threads", 0))
     else:
         launcher = Launcher(meta["name"], meta["params"], prog.link(obj, ["sg_kernel"])["sg_kernel"], meta["nslots"],
                             meta["returns"], meta["errors"], prog, meta["ret_matrix"], meta.get("private_slots", 0),

@@ -300,22 +300,26 @@ class ScalarField(Field):
         return key
 
     def __getitem__(self, key):
-        if self.view is None:
+        view = self.view
+        if view is None:
             self._ensure()
+            view = self._view
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.sparse:
             return scope_hooks.sparse.get(self, self._unshift(key))
-        if self.view is not None:
-            v = self.view[key].item()
+        if view is not None:
+            v = view[key].item()
         else:
             flat, gather = self._indirect()
             v = flat[gather[key]].item()
         return int(v) if self.dtype is dt.u1 else v  # Taichi reads a u1 as an int, 0 or 1
 
     def __setitem__(self, key, value):
-        if self.view is None:
+        view = self.view
+        if view is None:
             self._ensure()
+            view = self._view
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.quant_type is not None:  # kept to its bits whatever the value, as in kernels and Taichi
@@ -323,8 +327,8 @@ class ScalarField(Field):
         _check_value(value, self.dtype, self.name)
         if self.sparse:
             return scope_hooks.sparse.set(self, self._unshift(key), value)
-        if self.view is not None:
-            self.view[key] = value
+        if view is not None:
+            view[key] = value
         else:
             flat, gather = self._indirect()
             flat[gather[key]] = value

@@ -259,12 +259,13 @@ class Program:
 
 
 _program: Program | None = None
+_async_device = None  # the current program's device when it is asynchronous (what sync_for_host asks)
 
 
 def get_program() -> Program:
-    global _program
     if _program is None:
-        _program = Program()
+        _set_program(Program())
+    assert _program is not None
     return _program
 
 
@@ -272,11 +273,16 @@ def sync_for_host() -> None:
     """The one hook in front of Python-scope access of device memory (field views and tree buffers,
     lang/field.py and lang/snode.py; ndarray data, lang/ndarray.py): on an asynchronous device, wait for the
     kernels still queued before the host reads or writes what they may use, as Taichi synchronizes there."""
-    p = _program
-    if p is not None:
-        d = p._device
-        if d is not None and d.pending:
-            d.synchronize()
+    d = _async_device  # None on the CPU and the synchronous simulated GPU: one global read
+    if d is not None and d.pending:
+        d.synchronize()
+
+
+def _set_program(p: Program | None) -> None:
+    global _program, _async_device
+    _program = p
+    d = p._device if p is not None else None
+    _async_device = d if d is not None and d.asynchronous else None
 
 
 def require_init(what: str) -> Program:
@@ -290,7 +296,6 @@ def require_init(what: str) -> Program:
 
 
 def init(arch=None, **kw) -> Program:
-    global _program
     from simgrad.lang import archs
 
     known = {"arch", "debug", "default_fp", "default_ip", "random_seed", "kernel_profiler", "ad_stack_size",
@@ -306,12 +311,12 @@ def init(arch=None, **kw) -> Program:
         _program.release()
     if kw.get("check_out_of_bound"):
         kw["debug"] = True
-    _program = Program(**kw)
-    return _program
+    p = Program(**kw)
+    _set_program(p)
+    return p
 
 
 def reset() -> None:
-    global _program
     if _program is not None:
         _program.release()
-    _program = None
+    _set_program(None)

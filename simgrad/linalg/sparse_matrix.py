@@ -266,11 +266,14 @@ class TripletStore:
     number of triplets added; past `capacity` the excess were dropped), `rows`, `cols` (i32) and `values`."""
 
     def __init__(self, capacity: int, dtype: dt.DataType):
-        self.capacity, self.dtype = capacity, dtype
-        self.count = np.zeros(1, dtype=np.int64)
-        self.rows = np.zeros(capacity, dtype=np.int32)
-        self.cols = np.zeros(capacity, dtype=np.int32)
-        self.values = np.zeros(capacity, dtype=dtype.np)
+        from simgrad.lang.program import get_program
+
+        zeros = get_program().zeros  # memory kernels can write: the device's on arch=cuda (a launch that adds
+        self.capacity, self.dtype = capacity, dtype  # triplets waits for its kernel: runtime/args.py)
+        self.count = zeros(1, np.int64)
+        self.rows = zeros(max(capacity, 1), np.int32)[:capacity]
+        self.cols = zeros(max(capacity, 1), np.int32)[:capacity]
+        self.values = zeros(max(capacity, 1), dtype.np)[:capacity]
 
     def size(self, what: str) -> int:
         n = int(self.count[0])

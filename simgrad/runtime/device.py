@@ -247,19 +247,16 @@ class HostDriver(Device):
 
     def _launch(self, fn: Any, grid: int, block: int, ctx: int) -> None:
         self.launches += 1
-        if self.deferred:
-            self._queue.append(("launch", fn, grid, block, ctx))
-        else:
-            self._run_grid(fn, grid, block, ctx)
-
-    def _run_grid(self, fn: int, grid: int, block: int, ctx: int) -> None:
-        if self._grid is None:
+        if self._grid is None:  # the grid runner, loaded at the first launch (queued or not)
             from simgrad.runtime import abi, ll
             from simgrad.runtime.jit import get_jit
 
             text = ll.load("sim_grid", pfor_slot=abi.CTX_PFOR) + ll.load("sim_blocks", symbol="simgrad_sim_blocks")
             self._grid = _GRID_FN(get_jit().load(text, ["simgrad_sim_grid"])["simgrad_sim_grid"])
-        self._grid(ctx, fn, block, grid)
+        if self.deferred:
+            self._queue.append(("launch", fn, grid, block, ctx))
+        else:
+            self._grid(ctx, fn, block, grid)
 
     def synchronize(self) -> None:
         """Run the queued work in order (deferred mode; nothing to do otherwise)."""
@@ -269,7 +266,8 @@ class HostDriver(Device):
         queue, self._queue = self._queue, []
         for op in queue:
             if op[0] == "launch":
-                self._run_grid(*op[1:])
+                _, fn, grid, block, ctx = op
+                self._grid(ctx, fn, block, grid)
             elif op[0] == "copy":
                 _, dst, src = op
                 ctypes.memmove(dst, src.ctypes.data, src.nbytes)

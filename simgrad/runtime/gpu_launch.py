@@ -4,10 +4,11 @@ The arguments are packed into the host context exactly as on the CPU (runtime/la
 the context to the device (stream-ordered, `Device.upload`), queues the kernel's segments in order
 (codegen/nvptx.py `Launch`: grid, block) and returns without waiting, as Taichi's launches do: Python-scope
 access of fields and ndarrays synchronizes first (lang/program.py `sync_for_host`), as do ti.sync() and the
-next launch that waits. A launch waits only when the kernel returns values or can report an error (its error
-table is not empty), or when host arrays were staged for it (`Staging`: numpy arrays and host tensors on an
-asynchronous device are copied in before the launch and back after it, as Taichi does for external arrays on
-CUDA). A fault of a kernel that did not wait surfaces at the next synchronize (a DeviceError there)."""
+next launch that waits. A launch waits only when the kernel returns values, can report an error (its error
+table is not empty) or prints, as Taichi's do, or when host arrays were staged for it (`Staging`: numpy arrays
+and host tensors on an asynchronous device are copied in before the launch and back after it, as Taichi does
+for external arrays on CUDA). A fault of a kernel that did not wait surfaces at the next synchronize (a
+DeviceError there)."""
 
 from __future__ import annotations
 
@@ -68,15 +69,19 @@ class GpuLauncher(Launcher):
 
     def __init__(self, device: Device, launches: list[tuple[Any, int | None, int]], kernel_name: str, params: list,
                  nslots: int, returns: list, error_table: list, program, ret_matrix: object = None,
-                 scratch_slots: int = 0, tape_threads: int = 0):
+                 scratch_slots: int = 0, prints: bool = False, tape_threads: int = 0):
         self.device = device
         self.tape_threads = tape_threads  # threads with a region of the deep tape (codegen/nvptx.py)
         self.launches = [(fn, min(grid or (1 << 31), saturating_grid(device, block)), block)
                          for fn, grid, block in launches]
         self.dctx = self.dtape = 0
         self.staging = Staging(device)
-        # values to read back, or an error to report at its line: wait for the device; else return at once
-        self.waits = bool(returns) or bool(error_table)
+        # values to read back, an error to report at its line, or printed output (Taichi waits for a kernel
+        # with print statements): wait for the device; else return at once
+        self.waits = bool(returns) or bool(error_table) or prints
+        # a launch on the GPU that did not wait has nothing to report yet (and the host does not touch the error
+        # buffer's managed memory while the kernel may run); the synchronous simulated GPU's can be interrupted
+        self.reads_errors = self.waits or not device.asynchronous
         self.nreturns = len(returns)
         super().__init__(kernel_name, params, 0, nslots, returns, error_table, program, ret_matrix, 0, scratch_slots)
         self.pack = None  # no native Sequence replays it (lang/graph.py and the Tape launch from Python on a GPU)

@@ -14,6 +14,9 @@ from simgrad.lang.program import get_program
 
 @pytest.fixture
 def dev(monkeypatch):
+    from simgrad.runtime import device
+
+    monkeypatch.setattr(device, "cuda_runtime_enabled", lambda: False)  # the deferred simulated GPU, on a GPU too
     monkeypatch.setenv("SIMGRAD_GPU_SIM", "async")
     ti.init(arch=ti.cuda)
     d = get_program().device
@@ -291,3 +294,32 @@ def test_tape_on_the_asynchronous_device(dev):
         energy()
     assert loss[None] == pytest.approx(0.5 * (ws ** 2).sum())
     np.testing.assert_allclose(w.grad.to_numpy(), ws)
+
+
+def test_gui_set_image_of_a_field(dev):
+    img = ti.field(ti.f32, shape=(4, 3))
+
+    @ti.kernel
+    def paint(v: ti.f32):
+        for i, j in img:
+            img[i, j] = v
+
+    gui = ti.GUI("async", res=(4, 3), show_gui=False)
+    paint(0.5)
+    gui.set_image(img)
+    np.testing.assert_allclose(gui.get_image()[..., :3], 0.5, atol=1 / 255)
+
+
+def test_sparse_matrix_builder_on_the_asynchronous_device(dev):
+    """A kernel that adds triplets waits (the count is read after its call); build() sees them all."""
+    builder = ti.linalg.SparseMatrixBuilder(4, 4, max_num_triplets=16)
+
+    @ti.kernel
+    def diag(A: ti.types.sparse_matrix_builder(), v: ti.f32):
+        for i in range(4):
+            A[i, i] += v
+
+    diag(builder, 2.0)
+    diag(builder, 1.0)
+    A = builder.build()
+    assert [A[i, i] for i in range(4)] == [3.0] * 4 and A[0, 1] == 0.0

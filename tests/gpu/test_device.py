@@ -116,7 +116,7 @@ def test_deferred_host_driver_runs_its_queue_at_synchronize():
     assert (b == np.arange(8)).all()
 
 
-def test_host_driver_runs_a_kernels_launch_sequence():
+def test_host_driver_runs_a_kernels_launch_sequence(monkeypatch):
     """The flow the CUDA runtime will follow: a kernel's segments loaded as a module, its context buffer with
     the argument words, each Launch run with its grid (or a saturating one) and block, errors read back."""
     import simgrad as ti
@@ -124,6 +124,9 @@ def test_host_driver_runs_a_kernels_launch_sequence():
     from simgrad.compiler.driver import compile_kernel
     from simgrad.lang.program import get_program
     from simgrad.runtime import abi
+
+    monkeypatch.delenv("TI_ARCH", raising=False)  # the kernel's CPU launch gives the reference and the context
+    ti.init(arch=ti.cpu)
 
     @ti.kernel
     def k(a: ti.f32, x: ti.types.ndarray(dtype=ti.f32, ndim=1), s: ti.types.ndarray(dtype=ti.f32, ndim=1)):
