@@ -142,7 +142,7 @@ def _headless(ti, cache_dir, extra_init):
     init = ti.init
 
     def cpu_init(*args, **kw):
-        kw["arch"] = ti.cpu
+        kw["arch"] = getattr(ti, os.environ.get("ORIGINALS_ARCH", "cpu"))  # --arch (cuda: the GPU side by side)
         kw.setdefault("offline_cache_file_path", cache_dir)
         kw.update(extra_init)
         return init(*args[1:], **kw) if args else init(**kw)
@@ -264,6 +264,7 @@ def run_one(python, framework, prog, args, pythonpath):
     env = dict(os.environ, MPLBACKEND="Agg", TI_LOG_LEVEL="error", TI_GUI_SHOW="0")
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as on a user's machine: our .py files are not recompiled
     env["ORIGINALS_INIT"] = json.dumps(args.taichi_init)
+    env["ORIGINALS_ARCH"] = args.arch
     env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path if framework == "simgrad" else "", *pythonpath,
                                                      os.environ.get("PYTHONPATH", "")] if p)
     cmd = [python, os.path.abspath(__file__), "--child", framework, prog.script, "--", *argv]
@@ -390,6 +391,9 @@ def main():
     ap.add_argument("--skip-slow", action="store_true", help="leave out the 3-D programs")
     ap.add_argument("--frameworks", default="simgrad,taichi")
     ap.add_argument("--iters", type=int, default=5)
+    ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda"],
+                    help="the arch every program's ti.init gets, in both frameworks (cuda: on a GPU machine, with "
+                         "SIMGRAD_CUDA_RUNTIME=1 for simgrad's runtime)")
     ap.add_argument("--simgrad-python", default=sys.executable)
     ap.add_argument("--simgrad-path", default=ROOT, help="directory holding the simgrad package to test")
     ap.add_argument("--taichi-python", default=os.environ.get("TAICHI_PYTHON", sys.executable))

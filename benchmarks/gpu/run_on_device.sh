@@ -13,6 +13,8 @@
 #   # llvmlite is carried so that the device compiles with the LLVM simgrad is tested with here.
 # The device call (one command, leaves time for a rerun):
 #   run(command="bash benchmarks/gpu/run_on_device.sh", carry=[".whl"], timeout_s=540)
+# Then, if device time is left, the unmodified DiffTaichi programs side by side on the GPU:
+#   benchmarks/gpu/originals_on_device.sh (its header says what to carry).
 set -u -o pipefail
 OUT=${OUT:-/tmp/simgrad-gpu-out}
 mkdir -p "$OUT"
