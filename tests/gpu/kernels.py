@@ -236,10 +236,11 @@ def sparse_nodes():
     return [(k().to_numpy(), want, 0)]
 
 
-def deep_tape():
-    """A tape deeper than a GPU thread's local memory (codegen/nvptx.py GPU_TAPE_LIMIT): the device-buffer tape."""
-    x = ti.field(ti.f64, shape=8, needs_grad=True)
-    y = ti.field(ti.f64, shape=8, needs_grad=True)
+def sin_chain(xs):
+    """y = sin(sin(...sin(x))) n times per element, n a run-time argument (so the tape's depth is not static):
+    (x, y, f, reference(n) -> (y, dy/dx)) in float64."""
+    x = ti.field(ti.f64, shape=len(xs), needs_grad=True)
+    y = ti.field(ti.f64, shape=len(xs), needs_grad=True)
 
     @ti.kernel
     def f(n: ti.i32):
@@ -249,16 +250,24 @@ def deep_tape():
                 v = ti.sin(v)
             y[i] = v
 
-    xs = np.linspace(0.2, 1.0, 8)
-    x.from_numpy(xs)
+    def reference(n):
+        v, d = np.array(xs, np.float64), np.ones(len(xs))
+        for _ in range(n):
+            d *= np.cos(v)
+            v = np.sin(v)
+        return v, d
+
+    x.from_numpy(np.asarray(xs, np.float64))
+    return x, y, f, reference
+
+
+def deep_tape():
+    """A tape deeper than a GPU thread's local memory (codegen/nvptx.py GPU_TAPE_LIMIT): the device-buffer tape."""
+    x, y, f, reference = sin_chain(np.linspace(0.2, 1.0, 8))
     f(1500)
     y.grad.fill(1.0)
     f.grad(1500)
-    v, d = xs.copy(), np.ones(8)
-    for _ in range(1500):
-        d *= np.cos(v)
-        v = np.sin(v)
-    return [(x.grad.to_numpy(), d, 1e-9)]
+    return [(x.grad.to_numpy(), reference(1500)[1], 1e-9)]
 
 
 CASES = [arith_math, registry_math, atomics, loops_while, local_matrix, tape_adjoint, half_and_ndarray,
