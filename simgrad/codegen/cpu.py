@@ -97,10 +97,81 @@ class CpuCodegen(KernelCodegen):
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
         t.prologue.append(f"  {hi} = trunc i64 %hi to {ty}" if ty != "i64" else f"  {hi} = add i64 %hi, 0")
         self.open_reductions(t, plan)  # per-thread sums, added once per chunk
-        self.serial_loop(t, s, lo, hi)
+        split = _row_split(s)
+        if split is None:
+            self.serial_loop(t, s, lo, hi)
+        else:
+            self._row_loops(t, s, lo, hi, *split)
         self.flush_reductions(t, plan)
         t.emit("ret void")
         self.module.functions.append(t.text())
+
+
+    def _row_loops(self, t: FunctionText, s: Stmt, lo: str, hi: str, mod: Stmt, div: Stmt | None, n: int) -> None:
+        """The chunk [lo, hi) of a flat index i whose body splits it as (i / n, i % n) (ti.ndrange, a struct-for
+        over several axes) runs as rows: an outer loop over q = i / n and an inner counted loop over r = i % n, so
+        the body needs no division and its last-axis accesses are consecutive in r (LLVM vectorises the inner
+        loop, which the division kept it from)."""
+        ty = llvm_type(s.vtype)
+        pre, ohead, obody, ihead, ibody, ilatch, olatch, done = (t.label(x) for x in (
+            "rpre", "rowhead", "rowbody", "colhead", "colbody", "collatch", "rowlatch", "rowdone"))
+        q0, r0, q, rs, base, start, more, left, short, end, r, rn, qn, c, i = (t.tmp(x) for x in (
+            "q0", "r0", "q", "rs", "rowbase", "start", "more", "left", "short", "rend", "r", "rnext", "qnext", "c",
+            "i"))
+        t.emit(f"br label %{pre}")
+        t.start_block(pre)
+        t.emit(f"{q0} = udiv {ty} {lo}, {n}")  # chunk bounds are never negative
+        t.emit(f"{r0} = urem {ty} {lo}, {n}")
+        t.emit(f"br label %{ohead}")
+        t.start_block(ohead)
+        t.emit(f"{q} = phi {ty} [{q0}, %{pre}], [{qn}, %{olatch}]")
+        t.emit(f"{rs} = phi {ty} [{r0}, %{pre}], [0, %{olatch}]")
+        t.emit(f"{base} = mul nuw nsw {ty} {q}, {n}")
+        t.emit(f"{start} = add nuw nsw {ty} {base}, {rs}")
+        t.emit(f"{more} = icmp slt {ty} {start}, {hi}")
+        t.emit(f"br i1 {more}, label %{obody}, label %{done}")
+        t.start_block(obody)
+        t.emit(f"{left} = sub nsw {ty} {hi}, {base}")
+        t.emit(f"{short} = icmp slt {ty} {left}, {n}")
+        t.emit(f"{end} = select i1 {short}, {ty} {left}, {ty} {n}")
+        t.emit(f"br label %{ihead}")
+        t.start_block(ihead)
+        t.emit(f"{r} = phi {ty} [{rs}, %{obody}], [{rn}, %{ilatch}]")
+        t.emit(f"{c} = icmp slt {ty} {r}, {end}")
+        t.emit(f"br i1 {c}, label %{ibody}, label %{olatch}")
+        t.start_block(ibody)
+        t.emit(f"{i} = add nuw nsw {ty} {base}, {r}")
+        t.names[s], t.names[mod] = i, r
+        t.bound.add(id(mod))
+        if div is not None:
+            t.names[div] = q
+            t.bound.add(id(div))
+        t.loops.append((done, ilatch))
+        self.lower_block(t, s.blocks[0])
+        t.loops.pop()
+        t.emit(f"br label %{ilatch}")
+        t.start_block(ilatch)
+        t.emit(f"{rn} = add nuw nsw {ty} {r}, 1")
+        t.emit(f"br label %{ihead}")
+        t.start_block(olatch)
+        t.emit(f"{qn} = add nuw nsw {ty} {q}, 1")
+        t.emit(f"br label %{ohead}")
+        t.start_block(done)
+
+
+def _row_split(loop: Stmt) -> tuple[Stmt, Stmt | None, int] | None:
+    """(i % n, i / n or None, n) when the loop body's first level takes its index apart by a constant n >= 2
+    (C remainder and division: the index is never negative here)."""
+    mods: dict[int, Stmt] = {}
+    divs: dict[int, Stmt] = {}
+    for x in loop.blocks[0].stmts:
+        if x.op in (Op.RAW_MOD, Op.RAW_DIV) and x.operands[0] is loop and x.operands[1].op is Op.CONST:
+            n = int(x.operands[1].attrs["value"])
+            if n >= 2:
+                (mods if x.op is Op.RAW_MOD else divs).setdefault(n, x)
+    for n, mod in mods.items():
+        return mod, divs.get(n), n
+    return None
 
 
 def _private_root(t: FunctionText, region: Region, slot: int) -> None:

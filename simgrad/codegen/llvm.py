@@ -130,6 +130,7 @@ class FunctionText:
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
         self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
+        self.bound: set[int] = set()  # statements whose value the enclosing loop gives (lower_block skips them)
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -290,6 +291,9 @@ class KernelCodegen:
         k = 0
         while k < len(stmts):
             s = stmts[k]
+            if f.bound and id(s) in f.bound:
+                k += 1
+                continue
             if s.op is Op.ATOMIC and f.in_task and atomic_form(f, s) == PAIR:
                 # the strategy pass marks `a; ptr; b` triples; lower_access put ptr's offset before ptr
                 j = k + 1

@@ -49,7 +49,7 @@ def checkout(tmp_path):
 
 def _args(checkout, iters=4):
     return argparse.Namespace(difftaichi=checkout, iters=iters, timeout=120, nice=0, keep=False, taichi_init={},
-                              simgrad_path=os.path.dirname(originals.HERE))
+                              arch="cpu", simgrad_path=os.path.dirname(originals.HERE))
 
 
 def test_runs_a_patched_program_under_simgrad(checkout):
