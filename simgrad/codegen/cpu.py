@@ -107,7 +107,8 @@ class CpuCodegen(KernelCodegen):
         self.module.functions.append(t.text())
 
 
-    def _row_loops(self, t: FunctionText, s: Stmt, lo: str, hi: str, mod: Stmt, div: Stmt | None, n: int) -> None:
+    def _row_loops(self, t: FunctionText, s: Stmt, lo: str, hi: str, mod: Stmt, div: Stmt | None,
+                   extent: Stmt) -> None:
         """The chunk [lo, hi) of a flat index i whose body splits it as (i / n, i % n) (ti.ndrange, a struct-for
         over several axes) runs as rows: an outer loop over q = i / n and an inner counted loop over r = i % n, so
         the body needs no division and its last-axis accesses are consecutive in r (LLVM vectorises the inner
@@ -120,6 +121,12 @@ class CpuCodegen(KernelCodegen):
             "i"))
         t.emit(f"br label %{pre}")
         t.start_block(pre)
+        n = t.v(extent)
+        if extent.op is not Op.CONST:  # a run-time extent below 1 means no iterations: never divide by it
+            small, n1 = t.tmp("small"), t.tmp("n")
+            t.emit(f"{small} = icmp slt {ty} {n}, 1")
+            t.emit(f"{n1} = select i1 {small}, {ty} 1, {ty} {n}")
+            n = n1
         t.emit(f"{q0} = udiv {ty} {lo}, {n}")  # chunk bounds are never negative
         t.emit(f"{r0} = urem {ty} {lo}, {n}")
         t.emit(f"br label %{ohead}")
@@ -159,18 +166,22 @@ class CpuCodegen(KernelCodegen):
         t.start_block(done)
 
 
-def _row_split(loop: Stmt) -> tuple[Stmt, Stmt | None, int] | None:
-    """(i % n, i / n or None, n) when the loop body's first level takes its index apart by a constant n >= 2
-    (C remainder and division: the index is never negative here)."""
-    mods: dict[int, Stmt] = {}
-    divs: dict[int, Stmt] = {}
+def _row_split(loop: Stmt) -> tuple[Stmt, Stmt | None, Stmt] | None:
+    """(i % n, i / n or None, n) when the loop body's first level takes its index apart by n: a constant >= 2,
+    or a value from before the loop (an ndarray's extent). Only the frontend's index decomposition makes
+    RAW_MOD/RAW_DIV of the loop index (C remainder and division; the index is never negative)."""
+    inside = {id(x) for x in walk(loop.blocks[0])}
+    mods: dict[tuple, Stmt] = {}
+    divs: dict[tuple, Stmt] = {}
     for x in loop.blocks[0].stmts:
-        if x.op in (Op.RAW_MOD, Op.RAW_DIV) and x.operands[0] is loop and x.operands[1].op is Op.CONST:
-            n = int(x.operands[1].attrs["value"])
-            if n >= 2:
-                (mods if x.op is Op.RAW_MOD else divs).setdefault(n, x)
-    for n, mod in mods.items():
-        return mod, divs.get(n), n
+        if x.op not in (Op.RAW_MOD, Op.RAW_DIV) or x.operands[0] is not loop:
+            continue
+        n = x.operands[1]
+        key = ("c", n.attrs["value"]) if n.op is Op.CONST else ("s", id(n))  # equal constants: distinct statements
+        if (n.op is Op.CONST and int(n.attrs["value"]) >= 2) or (n.op is not Op.CONST and id(n) not in inside):
+            (mods if x.op is Op.RAW_MOD else divs).setdefault(key, x)
+    for key, mod in mods.items():
+        return mod, divs.get(key), mod.operands[1]
     return None
 
 

@@ -76,3 +76,27 @@ def test_three_axes_a_continue_and_a_struct_for():
     i, j, l = np.meshgrid(np.arange(5), np.arange(7), np.arange(9), indexing="ij")
     np.testing.assert_array_equal(f.to_numpy(), np.where((i + j + l) % 4 == 0, 0, i * 100 + j * 10 + l))
     np.testing.assert_array_equal(g.to_numpy(), np.sqrt(np.arange(33 * 35, dtype=np.float64)).reshape(33, 35))
+
+
+def test_run_time_extents_of_ndarrays():
+    """The extent is a run-time value (an ndarray's shape): the same instantiation serves every shape, an empty
+    axis included (no division by a zero extent)."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=2)
+
+    @ti.kernel
+    def k(a: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for i, j in ti.ndrange(a.shape[0], a.shape[1]):
+            a[i, j] += i * 1000 + j
+
+    @ti.kernel
+    def g(a: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for i, j in a:
+            a[i, j] += 1
+
+    for shape in [(7, 333), (1000, 13), (5, 0), (0, 9), (1, 1)]:
+        a = np.zeros(shape, np.int32)
+        k(a)
+        g(a)
+        i, j = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
+        np.testing.assert_array_equal(a, i * 1000 + j + 1)
+    assert "rowhead" in k._instance_for((np.zeros((2, 2), np.int32),), "").llvm_text
