@@ -31,3 +31,9 @@ def with_dx12() -> bool:
 
 def with_amdgpu() -> bool:
     return False
+
+
+def get_max_num_indices() -> int:
+    """Taichi's cap on a field's dimensionality (12; ti.field(shape=(1,) * 13) is its RuntimeError). simgrad has
+    no cap, so every program written within Taichi's runs here."""
+    return 12
