@@ -36,18 +36,19 @@ class DataType:
         """Taichi's name of the type (`ti.f32.to_string() == str(ti.f32) == "f32"`)."""
         return self.name
 
-    def __call__(self, value):
-        """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast in a kernel)."""
+    def __call__(self, *args, **kwargs):
+        """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast or typed literal in a kernel:
+        lang/operators.py type_call)."""
         if cast_hook is None:
             raise RuntimeError("simgrad.lang is not loaded: `import simgrad` before casting with a type")
-        return cast_hook(value, self)
+        return cast_hook(self, args, kwargs)
 
     def __reduce__(self):
         return (_by_name, (self.name,))
 
 
 # how `ti.f32(x)` casts: lang/operators.py installs its `cast` here (dtypes sits below lang and imports none of it)
-cast_hook: Callable[[Any, DataType], Any] | None = None
+cast_hook: Callable[[DataType, tuple, dict], Any] | None = None
 
 i8 = DataType("i8", np.int8, 8, False, True, "i8")
 i16 = DataType("i16", np.int16, 16, False, True, "i16")

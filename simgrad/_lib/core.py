@@ -37,3 +37,18 @@ def get_max_num_indices() -> int:
     """Taichi's cap on a field's dimensionality (12; ti.field(shape=(1,) * 13) is its RuntimeError). simgrad has
     no cap, so every program written within Taichi's runs here."""
     return 12
+
+
+TAICHI_VERSION = (1, 7, 4)  # the Taichi release whose language and API simgrad follows
+
+
+def get_version_major() -> int:
+    return TAICHI_VERSION[0]
+
+
+def get_version_minor() -> int:
+    return TAICHI_VERSION[1]
+
+
+def get_version_patch() -> int:
+    return TAICHI_VERSION[2]

@@ -14,3 +14,10 @@ def get_os_name() -> str:
     if name.startswith("linux"):
         return "linux"
     return "unix"
+
+
+def import_ti_python_core():
+    """Taichi's C++ core module; here its stand-in, simgrad._lib.core (version and backend probes)."""
+    from simgrad._lib import core
+
+    return core

@@ -230,7 +230,7 @@ class NdarrayParam(Param):
     def key(self, a, keep: list):
         if not hasattr(a, "dtype") or not hasattr(a, "shape"):
             raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects an ndarray, got "
-                                   f"{type(a).__name__}")
+                                   f"{type(a).__name__} (Invalid type for argument {self.name}, got {a})")
         arr = getattr(a, "_ndarray", a)  # a ti.ndarray object: its numpy data
         return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a))
 
@@ -260,6 +260,8 @@ class NdarrayParam(Param):
                                         f"element shape {elem}")
             return elem
         if isinstance(ann.dtype, MatrixType):
+            if isinstance(a, np.ndarray):  # the key holds the annotation's shape: check the array's here
+                self._check_external(a)
             return ann.dtype.shape
         elem = ann.element_shape_of(tuple(arr.shape))
         if not elem and ann.dtype is None and not ann.element_dim:
@@ -271,11 +273,38 @@ class NdarrayParam(Param):
         return arg, ArrayPacking(self.name, arg.slot, arg.dtype, arg.ndim, arg.ndim + len(arg.element_shape),
                                  arg.grad_slot)
 
+    def _check_external(self, a: np.ndarray) -> None:
+        """A numpy argument against the annotation, in Taichi's words for external arrays (ValueError)."""
+        ann, name, shape = self.ann, self.name, tuple(a.shape)
+        where = f"kernel {self.kernel_name}: Invalid value for argument {name} - "
+        if isinstance(ann.dtype, MatrixType):
+            edim = 1 if ann.dtype.m == 0 else 2
+            if ann.ndim is not None and len(shape) != edim + ann.ndim:
+                raise SimgradValueError(f"{where}required array has ndim={ann.ndim} element_dim={edim}, array with "
+                                        f"{len(shape)} dimensions is provided")
+            if len(shape) < edim:
+                raise SimgradValueError(f"{where}required element_dim={edim}, array with {len(shape)} dimensions "
+                                        "is provided")
+            want = ann.dtype.shape
+            if ann.dtype.n is not None and None not in want and shape[len(shape) - edim:] != tuple(want):
+                raise SimgradValueError(f"{where}required element_shape={tuple(want)}, array with element shape of "
+                                        f"{shape[len(shape) - edim:]} is provided")
+        elif ann.dtype is not None:
+            want_t, t = dt.from_any(ann.dtype), dt.from_numpy(a.dtype)
+            if want_t is not t:
+                raise SimgradValueError(f"{where}required array has dtype={want_t}, array with dtype={t} is "
+                                        "provided")
+            if ann.ndim is not None and len(shape) != ann.ndim:
+                raise SimgradValueError(f"{where}required array has ndim={ann.ndim}, array with {len(shape)} "
+                                        "dimensions is provided")
+
     def _array_arg(self, a, slots: Slots, grad: bool | None = None) -> ArrayArg:
         """The compiler's view of the argument, its dtype, dimensions and element shape checked (Taichi's
         messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
         ann: NdarrayType = self.ann
         kernel_name, name = self.kernel_name, self.name
+        if isinstance(a, np.ndarray):
+            self._check_external(a)
         arr = getattr(a, "_ndarray", a) if hasattr(a, "dtype") else np.asarray(a)
         t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else array_dtype(arr)
         want: dt.DataType | None

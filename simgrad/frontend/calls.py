@@ -15,6 +15,7 @@ from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.loops import static as _static
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
 
@@ -90,18 +91,23 @@ def call(comp, node: ast.Call):
         return _atomic(comp, node, kind)
     by_ref = _template_params(fn)
     args = []
-    for k, a in enumerate(node.args):
-        v = _by_reference(comp, a) if k in by_ref else comp.eval(a)
-        if type(v).__name__ == "_Starred":
-            args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
-        else:
-            args.append(v)
     kwargs = {}
-    for kw in node.keywords:
-        if kw.arg is None:
-            kwargs.update(comp.eval(kw.value))
-        else:
-            kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
+    static = fn is _static
+    comp.static_scope += static  # `in` / `is` are Python's on compile-time values there
+    try:
+        for k, a in enumerate(node.args):
+            v = _by_reference(comp, a) if k in by_ref else comp.eval(a)
+            if type(v).__name__ == "_Starred":
+                args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
+            else:
+                args.append(v)
+        for kw in node.keywords:
+            if kw.arg is None:
+                kwargs.update(comp.eval(kw.value))
+            else:
+                kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
+    finally:
+        comp.static_scope -= static
     if isinstance(getattr(fn, "__self__", None), str) and getattr(fn, "__name__", "") == "format":
         from simgrad.frontend.printing import str_format
 

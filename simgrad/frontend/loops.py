@@ -32,6 +32,9 @@ def _is_static_call(comp, node) -> bool:
 
 def lower_for(comp, node: ast.For) -> None:
     if _is_static_call(comp, node.iter):
+        inner = node.iter.args[0] if isinstance(node.iter, ast.Call) and len(node.iter.args) == 1 else None
+        if _is_static_call(comp, inner):
+            raise SimgradSyntaxError("'ti.static' cannot be nested", comp.loc(node.iter))
         _unroll(comp, node)
         return
     it = comp.eval(node.iter)
@@ -107,8 +110,11 @@ def _binder(comp, node: ast.For, nd: int, grouped_: bool):
     if grouped_ and len(names) != 1:
         raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
     if not grouped_ and len(names) != nd:
-        raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
-                                 comp.loc(node.target))
+        what = "Ndrange" if isinstance(node.iter, ast.Call) and getattr(node.iter.func, "attr", "") == "ndrange" \
+            else "This"
+        raise SimgradSyntaxError(f"{what} for loop with number of the loop variables not equal to the dimension of "
+                                 f"the {'ndrange' if what == 'Ndrange' else 'loop'} is not supported: it has {nd} "
+                                 f"indices but {len(names)} loop variable(s)", comp.loc(node.target))
 
     def bind(idx):
         if grouped_:

@@ -54,7 +54,7 @@ _CMPOPS = {
     ast.Eq: operators.eq, ast.NotEq: operators.ne,
 }
 _PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b: a in b,
-           ast.NotIn: lambda a, b: a not in b}
+           ast.NotIn: lambda a, b: a not in b}  # `is` is refused (eval_Compare), `in` only on ti.static values
 
 
 class KernelLowering:
@@ -74,6 +74,7 @@ class KernelLowering:
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
+        self.static_scope = 0  # > 0 while the arguments of a ti.static(...) call are evaluated (frontend/calls.py)
 
     @property
     def frame(self) -> Frame:
@@ -176,7 +177,7 @@ class KernelLowering:
                 if len(self.loop_stack) > frame.loop_base:
                     stop = self.builder.emit(Op.IF, None, (operators.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(stop.blocks[0]):
-                        self._loop_jump(s, Op.BREAK)
+                        self._loop_jump(s, Op.BREAK, written=False)
                 rest = stmts[k + 1:]
                 if rest:
                     with self.unless_returned():
@@ -230,7 +231,7 @@ class KernelLowering:
         assert frame.ret_flag is not None
         frame.ret_flag.store(1)
         if len(self.loop_stack) > frame.loop_base:
-            self._loop_jump(node, Op.BREAK)
+            self._loop_jump(node, Op.BREAK, written=False)
         frame.dynamic_returns += 1
         frame.returned_here = True
 
@@ -240,9 +241,13 @@ class KernelLowering:
         try:
             method = getattr(self, "visit_" + type(node).__name__, None)
             if method is None:
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):  # Taichi's words
+                    where = "ti.kernel" if self.frame.is_kernel else "ti.func"
+                    raise SimgradSyntaxError(f"Function definition is not allowed in '{where}': define the "
+                                             "ti.func outside and call it", self.loc(node))
                 raise SimgradSyntaxError(
-                    f"the Python construct '{type(node).__name__}' is not supported in kernels", self.loc(node)
-                )
+                    f'Unsupported node "{type(node).__name__}": the Python construct is not supported in kernels',
+                    self.loc(node))
             method(node)
         except SimgradError as e:
             if e.loc is None:
@@ -267,12 +272,23 @@ class KernelLowering:
 
     def visit_Assign(self, node: ast.Assign) -> None:
         value = self.eval(node.value)
+        if getattr(value, "ndim", 0) and type(value).__module__ == "numpy" and not _is_static_call(node.value):
+            raise SimgradTypeError("Only 0-dimensional numpy array can be used to initialize a scalar expression "
+                                   "(keep an array as a compile-time value with ti.static(np.array(...)))",
+                                   self.loc(node))
         for target in node.targets:
             self.assign(target, value)
+
+    def _check_not_argument(self, target: ast.expr) -> None:
+        if isinstance(target, ast.Name) and target.id in self.frame.arg_names:
+            raise SimgradSyntaxError(f'Kernel argument "{target.id}" is immutable in the kernel. If you want to '
+                                     f"change its value, please create a new variable ({target.id}_ = {target.id})",
+                                     self.loc(target))
 
     def visit_AnnAssign(self, node: ast.AnnAssign) -> None:
         if not isinstance(node.target, ast.Name):
             raise SimgradSyntaxError("annotated assignment needs a plain name", self.loc(node))
+        self._check_not_argument(node.target)
         ann = self.eval(node.annotation)
         value = self.eval(node.value) if node.value is not None else 0
         from simgrad.lang.types import MatrixType
@@ -284,6 +300,7 @@ class KernelLowering:
 
     def assign(self, target: ast.expr, value) -> None:
         if isinstance(target, ast.Name):
+            self._check_not_argument(target)
             name = target.id
             current = self._local(name)
             if isinstance(current, LOCAL_REFS):
@@ -348,6 +365,7 @@ class KernelLowering:
         if kind is None:
             raise SimgradSyntaxError(f"augmented assignment {type(node.op).__name__} is not supported",
                                      self.loc(node))
+        self._check_not_argument(node.target)
         value = self.eval(node.value)
         if isinstance(node.target, ast.Name):
             ref = self._local(node.target.id)
@@ -443,17 +461,22 @@ class KernelLowering:
     def visit_Continue(self, node) -> None:
         self._loop_jump(node, Op.CONTINUE)
 
-    def _loop_jump(self, node, op: Op) -> None:
+    def _loop_jump(self, node, op: Op, written: bool = True) -> None:
+        """A break/continue; `written`: the user's own, not the break an early return makes."""
         if self.static_loops and self.static_loops[-1] == self.static_jump_target():
             from simgrad.frontend.loops import StaticJump
 
             raise StaticJump(op is Op.BREAK)
+        word = op.name.lower()
+        if written and self.static_loops and self.static_loops[-1][:2] == self.static_jump_target()[:2]:
+            # the innermost loop is a ti.static one, and a run-time if lies in between (Taichi's words)
+            raise SimgradSyntaxError(f"You are trying to `{word}` a static `for` loop, but the `{word}` statement "
+                                     "is inside a non-static `if`", self.loc(node))
         if not self.loop_stack:
-            raise SimgradSyntaxError(f"'{op.name.lower()}' outside a run-time loop (inside ti.static loops it "
-                                     "is not supported)", self.loc(node))
+            raise SimgradSyntaxError(f"'{word}' outside a run-time loop", self.loc(node))
         if op is Op.BREAK and self.loop_stack[-1] == "parallel":
             raise SimgradSyntaxError(
-                "'break' is not allowed in the outermost (parallel) for loop; use a serial loop "
+                "Cannot break in the outermost loop: it is a parallel for; use a serial loop "
                 "(ti.loop_config(serialize=True)) or a flag", self.loc(node))
         self.builder.emit(op, None)
 
@@ -617,7 +640,15 @@ class KernelLowering:
         result = None
         for op, right_node in zip(node.ops, node.comparators):
             right = self.eval(right_node)
-            if type(op) in _PY_CMP:
+            if type(op) in _PY_CMP:  # Taichi's rules: `is` never, `in` on ti.static values only
+                if isinstance(op, (ast.Is, ast.IsNot)):
+                    name = "is" if isinstance(op, ast.Is) else "is not"
+                    raise SimgradSyntaxError(f'Operator "{name}" in Taichi scope is not supported (use == on '
+                                             "values; compare objects outside the kernel)", self.loc(node))
+                if not self.static_scope:
+                    name = "In" if isinstance(op, ast.In) else "NotIn"
+                    raise SimgradSyntaxError(f'"{name}" is only supported inside `ti.static`: wrap the comparison, '
+                                             "ti.static(a in b)", self.loc(node))
                 r = _PY_CMP[type(op)](left, right)
             else:
                 r = _CMPOPS[type(op)](left, right)

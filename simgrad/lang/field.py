@@ -11,8 +11,8 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import (
+    FieldIndexTypeError,
     SimgradError,
-    SimgradIndexError,
     SimgradNotSupportedError,
     SimgradOutOfBoundError,
     SimgradOverflowError,
@@ -388,10 +388,12 @@ def _check_bounds(key, shape, name):
     """Negative indices are out of bounds as in kernels (and with an offset they would silently alias)."""
     for k, n in zip(key, shape):
         if not isinstance(k, (int, np.integer)):
-            raise SimgradIndexError(f"field {name} is indexed with {k!r} ({type(k).__name__}); Python-scope "
-                                    f"indices must be integers", caller_loc())
-        if not 0 <= k < n:
-            raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
+            raise FieldIndexTypeError(f"field {name} is indexed with {k!r} ({type(k).__name__}); Python-scope "
+                                      f"indices must be integers (Detected illegal element of type: "
+                                      f"{type(k).__name__}. Please be aware that slicing a ti.field is not "
+                                      f"supported so far.)", caller_loc())
+        if not 0 <= k < n:  # an IndexError, and the assertion failure Taichi's debug mode reports
+            raise SimgradOutOfBoundError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
 
 
 def _wrapped(value, dtype: dt.DataType):

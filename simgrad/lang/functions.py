@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 
-from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
+from simgrad.errors import AnnotationError, SimgradSyntaxError, caller_loc
 from simgrad.ir import context
 
 
@@ -115,7 +115,7 @@ def resolved_signature(func) -> inspect.Signature:
             try:
                 return eval(a, scope)  # noqa: S307 - the user's own annotation text
             except Exception as e:
-                raise SimgradTypeError(f"{func.__name__}: cannot evaluate annotation {a!r}: {e}") from None
+                raise AnnotationError(f"{func.__name__}: cannot evaluate annotation {a!r}: {e}") from None
         return a
 
     params = [p.replace(annotation=ev(p.annotation)) for p in sig.parameters.values()]

@@ -30,11 +30,22 @@ def _swizzle_indices(name: str) -> list[int] | None:
     return None
 
 
+def vector_key(key):
+    """A vector used as an index (`m[I]`, I from `ti.static(ti.grouped(ti.ndrange(2, 3)))`) stands for its
+    entries, as in Taichi."""
+    if isinstance(key, Matrix) and key.m == 0:
+        return tuple(key.entries)
+    return key
+
+
 class Matrix:
     """An n-vector (m == 0) or an n x m matrix of scalars (Python numbers or kernel values)."""
 
     __slots__ = ("entries", "n", "m")
     _is_matrix = True
+    # numpy defers to Matrix's reflected operators (`np.cos(0) + v` is a Matrix, as in Taichi), rather than
+    # treating it as a sequence
+    __array_priority__ = 1000
 
     def __init__(self, arr=None, dt=None, n=None, m=None, *, _entries=None):
         if _entries is not None:
@@ -91,8 +102,9 @@ class Matrix:
         for a in mats[1:]:
             if a.shape != shape:
                 # as Taichi: a TaichiTypeError in a kernel, numpy's ValueError in Python scope
-                if errors.compiling():
-                    raise SimgradTypeError(f"matrix shapes {shape} and {a.shape} do not match")
+                if errors.compiling():  # (Taichi's words first)
+                    raise SimgradTypeError(f"Cannot broadcast tensor to tensor: matrix shapes {shape} and {a.shape} "
+                                           "do not match")
                 raise SimgradValueError(f"matrix shapes {shape} and {a.shape} do not match", caller_loc())
         proto = mats[0]
         cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
@@ -133,6 +145,7 @@ class Matrix:
         return self[key if len(key) > 1 else key[0]]
 
     def __getitem__(self, key):
+        key = vector_key(key)
         if isinstance(key, slice) or (isinstance(key, tuple) and any(isinstance(k, slice) for k in key)):
             return self._slice(key)
         idx = self._flat_index(key)
@@ -191,6 +204,7 @@ class Matrix:
         return out
 
     def __setitem__(self, key, value):
+        key = vector_key(key)
         idx = self._flat_index(key)
         if idx is None:
             if self.m and not isinstance(key, tuple):

@@ -95,6 +95,7 @@ class Launcher:
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         gen = LaunchCode(self.kernel_name, env, self.views, bool(getattr(self.program.device, "asynchronous", False)))
         names = [p.name for p in params]
+        gen.positions = {n: k for k, n in enumerate(names)}
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
         lines.append("    _call(_addr)")

@@ -2,6 +2,7 @@
 failed before its fix and checks Taichi 1.7.4's observed result or numpy's."""
 
 import numpy as np
+import pytest
 
 import simgrad as ti
 
@@ -23,3 +24,484 @@ def test_fields_up_to_taichis_max_num_indices():
     got = x.to_numpy()
     np.testing.assert_array_equal(got[..., 0], idx.sum(axis=0))
     np.testing.assert_array_equal(got[..., 1], idx[0])
+
+
+def test_init_options_from_the_environment(monkeypatch):
+    # Taichi's _EnvironmentConfigurator: TI_<KEY> sets an option not given as an argument ("0"/"1" for booleans)
+    monkeypatch.setenv("TI_FAST_MATH", "0")
+    monkeypatch.setenv("TI_OPT_LEVEL", "3")
+    monkeypatch.setenv("TI_DEFAULT_FP", "64")
+    ti.init(arch=ti.cpu)
+    cfg = ti.lang.impl.current_cfg()
+    assert cfg.fast_math is False and cfg.opt_level == 3 and cfg.default_fp == ti.f64
+    ti.init(arch=ti.cpu, fast_math=True)  # the argument wins
+    assert ti.lang.impl.current_cfg().fast_math is True
+    monkeypatch.delenv("TI_FAST_MATH")
+    ti.init(arch=ti.cpu)
+    assert ti.lang.impl.current_cfg().fast_math is True and ti.lang.impl.current_cfg().verbose is True
+
+
+def test_init_test_mode_returns_the_special_config(monkeypatch):
+    monkeypatch.setenv("TI_GDB_TRIGGER", "1")
+    spec = ti.init(_test_mode=True, log_level=ti.WARN)
+    assert spec.log_level == ti.WARN and spec.gdb_trigger is True and spec.unrolling_limit == 32
+    ti.set_logging_level(ti.ERROR)
+    assert ti._logging.is_logging_effective(ti.ERROR) and not ti._logging.is_logging_effective(ti.WARN)
+    ti.set_logging_level(ti.INFO)
+
+
+def test_init_require_version():
+    core = ti._lib.utils.import_ti_python_core()
+    assert (core.get_version_major(), core.get_version_minor(), core.get_version_patch()) == (1, 7, 4)
+    ti.init(arch=ti.cpu, require_version="1.7.4")
+    ti.init(arch=ti.cpu, require_version="1.6")
+    with pytest.raises(RuntimeError, match="version"):
+        ti.init(arch=ti.cpu, require_version="1.7.5")
+    with pytest.raises(ValueError, match="PEP 440"):
+        ti.init(arch=ti.cpu, require_version="one")
+
+
+def test_init_without_fallback_refuses_an_unavailable_arch():
+    with pytest.raises(RuntimeError, match="vulkan"):
+        ti.init(arch=ti.vulkan, enable_fallback=False)
+
+
+def _noop():
+    @ti.kernel
+    def foo():
+        pass
+
+    return foo
+
+
+def test_a_field_never_placed_is_an_error_at_the_next_kernel():
+    # taichi 1.7.4: RuntimeError "These field(s) are not placed" at the first launch after the field was made
+    ti.init(arch=ti.cpu)
+    a = ti.field(ti.i32)
+    with pytest.raises(RuntimeError, match=r"These field\(s\) are not placed:\n  a \(made at .*test_taichi_suite"):
+        _noop()()
+    ti.root.dense(ti.i, 2).place(a)
+    _noop()()  # placed now: runs
+
+
+def test_needs_grad_without_a_shape_needs_its_gradient_placed():
+    # taichi 1.7.4: placing a needs_grad field does not place its gradient (RuntimeError at the next launch);
+    # place(x.grad) or ti.root.lazy_grad() does
+    ti.init(arch=ti.cpu)
+    a = ti.field(ti.f32, needs_grad=True)
+    b = ti.Vector.field(3, ti.f32, needs_dual=True)
+    ti.root.dense(ti.i, 1).place(a, b)
+    assert a.grad.snode is None
+    with pytest.raises(RuntimeError, match=r"requrie `needs_grad=True`, however their grad field\(s\) are not"):
+        _noop()()
+    ti.root.dense(ti.i, 1).place(a.grad)
+    with pytest.raises(RuntimeError, match=r"requrie `needs_dual=True`, however their dual field\(s\) are not"):
+        _noop()()
+    ti.root.lazy_dual()
+    _noop()()
+
+    ti.init(arch=ti.cpu)
+    s = ti.Struct.field({"p": ti.types.vector(2, float), "m": ti.f32}, needs_grad=True)
+    ti.root.dense(ti.i, 4).place(s)
+    ti.root.lazy_grad()
+    s.m[1] = 2.0
+
+    @ti.kernel
+    def sq():
+        for i in s:
+            s.p[i] = ti.Vector([s.m[i] ** 2, 0.0])
+
+    s.p.grad[1] = ti.Vector([1.0, 0.0])
+    sq.grad()
+    assert s.m.grad[1] == 4.0
+    t = ti.Struct.field({"m": ti.f32}, shape=3, needs_grad=True)  # with a shape, the gradients come along
+    assert t.m.grad.shape == (3,)
+
+
+def test_matrix_entries_placed_with_different_shapes():
+    ti.init(arch=ti.cpu)
+    a = ti.Matrix.field(2, 2, ti.i32)
+    for (i, j), n in zip([(0, 0), (0, 1), (1, 0), (1, 1)], [10, 11, 10, 11]):
+        ti.root.dense(ti.i, n).place(a.get_scalar_field(i, j))
+    with pytest.raises(RuntimeError, match=r"Members of the following field have different shapes"):
+        _noop()()
+
+
+def _compile_error(kernel, cls, match, *args):
+    with pytest.raises(cls, match=match) as e:
+        kernel(*args)
+    assert "test_taichi_suite_compat.py" in str(e.value)  # located at the user's line
+    return e.value
+
+
+def test_kernel_arguments_are_immutable():
+    # taichi 1.7.4: TaichiSyntaxError 'Kernel argument "a" is immutable in the kernel' for =, +=, a: T = and a
+    # template argument alike
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def assign(a: ti.i32):
+        a = 1
+
+    @ti.kernel
+    def aug(a: ti.i32):
+        a += 1
+
+    @ti.kernel
+    def ann(a: ti.i32):
+        a: ti.i32 = 1
+
+    @ti.kernel
+    def template(a: ti.template()):
+        a = 5
+
+    for k in (assign, aug, ann, template):
+        _compile_error(k, ti.TaichiSyntaxError, 'Kernel argument "a" is immutable in the kernel', 5)
+
+    @ti.kernel
+    def copy(a: ti.i32) -> ti.i32:
+        b = a
+        b += 1
+        return b
+
+    assert copy(5) == 6
+
+
+def test_is_and_in_in_kernels_follow_taichi():
+    # taichi 1.7.4: `is` is refused even inside ti.static; `in` only inside ti.static (a compile-time test)
+    ti.init(arch=ti.cpu)
+    b = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def is_static():
+        ti.static(1 is 2)  # noqa: F632
+
+    @ti.kernel
+    def in_field():
+        a = b in b  # noqa: F841
+
+    @ti.kernel
+    def in_static() -> ti.i32:
+        r = 0
+        if ti.static(2 in [1, 2]):
+            r = 7
+        return r
+
+    _compile_error(is_static, ti.TaichiSyntaxError, 'Operator "is" in Taichi scope is not supported')
+    _compile_error(in_field, ti.TaichiSyntaxError, '"In" is only supported inside `ti.static`')
+    assert in_static() == 7
+
+
+def test_syntax_error_messages_in_taichis_words():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def raises():
+        raise Exception()
+
+    @ti.kernel
+    def defines():
+        def bar():
+            pass
+
+    @ti.kernel
+    def breaks():
+        for _i in range(10):
+            break
+
+    @ti.kernel
+    def static_continue():
+        for _i in ti.static(range(3)):
+            if b[None] > 0:
+                continue
+
+    @ti.kernel
+    def nested_static():
+        for _i in ti.static(ti.static(range(1))):
+            pass
+
+    b = ti.field(ti.i32, shape=())
+    _compile_error(raises, ti.TaichiSyntaxError, 'Unsupported node "Raise"')
+    _compile_error(defines, ti.TaichiSyntaxError, "Function definition is not allowed in 'ti.kernel'")
+    _compile_error(breaks, ti.TaichiSyntaxError, "Cannot break in the outermost loop")
+    _compile_error(static_continue, ti.TaichiSyntaxError, "You are trying to `continue` a static `for` loop")
+    _compile_error(nested_static, ti.TaichiSyntaxError, "'ti.static' cannot be nested")
+    with pytest.raises(ti.TaichiSyntaxError, match="annotation"):
+        @ti.kernel
+        def bad(x: "no_such_name"):  # noqa: F821
+            pass
+
+
+def test_typed_literals_in_kernels():
+    # taichi 1.7.4: ti.f32(0) / ti.i32(0.0) / ti.u16(-1) / ti.i64(1, 2) / ti.f16(vector) are refused in kernels;
+    # ti.u32(2891336453) is a u32 literal; in Python scope a type call is a cast
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def pcg(inp: ti.u32) -> ti.u32:
+        state: ti.u32 = inp * ti.u32(747796405) + ti.u32(2891336453)
+        word: ti.u32 = ((state >> ((state >> ti.u32(28)) + ti.u32(4))) ^ state) * ti.u32(277803737)
+        return (word >> ti.u32(22)) ^ word
+
+    assert pcg(12345678) == 119515934 and pcg(98765432) == 4244201195  # taichi's values
+
+    @ti.kernel
+    def f_of_int():
+        a = ti.f32(0)  # noqa: F841
+
+    @ti.kernel
+    def i_of_float():
+        a = ti.i32(0.0)  # noqa: F841
+
+    @ti.kernel
+    def out_of_range():
+        a = ti.u16(-1)  # noqa: F841
+
+    @ti.kernel
+    def two_args():
+        a = ti.i64(1, 2)  # noqa: F841
+
+    @ti.kernel
+    def compound():
+        a = ti.f16(ti.Vector([1]))  # noqa: F841
+
+    _compile_error(f_of_int, ti.TaichiTypeError, "Integer literals must be annotated with a integer type")
+    _compile_error(i_of_float, ti.TaichiTypeError, "Floating-point literals must be annotated with a floating")
+    _compile_error(out_of_range, ti.TaichiTypeError, "Integer literal -1 exceeded the range of specified dtype: u16")
+    _compile_error(two_args, ti.TaichiSyntaxError, "A primitive type can only decorate a single expression")
+    _compile_error(compound, ti.TaichiSyntaxError, "cannot decorate an expression with a compound type")
+    assert ti.f32(1) == 1.0 and ti.u8(300) == 44  # Python scope: casts
+
+
+def test_argument_type_errors_name_taichis_words():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def scalar(a: ti.i32):
+        pass
+
+    @ti.kernel
+    def array(a: ti.types.ndarray()):
+        pass
+
+    with pytest.raises(ti.TaichiRuntimeTypeError,
+                       match=r"Argument \(0,\) \(type=<class 'float'>\) cannot be converted into required type i32"):
+        scalar(1.2)
+    with pytest.raises(ti.TaichiRuntimeTypeError, match=r"Invalid type for argument a, got 1.2"):
+        array(1.2)
+
+
+def test_graph_arguments_removed_in_taichi_1_7():
+    ti.init(arch=ti.cpu)
+    with pytest.raises(ti.TaichiRuntimeError, match="element_shape argument for scalar is deprecated"):
+        ti.graph.Arg(ti.graph.ArgKind.SCALAR, "x", dtype=ti.f32, element_shape=())
+    with pytest.raises(ti.TaichiRuntimeError, match="element_shape argument for ndarray is deprecated"):
+        ti.graph.Arg(ti.graph.ArgKind.NDARRAY, "x", ti.f32, ndim=1, element_shape=(1,))
+    with pytest.raises(ti.TaichiRuntimeError, match="shape argument for texture is deprecated"):
+        ti.graph.Arg(ti.graph.ArgKind.TEXTURE, "x", shape=(128, 128), channel_format=ti.f32)
+
+
+def test_experimental_real_func_is_real_func_with_a_deprecation_warning():
+    ti.init(arch=ti.cpu)
+    with pytest.warns(DeprecationWarning, match="ti.experimental.real_func is deprecated"):
+        @ti.experimental.real_func
+        def foo(a: ti.i32) -> ti.i32:
+            s = 0
+            for i in range(100):
+                if i == a + 1:
+                    return s
+                s = s + i
+            return s
+
+    @ti.kernel
+    def bar(a: ti.i32) -> ti.i32:
+        return foo(a)
+
+    assert bar(10) == 11 * 5 and bar(200) == 99 * 50
+
+
+def test_field_order_and_soa_layout_place_memory_as_taichi():
+    # taichi 1.7.4 (test_order.py): order="ikj" lays axis i outermost, then k, then j; Layout.SOA puts each
+    # entry of a vector field in its own array, one after another; values and indexing do not change
+    ti.init(arch=ti.cpu)
+    X, Y, Z = 4, 3, 2
+    b = ti.field(ti.i32, shape=(X, Y, Z), order="ikj")
+    d = ti.Vector.field(2, ti.i32, shape=(X, Y), order="ji", layout=ti.Layout.SOA)
+
+    @ti.kernel
+    def fill():
+        for i, j, k in b:
+            b[i, j, k] = i * 100 + j * 10 + k
+        for i, j in d:
+            d[i, j] = [i, j]
+
+    @ti.kernel
+    def addr3(a: ti.template(), i: ti.i32, j: ti.i32, k: ti.i32) -> ti.u64:
+        return ti.get_addr(a, [i, j, k])
+
+    @ti.kernel
+    def addr2(a: ti.template(), i: ti.i32, j: ti.i32) -> ti.u64:
+        return ti.get_addr(a, [i, j])
+
+    fill()
+    i, j, k = np.indices((X, Y, Z))
+    np.testing.assert_array_equal(b.to_numpy(), i * 100 + j * 10 + k)
+    b0 = addr3(b, 0, 0, 0)
+    assert addr3(b, 2, 1, 1) == b0 + (2 * (Z * Y) + 1 * Y + 1) * 4
+    d0 = addr2(d.get_scalar_field(0), 0, 0)
+    assert addr2(d.get_scalar_field(1), 3, 2) == d0 + (1 * (X * Y) + 2 * X + 3) * 4
+    assert d[3, 2] == [3, 2]
+    with pytest.raises(ti.TaichiSyntaxError, match="Invalid axis l"):
+        ti.field(ti.f32, shape=(3, 4, 3), order="ijl")
+    with pytest.raises(ti.TaichiSyntaxError, match="The axes in order must be different"):
+        ti.field(ti.f32, shape=(3, 4, 3), order="iji")
+
+
+def test_loop_unique_is_a_hint():
+    # taichi 1.7.4 (test_loop_unique.py): y[loop_unique(x[i])] += 1 over the active cells of a pointer field
+    ti.init(arch=ti.cpu)
+    x, y = ti.field(ti.i32), ti.field(ti.i32)
+    ti.root.pointer(ti.i, 16).place(x)
+    ti.root.pointer(ti.i, 16).place(y)
+
+    @ti.kernel
+    def inc_y():
+        for i in x:
+            a = ti.loop_unique(x[i], covers=[y])
+            y[a] += 1
+
+    x[1], x[2], x[7] = 2, 3, 5
+    y[3], y[4] = 2, 3
+    inc_y()
+    assert [y[i] for i in range(8)] == [0, 0, 1, 3, 3, 1, 0, 0]
+
+
+def test_numpy_arguments_as_taichi_takes_them():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def copy_and_mark(arr: ti.types.ndarray(), out: ti.types.ndarray()):
+        for i, j in arr:
+            out[i, j] = arr[i, j]
+            arr[i, j] = 1
+
+    a = np.arange(12, dtype=np.int32).reshape(3, 4)
+    t = a.T  # Fortran order: the kernel sees t as indexed, and its writes land in t (taichi copies it in and out)
+    out = np.zeros((4, 3), np.int32)
+    copy_and_mark(t, out)
+    np.testing.assert_array_equal(out, np.arange(12).reshape(3, 4).T)
+    assert (a == 1).all()
+    with pytest.raises(ValueError, match="Non contiguous numpy arrays are not supported"):
+        copy_and_mark(np.zeros((4, 6), np.int32)[:, ::2], out)
+
+    @ti.kernel
+    def add_one_mat(arr: ti.types.ndarray(dtype=ti.math.mat3, ndim=2)):
+        for i in ti.grouped(arr):
+            arr[i] = arr[i] + 1.0
+
+    @ti.kernel
+    def arange(x: ti.types.ndarray(ti.i32, ndim=1)):
+        for i in x:
+            x[i] = i
+
+    add_one_mat(np.zeros((2, 2, 3, 3), np.float32))
+    # the same key as the call before: the array's element shape used to go unchecked (the kernel wrote past it)
+    with pytest.raises(ValueError, match=r"required element_shape=\(3, 3\), array with element shape of \(2, 3\)"):
+        add_one_mat(np.zeros((2, 2, 2, 3), np.float32))
+    with pytest.raises(ValueError, match=r"required array has ndim=2 element_dim=2, array with 3 dimensions"):
+        add_one_mat(np.zeros((2, 3, 3), np.float32))
+    with pytest.raises(ValueError, match=r"Invalid value for argument x - required array has dtype=i32, array "
+                                         r"with dtype=i64 is provided"):
+        arange(np.zeros(5, np.int64))
+
+
+def test_numpy_scalars_with_vectors_make_vectors():
+    ti.init(arch=ti.cpu)
+    v = ti.Vector([1, 2])
+    assert isinstance(np.cos(0) + v, ti.Matrix) and isinstance(v + np.cos(0), ti.Matrix)
+    assert (np.float32(2) * v).to_numpy().tolist() == [2, 4]
+
+
+def test_type_errors_in_taichis_words():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def floor_int():
+        a = 1
+        b = ti.floor(a)  # noqa: F841
+
+    @ti.kernel
+    def and_float():
+        a = 1
+        b = 3.1
+        c = a & b  # noqa: F841
+
+    @ti.kernel
+    def select_shapes():
+        a = ti.math.vec2(1.0, 1.0)
+        b = 3
+        c = ti.math.vec3(1.0, 1.0, 2.0)
+        d = a if b else c  # noqa: F841
+
+    @ti.kernel
+    def array_local():
+        a = np.array([1])  # noqa: F841
+
+    @ti.kernel
+    def array_static() -> ti.i32:
+        a = ti.static(np.array([4, 5]))
+        return a[1]
+
+    _compile_error(floor_int, ti.TaichiTypeError, "'floor' takes real inputs only")
+    _compile_error(and_float, ti.TaichiTypeError, r"unsupported operand type\(s\) for '&'")
+    _compile_error(select_shapes, ti.TaichiCompilationError, "Cannot broadcast tensor to tensor")
+    _compile_error(array_local, ti.TaichiTypeError, "Only 0-dimensional numpy array can be used to initialize")
+    assert array_static() == 5
+
+
+def test_ndrange_errors_and_static_grouped_indices():
+    ti.init(arch=ti.cpu)
+    x = ti.Matrix.field(2, 3, dtype=ti.f32, shape=(4, 2))
+
+    @ti.kernel
+    def fill():
+        for i, j in ti.ndrange(4, 2):
+            for I in ti.static(ti.grouped(ti.ndrange(2, 3))):
+                x[i, j][I] = I[0] + I[1] * 10 + i + j * 4
+
+    @ti.kernel
+    def floats():
+        for _i in ti.ndrange((1.1, 10.5)):
+            pass
+
+    @ti.kernel
+    def three():
+        for _i in ti.ndrange((1, 2, 3)):
+            pass
+
+    @ti.kernel
+    def too_few():
+        for _i in ti.ndrange(4, 4):
+            pass
+
+    fill()
+    k, l_ = np.indices((2, 3))
+    for i in range(4):
+        for j in range(2):
+            np.testing.assert_array_equal(x[i, j].to_numpy(), k + l_ * 10 + i + j * 4)
+    _compile_error(floats, ti.TaichiTypeError, r"Every argument of ndrange should be an integer scalar or a "
+                                               r"tuple/list of \(int, int\)")
+    _compile_error(three, ti.TaichiSyntaxError, r"Every argument of ndrange should be a scalar or a tuple/list like")
+    _compile_error(too_few, ti.TaichiSyntaxError, "Ndrange for loop with number of the loop variables not equal")
+
+
+def test_python_scope_index_errors():
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(ti.f32, shape=3)
+    with pytest.raises(AssertionError):  # taichi's debug mode: an assertion failure; simgrad: also an IndexError
+        x[3] = 1.0
+    with pytest.raises(IndexError):
+        x[-1]  # noqa: B018
+    val = ti.field(ti.i32, shape=(2, 2))
+    with pytest.raises(TypeError, match="Detected illegal element of type: slice"):
+        val[0, :]  # noqa: B018

@@ -16,7 +16,7 @@ SCRIPT = textwrap.dedent("""
     import os, signal, sys, threading, time
     import simgrad as ti
 
-    ti.init(arch=ti.cpu, num_threads=int(sys.argv[2]))
+    ti.init(arch=ti.cpu, cpu_max_num_threads=int(sys.argv[2]))
     x = ti.field(ti.i64, 4)
 
     @ti.kernel
