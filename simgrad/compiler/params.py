@@ -312,6 +312,8 @@ class NdarrayParam(Param):
         own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray") else None
         if isinstance(ann.dtype, MatrixType):
             want = ann.dtype.dtype if ann.dtype._dtype is not None or ann.dtype.n is not None else None
+            if isinstance(a, np.ndarray):  # Taichi checks only the element shape of an external array
+                want = None
         else:
             want = dt.from_any(ann.dtype) if ann.dtype is not None else None
         if want is not None and not isinstance(ann.dtype, MatrixType) and own:

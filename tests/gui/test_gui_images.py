@@ -141,3 +141,13 @@ def test_lib_utils_os_name():
     import simgrad as ti
 
     assert ti._lib.utils.get_os_name() in ("linux", "osx", "win", "unix")
+
+
+def test_imwrite_scales_wider_unsigned_ints_by_their_bound(tmp_path):
+    # taichi 1.7.4 (ti.tools.imwrite): a u16/u32/u64 pixel v is written as v // (max // 256)
+    for t in (np.uint16, np.uint32, np.uint64):
+        step = np.iinfo(t).max // 256
+        px = (np.arange(24, dtype=t).reshape(4, 2, 3) * 10) * t(step)
+        path = str(tmp_path / f"u{np.dtype(t).itemsize}.png")
+        tg.imwrite(px, path)
+        np.testing.assert_array_equal(tg.imread(path).astype(np.int64), (px // step).astype(np.int64))

@@ -505,3 +505,40 @@ def test_python_scope_index_errors():
     val = ti.field(ti.i32, shape=(2, 2))
     with pytest.raises(TypeError, match="Detected illegal element of type: slice"):
         val[0, :]  # noqa: B018
+
+
+def test_read_then_update_in_one_kernel_has_the_right_gradient():
+    # taichi 1.7.4 (test_break_gdar_rule_1) refuses this kernel under Tape(validation=True) in debug mode (it reads
+    # b[None], then updates it); simgrad's Tape rolls b back before the adjoint, so the gradient is right instead:
+    # loss = x[1] * b_old, so dloss/dx[1] = b_old = 10 and dloss/db = x[1] = 1 (a deliberate difference)
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(dtype=ti.f32, shape=16, needs_grad=True)
+    loss = ti.field(dtype=ti.f32, shape=(), needs_grad=True)
+    b = ti.field(dtype=ti.f32, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def read_then_update():
+        loss[None] = x[1] * b[None]
+        b[None] += 100
+
+    x.from_numpy(np.arange(16, dtype=np.float32))
+    b[None] = 10
+    with ti.ad.Tape(loss=loss, validation=True):
+        read_then_update()
+    assert x.grad[1] == 10.0 and b.grad[None] == 1.0 and b[None] == 110.0
+
+
+def test_external_array_keeps_its_dtype_under_a_matrix_annotation():
+    # taichi 1.7.4 (test_matrix_ndarray_non_constant_index): ndarray(dtype=ti.math.mat2) takes an int32 numpy array
+    # (only the element shape is checked) and the kernel computes in int32
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def fill(a: ti.types.ndarray(dtype=ti.math.mat2)):
+        for i in range(5):
+            for j, k in ti.ndrange(2, 2):
+                a[i][j, k] = j * j + k * k
+
+    m = np.zeros((5, 2, 2), dtype=np.int32)
+    fill(m)
+    np.testing.assert_array_equal(m, np.broadcast_to([[0, 1], [1, 2]], (5, 2, 2)))
