@@ -227,6 +227,10 @@ class BoundKernel:
         refuse_pickle(f"kernel {self.name}", function_loc(self.kernel.func))
 
     def __call__(self, *args, **kwargs):
+        if not getattr(type(self.obj), "_data_oriented", False) and not isinstance(self.obj, type):
+            cls = type(self.obj).__name__  # Taichi's rule: kernel methods belong to @ti.data_oriented classes
+            raise SimgradSyntaxError(f"Please decorate class {cls} with @ti.data_oriented (kernel {self.name} is "
+                                     "one of its methods)", caller_loc())
         return self.kernel(self.obj, *args, **kwargs)
 
 

@@ -660,8 +660,9 @@ class KernelLowering:
         cond = self.eval(node.test)
         if not isinstance(cond, (Expr, Matrix)):
             return self.eval(node.body if cond else node.orelse)
-        if isinstance(cond, Matrix):
-            return operators.select(cond, self.eval(node.body), self.eval(node.orelse))
+        if isinstance(cond, Matrix):  # Taichi's rule: an element-wise choice is ti.select's
+            raise SimgradSyntaxError('The condition of `a if cond else b` is a vector or matrix: Please use '
+                                     '"ti.select" instead.', self.loc(node))
         return self.choose(cond, lambda: self.eval(node.body), lambda: self.eval(node.orelse))
 
     def choose(self, cond: Expr, then_fn, else_fn):
@@ -684,11 +685,14 @@ class KernelLowering:
             return operators.select(c, *values)
         a, b = values
         if isinstance(a, Matrix) or isinstance(b, Matrix):
-            if not (isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape == b.shape):
+            if isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape != b.shape:
                 raise SimgradTypeError("both sides of a run-time choice must be matrices of one shape",
                                        self.builder.loc)
-            t = dt.promote(dtype_of(a), dtype_of(b))
-            ref: MatrixRef | VarRef = MatrixRef([VarRef(t) for _ in a.entries], a.n, a.m)
+            mat = a if isinstance(a, Matrix) else b  # a scalar side is broadcast to it (Taichi's `0 if c else v`)
+            values = [v if isinstance(v, Matrix) else Matrix(_entries=[v] * len(mat.entries), n=mat.n, m=mat.m)
+                      for v in values]
+            t = dt.promote(dtype_of(values[0]), dtype_of(values[1]))
+            ref: MatrixRef | VarRef = MatrixRef([VarRef(t) for _ in mat.entries], mat.n, mat.m)
         else:
             ref = VarRef(_choice_type(a, b))
         new = parent.stmts[at + 1:]  # the result's ALLOCAs go before the IF

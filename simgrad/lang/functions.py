@@ -83,7 +83,9 @@ def real_func(fn):
     rules for real functions: every parameter annotated, the return value annotated, loops serial."""
     import inspect
 
-    for name, p in inspect.signature(fn).parameters.items():
+    for k, (name, p) in enumerate(inspect.signature(fn).parameters.items()):
+        if k == 0 and name == "self":  # a method of a @ti.data_oriented class (its object is compile-time)
+            continue
         if p.annotation is inspect.Parameter.empty:
             raise SimgradSyntaxError(f"Argument {name} of real function {fn.__name__} must be type annotated",
                                      caller_loc())

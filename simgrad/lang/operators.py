@@ -175,8 +175,11 @@ def _ipow(base: Expr, n: int) -> Expr:
     if n == 0:
         return cast_expr(to_expr(1, base.dtype), base.dtype)
     if n < 0:
-        if not base.dtype.is_float:
-            base = cast_expr(base, dt.Defaults.fp)
+        if not base.dtype.is_float:  # Taichi refuses it when compiling (alg_simp), in every mode
+            from simgrad.errors import SimgradRuntimeError
+
+            raise SimgradRuntimeError(f"Negative exponent in pow(int, int) is not allowed: {base.dtype} ** {n} "
+                                      "(make the base a float for 1 / x ** n)", context.current_loc())
         return truediv(1.0, _ipow(base, -n))
     result: Expr | None = None
     p = base

@@ -542,3 +542,73 @@ def test_external_array_keeps_its_dtype_under_a_matrix_annotation():
     m = np.zeros((5, 2, 2), dtype=np.int32)
     fill(m)
     np.testing.assert_array_equal(m, np.broadcast_to([[0, 1], [1, 2]], (5, 2, 2)))
+
+
+def test_ternary_broadcasts_a_scalar_side_and_refuses_a_vector_condition():
+    # taichi 1.7.4 (test_if.py): `0 if c else v` with a vector v is a vector; a vector condition is its
+    # TaichiSyntaxError 'Please use "ti.select" instead.'
+    ti.init(arch=ti.cpu)
+    g = ti.Vector.field(3, float, shape=4)
+
+    @ti.kernel
+    def clear_first_two():
+        for i in g:
+            g[i] = 0 if i < 2 else g[i]
+
+    @ti.kernel
+    def vector_cond():
+        for i in g:
+            g[i] = 0 if g[i] > 0 else g[i]
+
+    g.from_numpy(np.ones((4, 3), np.float32))
+    clear_first_two()
+    np.testing.assert_array_equal(g.to_numpy(), [[0, 0, 0], [0, 0, 0], [1, 1, 1], [1, 1, 1]])
+    _compile_error(vector_cond, ti.TaichiSyntaxError, 'Please use "ti.select" instead.')
+
+
+def test_integer_power_with_a_negative_constant_exponent_is_refused():
+    # taichi 1.7.4: RuntimeError "Negative exponent in pow(int, int) is not allowed." when compiling (simgrad
+    # returned the float 1 / x ** n)
+    ti.init(arch=ti.cpu)
+    z = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def foo(x: ti.i32, y: ti.template()):
+        z[None] = x ** y
+
+    foo(3, 2)
+    assert z[None] == 9
+    _compile_error(foo, ti.TaichiRuntimeError, r"Negative exponent in pow\(int, int\) is not allowed", 10, -10)
+
+
+def test_kernel_methods_need_a_data_oriented_class():
+    ti.init(arch=ti.cpu)
+
+    class Plain:
+        def __init__(self):
+            self.val = ti.field(ti.f32, shape=4)
+
+        @ti.kernel
+        def fill(self):
+            for i in self.val:
+                self.val[i] = i
+
+    @ti.data_oriented
+    class Array:
+        def __init__(self):
+            self.val = ti.field(ti.f32, shape=4)
+
+        @ti.real_func
+        def mul(self, i: ti.i32, j: ti.i32) -> ti.i32:  # `self` needs no annotation on a real function
+            return i * j
+
+        @ti.kernel
+        def fill(self):
+            for i in self.val:
+                self.val[i] = self.mul(i, 3)
+
+    with pytest.raises(ti.TaichiSyntaxError, match="Please decorate class Plain with @ti.data_oriented"):
+        Plain().fill()
+    a = Array()
+    a.fill()
+    np.testing.assert_array_equal(a.val.to_numpy(), [0, 3, 6, 9])
