@@ -31,7 +31,7 @@ from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.functions import BoundFunc
-from simgrad.lang.matrix import Matrix, dtype_of
+from simgrad.lang.matrix import Matrix, _swizzle_indices, dtype_of
 from simgrad.lang.struct import Struct, StructField
 from simgrad.lang.types import MatrixType
 
@@ -898,7 +898,8 @@ def _maybe_global(node) -> bool:
 
 
 def _is_swizzle(name: str) -> bool:
-    return 0 < len(name) <= 4 and all(c in "xyzwrgba" for c in name)
+    """Letters of one of Taichi's groups (xyzw, rgba, stpq: `v.p` is v[2])."""
+    return _swizzle_indices(name) is not None
 
 
 def _is_array_arg(v) -> bool:

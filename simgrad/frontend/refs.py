@@ -14,7 +14,7 @@ from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import ScalarField
-from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index, vector_key
+from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index, check_swizzle, vector_key
 
 
 class VarRef:
@@ -178,6 +178,7 @@ class MatrixRef:
 
     def swizzle(self, name: str):
         idx = [_SWIZZLE[c] for c in name]
+        check_swizzle(name, idx, self.n)
         if len(idx) == 1:
             return self.refs[idx[0]]
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)

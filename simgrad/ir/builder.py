@@ -83,10 +83,12 @@ class Builder:
         """The result type of `d` on operands of type `t` (a located error where it does not take them)."""
         if not d.accepts(t):
             kind = "floating-point" if d.domain == FLOAT else "integer"
-            what = f"{kind} operands" if d.arity == 2 else f"a {'n' if kind[0] == 'i' else ''}{kind} operand"
+            if d.arity == 1:  # Taichi's words
+                inputs = "real" if d.domain == FLOAT else "integral"
+                raise SimgradTypeError(f"'{d.name}' takes {inputs} inputs only, got {t}", self.loc)
             symbol = _SYMBOLS.get(d.name)
-            taichi = f"unsupported operand type(s) for '{symbol}': " if symbol else ""  # Taichi's words
-            raise SimgradTypeError(f"{taichi}{d.name} needs {what}, got {t}", self.loc)
+            taichi = f"unsupported operand type(s) for '{symbol}': " if symbol else ""
+            raise SimgradTypeError(f"{taichi}{d.name} needs {kind} operands, got {t}", self.loc)
         return d.result_type(t)
 
     def select(self, cond: Stmt, a, b) -> Stmt:

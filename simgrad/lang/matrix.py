@@ -11,7 +11,14 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad import errors
-from simgrad.errors import SimgradIndexError, SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.errors import (
+    SimgradIndexError,
+    SimgradSyntaxError,
+    SimgradTypeError,
+    SimgradValueError,
+    TaichiRuntimeError,
+    caller_loc,
+)
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
@@ -28,6 +35,13 @@ def _swizzle_indices(name: str) -> list[int] | None:
         if all(c in g for c in name):
             return [g.index(c) for c in name]
     return None
+
+
+def check_swizzle(name: str, idx: list[int], n: int) -> None:
+    """A swizzle past the vector's length, in Taichi's words (a TaichiSyntaxError, in kernels too)."""
+    if max(idx) >= n:
+        group = next(g for g in _SWIZZLE_GROUPS if name[0] in g)
+        raise SimgradSyntaxError(f"vec{n} only has attributes={tuple(group[:n])}, got={tuple(name)}", _loc())
 
 
 def vector_key(key):
@@ -218,9 +232,9 @@ class Matrix:
         idx = _swizzle_indices(name)
         if idx is None or name.startswith("_"):
             raise AttributeError(f"'Matrix' object has no attribute '{name}'")
-        if self.m != 0 or max(idx) >= self.n:
-            raise AttributeError(f"a {self.shape} {'vector' if self.m == 0 else 'matrix'} has no swizzle "
-                                 f"'{name}'")
+        if self.m != 0:
+            raise AttributeError(f"a {self.shape} matrix has no swizzle '{name}'")
+        check_swizzle(name, idx, self.n)
         return idx
 
     def __getattr__(self, name):
@@ -236,7 +250,8 @@ class Matrix:
         idx = self._swizzle(name)
         vals = [value] if len(idx) == 1 else list(value)
         if len(vals) != len(idx):
-            raise ValueError(f"swizzle '{name}' takes {len(idx)} values, got {len(vals)}")
+            raise TaichiRuntimeError(f"value len does not match the swizzle pattern={name}: it takes {len(idx)} "
+                                     f"values, got {len(vals)}", _loc())
         for i, v in zip(idx, vals):
             self.entries[i] = v
 

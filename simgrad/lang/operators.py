@@ -307,6 +307,9 @@ def logical_not(a):
         return _elementwise(logical_not, a)
     if not isinstance(a, Expr):
         return int(not a)
+    if a.dtype.is_float:  # Taichi's type check: `not x` needs an integer (compare with 0 for a float)
+        raise SimgradTypeError(f"'logical_not' takes integral inputs only, got {a.dtype} (write x == 0)",
+                               context.current_loc())
     return _emit1(Op.LOGICAL_NOT, a)
 
 

@@ -612,3 +612,45 @@ def test_kernel_methods_need_a_data_oriented_class():
     a = Array()
     a.fill()
     np.testing.assert_array_equal(a.val.to_numpy(), [0, 3, 6, 9])
+
+
+def test_stpq_swizzles_assign_and_invalid_swizzles_are_refused():
+    # `v.p = 3` in a kernel did nothing (the stpq group was not recognised as assignable); taichi 1.7.4's messages
+    # for swizzles past a vector's length
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def stp() -> ti.math.vec3:
+        v = ti.math.vec3(0, 0, 0)
+        v.s = 1
+        v.t = 2
+        v.p = 3
+        return v
+
+    @ti.kernel
+    def invalid_z():
+        b = ti.math.vec2(1, 2)
+        b.z = 3
+
+    assert stp().to_numpy().tolist() == [1, 2, 3]
+    _compile_error(invalid_z, ti.TaichiSyntaxError, r"vec2 only has attributes=\('x', 'y'\), got=\('z',\)")
+    a = ti.math.vec2(1, 2)
+    with pytest.raises(ti.TaichiSyntaxError, match=r"vec2 only has attributes=\('x', 'y'\), got=\('x', 'y', 'z'\)"):
+        a.xyz = [1, 2, 3]
+    with pytest.raises(ti.TaichiRuntimeError, match="value len does not match the swizzle pattern=xy"):
+        a.xy = [1, 2, 3]
+
+
+def test_unary_type_errors_in_taichis_words():
+    ti.init(arch=ti.cpu)
+
+    @ti.kernel
+    def bit_not(x: ti.f32) -> ti.i32:
+        return ~x
+
+    @ti.kernel
+    def logic_not(x: ti.f32) -> ti.i32:
+        return not x
+
+    _compile_error(bit_not, ti.TaichiTypeError, "takes integral inputs only", 1.0)
+    _compile_error(logic_not, ti.TaichiTypeError, "takes integral inputs only", 1.0)
