@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from simgrad import dtypes as dt
 from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
-from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
+from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef, tensor_text
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
@@ -196,6 +196,27 @@ def _atomic(comp, node: ast.Call, kind: str):
     return ref.atomic("atomic_mul" if kind == "mul" else kind, comp.eval(node.args[1]))
 
 
+def _check_array_argument(name: str, ann, value, loc) -> None:
+    """An ndarray passed to a ti.func parameter annotated ti.types.ndarray(dtype, ndim): its element type and
+    dimensions must be those (Taichi's TaichiCompilationError "Invalid value for argument a")."""
+    from simgrad.frontend.arrays import ArrayArg
+    from simgrad.lang.types import MatrixType, NdarrayType
+
+    if not isinstance(ann, NdarrayType) or not isinstance(value, ArrayArg):
+        return
+    have = tuple(value.element_shape)
+    wrong = None
+    if ann.ndim is not None and ann.ndim != value.ndim:
+        wrong = f"ndim={ann.ndim}, got an array of ndim={value.ndim}"
+    elif isinstance(ann.dtype, MatrixType) and ann.dtype.n is not None and tuple(ann.dtype.shape) != have:
+        wrong = f"element shape {tuple(ann.dtype.shape)}, got {have}"
+    elif ann.dtype is not None and not isinstance(ann.dtype, MatrixType) and (
+            have or dt.from_any(ann.dtype) is not value.dtype):
+        wrong = f"element type {dt.from_any(ann.dtype)}, got {tensor_text(have, value.dtype)}"
+    if wrong:
+        raise SimgradTypeError(f"Invalid value for argument {name} - required {wrong}", loc)
+
+
 def inline(comp, fn, args, kwargs, node):
     """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
     from simgrad.frontend.source import get_source
@@ -216,6 +237,7 @@ def inline(comp, fn, args, kwargs, node):
     frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
+        _check_array_argument(name, ann, value, comp.loc(node))
         if by_reference(ann) or not isinstance(value, (Expr, Matrix, Struct, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local

@@ -654,3 +654,23 @@ def test_unary_type_errors_in_taichis_words():
 
     _compile_error(bit_not, ti.TaichiTypeError, "takes integral inputs only", 1.0)
     _compile_error(logic_not, ti.TaichiTypeError, "takes integral inputs only", 1.0)
+
+
+def test_func_ndarray_annotation_is_checked():
+    # taichi 1.7.4 (test_func_ndarray_arg): a vec3 ndarray passed to a ti.func parameter annotated
+    # ndarray(dtype=vec2) is a TaichiCompilationError "Invalid value for argument a"
+    ti.init(arch=ti.cpu)
+
+    @ti.func
+    def set_first(a: ti.types.ndarray(dtype=ti.math.vec2, ndim=1)):
+        a[0] = [100, 100]
+
+    @ti.kernel
+    def call(x: ti.types.ndarray(ndim=1)):
+        set_first(x)
+
+    ok = ti.ndarray(ti.math.vec2, shape=4)
+    call(ok)
+    assert ok[0] == [100, 100]
+    _compile_error(call, ti.TaichiCompilationError, "Invalid value for argument a - required element shape",
+                   ti.ndarray(ti.math.vec3, shape=4))
