@@ -71,6 +71,7 @@ class KernelLowering:
         self.next_loop_config: dict | None = None
         self.debug = debug
         self.return_types: list | None = None
+        self.return_struct = None  # the kernel's struct return type (compiler/driver.py), checked at `return`
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
@@ -501,11 +502,19 @@ class KernelLowering:
         if self.return_types is None:
             raise SimgradSyntaxError("this kernel returns a value but has no return annotation (-> ti.f32)",
                                      self.loc(node))
-        if isinstance(value, Struct):  # its leaves in order, matrices by entry
-            value = [x for _, leaf in _struct_leaves(value) for x in
-                     (leaf.entries if isinstance(leaf, Matrix) else [leaf])]
-        values = value.entries if isinstance(value, Matrix) else list(value) \
-            if isinstance(value, (tuple, list)) else [value]
+        want = self.return_struct
+        have = getattr(value, "_type", None) if isinstance(value, Struct) else None
+        if want is not None and have is not None and have is not want and \
+                [(k, repr(t)) for k, t in have.members.items()] != [(k, repr(t)) for k, t in want.members.items()]:
+            raise SimgradTypeError(f"the kernel returns a struct of type {have!r}, but is annotated with {want!r}",
+                                   self.loc(node))
+
+        def flat(v) -> list:  # a struct's leaves in order, matrices by entry
+            if isinstance(v, Struct):
+                return [x for _, leaf in _struct_leaves(v) for x in flat(leaf)]
+            return list(v.entries) if isinstance(v, Matrix) else [v]
+
+        values = [x for v in value for x in flat(v)] if isinstance(value, (tuple, list)) else flat(value)
         if len(values) != len(self.return_types):
             raise SimgradTypeError(f"kernel returns {len(values)} values but is annotated with "
                                    f"{len(self.return_types)}", self.loc(node))

@@ -674,3 +674,40 @@ def test_func_ndarray_annotation_is_checked():
     assert ok[0] == [100, 100]
     _compile_error(call, ti.TaichiCompilationError, "Invalid value for argument a - required element shape",
                    ti.ndarray(ti.math.vec3, shape=4))
+
+
+def test_kernels_return_tuples_of_scalars_vectors_and_structs():
+    # taichi 1.7.4 (test_real_func_tuple_ret*): -> (ti.f32, s0), tuple[...] and typing.Tuple[...] alike; 65537 in
+    # an i16 member wraps to 1; a struct of another type is refused
+    import typing
+
+    ti.init(arch=ti.cpu)
+    s0 = ti.types.struct(a=ti.math.vec3, b=ti.i16)
+    s1 = ti.types.struct(a=ti.math.vec2, b=ti.i16)
+
+    @ti.real_func
+    def foo() -> (ti.f32, s0):
+        return 1, s0(a=ti.math.vec3([100, 0.2, 3]), b=65537)
+
+    @ti.kernel
+    def bar() -> (ti.f32, s0):
+        return foo()
+
+    @ti.kernel
+    def baz() -> tuple[ti.i32, ti.math.vec2, s0]:
+        return 7, ti.math.vec2(1, 2), s0(a=ti.math.vec3(4, 5, 6), b=3)
+
+    @ti.kernel
+    def qux() -> typing.Tuple[ti.f32, ti.i32]:  # noqa: UP006 (the typing spelling is the point)
+        return 0.5, 2
+
+    @ti.kernel
+    def wrong() -> s0:
+        return s1(a=ti.math.vec2(1, 2), b=3)
+
+    a, b = bar()
+    assert a == 1.0 and b.a.to_numpy().tolist() == pytest.approx([100, 0.2, 3]) and b.b == 1
+    i, v, s = baz()
+    assert i == 7 and v.to_numpy().tolist() == [1, 2] and s.a.to_numpy().tolist() == [4, 5, 6] and s.b == 3
+    assert qux() == (0.5, 2)
+    _compile_error(wrong, ti.TaichiCompilationError, "returns a struct of type")
