@@ -32,7 +32,7 @@ from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.functions import BoundFunc
 from simgrad.lang.matrix import Matrix, _swizzle_indices, dtype_of
-from simgrad.lang.struct import Struct, StructField
+from simgrad.lang.struct import Struct, StructField, StructType
 from simgrad.lang.types import MatrixType
 
 _BINOPS = {
@@ -71,7 +71,7 @@ class KernelLowering:
         self.next_loop_config: dict | None = None
         self.debug = debug
         self.return_types: list | None = None
-        self.return_struct = None  # the kernel's struct return type (compiler/driver.py), checked at `return`
+        self.return_struct: StructType | None = None  # a struct return type (compiler/driver.py), checked at return
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
