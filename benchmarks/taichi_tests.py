@@ -141,6 +141,9 @@ EXCLUDED = {
     ("test_tensor_reflection.py", "test_unordered"): "walks Taichi's SNode internals (_get_children(), "
                                                      "impl.get_runtime().materialize_root_fb(), FieldsBuilder."
                                                      "_finalized_roots(), _path_from_root())",
+    ("test_fill.py", "test_fill_vector_field_recompile"): "counts the kernels Taichi compiles for x.fill() "
+                                                          "(get_num_compiled_functions() == 1); simgrad fills a dense "
+                                                          "field through its numpy view and compiles none",
     ("test_ad_basics.py", "test_ad_rand"): "asserts Taichi's C++ message 'RandStmt not supported' (simgrad "
                                            "refuses ti.random in a differentiated kernel too, in its own words)",
 }

@@ -79,12 +79,27 @@ class Defaults:
     ip: DataType = i32
 
 
+class _DefaultUnsigned:
+    """Taichi's default_up: the unsigned type of default_ip's width (ti.math.uvec2 follows it, as in Taichi)."""
+
+    def __repr__(self) -> str:
+        return "default_up"
+
+    def __reduce__(self) -> str:
+        return "default_up"
+
+
+default_up = _DefaultUnsigned()
+
+
 def from_any(t) -> DataType:
     """Accept our types, numpy dtypes and the Python builtins `int`/`float`/`bool` as type names."""
     if isinstance(t, DataType):
         return t
     if t is int:
         return Defaults.ip
+    if t is default_up:
+        return {8: u8, 16: u16, 32: u32, 64: u64}[Defaults.ip.bits]
     if t is float:
         return Defaults.fp
     if t is bool:

@@ -27,7 +27,7 @@ from typing import ClassVar
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.errors import AnnotationError, SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.frontend.arrays import ArrayArg, BuilderArg
 from simgrad.frontend.fingerprint import KeyBuilder
 from simgrad.frontend.refs import tensor_text
@@ -274,28 +274,29 @@ class NdarrayParam(Param):
                                  arg.grad_slot)
 
     def _check_external(self, a: np.ndarray) -> None:
-        """A numpy argument against the annotation, in Taichi's words for external arrays (ValueError)."""
+        """A numpy argument against the annotation, in Taichi's words for external arrays (ValueError, and
+        TypeError: compiler/kernel.py makes it an ArgumentValueError)."""
         ann, name, shape = self.ann, self.name, tuple(a.shape)
         where = f"kernel {self.kernel_name}: Invalid value for argument {name} - "
         if isinstance(ann.dtype, MatrixType):
             edim = 1 if ann.dtype.m == 0 else 2
             if ann.ndim is not None and len(shape) != edim + ann.ndim:
-                raise SimgradValueError(f"{where}required array has ndim={ann.ndim} element_dim={edim}, array with "
+                raise SimgradTypeError(f"{where}required array has ndim={ann.ndim} element_dim={edim}, array with "
                                         f"{len(shape)} dimensions is provided")
             if len(shape) < edim:
-                raise SimgradValueError(f"{where}required element_dim={edim}, array with {len(shape)} dimensions "
+                raise SimgradTypeError(f"{where}required element_dim={edim}, array with {len(shape)} dimensions "
                                         "is provided")
             want = ann.dtype.shape
             if ann.dtype.n is not None and None not in want and shape[len(shape) - edim:] != tuple(want):
-                raise SimgradValueError(f"{where}required element_shape={tuple(want)}, array with element shape of "
+                raise SimgradTypeError(f"{where}required element_shape={tuple(want)}, array with element shape of "
                                         f"{shape[len(shape) - edim:]} is provided")
         elif ann.dtype is not None:
             want_t, t = dt.from_any(ann.dtype), dt.from_numpy(a.dtype)
             if want_t is not t:
-                raise SimgradValueError(f"{where}required array has dtype={want_t}, array with dtype={t} is "
+                raise SimgradTypeError(f"{where}required array has dtype={want_t}, array with dtype={t} is "
                                         "provided")
             if ann.ndim is not None and len(shape) != ann.ndim:
-                raise SimgradValueError(f"{where}required array has ndim={ann.ndim}, array with {len(shape)} "
+                raise SimgradTypeError(f"{where}required array has ndim={ann.ndim}, array with {len(shape)} "
                                         "dimensions is provided")
 
     def _array_arg(self, a, slots: Slots, grad: bool | None = None) -> ArrayArg:
@@ -435,7 +436,7 @@ def make_param(name: str, ann, kernel_name: str, first: bool = False) -> Param:
     for kind in KINDS:
         if kind.accepts(ann):
             return kind(name, ann, kernel_name)
-    if ann is inspect.Parameter.empty:
-        raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
-                               "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
-    raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' has an unsupported annotation {ann!r}")
+    if ann is inspect.Parameter.empty:  # a TypeError, and Taichi's TaichiSyntaxError
+        raise AnnotationError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
+                              "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
+    raise AnnotationError(f"kernel {kernel_name}: parameter '{name}' has an unsupported annotation {ann!r}")

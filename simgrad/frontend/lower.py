@@ -124,7 +124,7 @@ class KernelLowering:
             return src.globals[name]
         if hasattr(builtins, name):
             return getattr(builtins, name)
-        raise SimgradNameError(f"name '{name}' is not defined", src.loc(node))
+        raise SimgradNameError(f'Name "{name}" is not defined', src.loc(node))
 
     def new_var(self, value, dtype=None):
         """A fresh local initialised with `value` (a scalar, a matrix or a struct)."""
@@ -294,6 +294,14 @@ class KernelLowering:
         value = self.eval(node.value) if node.value is not None else 0
         from simgrad.lang.types import MatrixType
 
+        current = self.frame.scopes[-1].get(node.target.id)
+        if isinstance(current, VarRef) and isinstance(ann, dt.DataType):  # Taichi: an assignment, same type only
+            if current.dtype is not ann:
+                raise SimgradSyntaxError(f"Static assign cannot have type overloading: '{node.target.id}' is "
+                                         f"{current.dtype}, annotated {ann} here", self.loc(node))
+            current.store(operators.cast(value, ann))
+            return
+
         if isinstance(ann, MatrixType):
             self.bind(node.target.id, self.new_var(ann.make(value), ann.dtype))
         else:
@@ -394,12 +402,17 @@ class KernelLowering:
         if not isinstance(cond, (Expr, Matrix)):
             # a Python value decides at compile time; unless it is ti.static(...), Taichi still treats the
             # body as nested, so a for loop inside is not an outermost (parallel) loop
+            # and its body is a scope of its own (Taichi's: `if True: a = 0` leaves no `a` after the if)
             nested = not _is_static_call(node.test)
             self.depth += nested
+            if nested:
+                self.frame.scopes.append({})
             try:
                 self.visit_block(node.body if cond else node.orelse)
             finally:
                 self.depth -= nested
+                if nested:
+                    self.frame.scopes.pop()
             return
         if isinstance(cond, Matrix):
             raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",

@@ -37,11 +37,15 @@ def _swizzle_indices(name: str) -> list[int] | None:
     return None
 
 
-def check_swizzle(name: str, idx: list[int], n: int) -> None:
-    """A swizzle past the vector's length, in Taichi's words (a TaichiSyntaxError, in kernels too)."""
+def check_swizzle(name: str, idx: list[int], n: int, cls: type[Exception] | None = None) -> None:
+    """A swizzle past the vector's length, in Taichi's words (a TaichiSyntaxError; reading one in Python scope is
+    an AttributeError, so that hasattr() keeps working)."""
     if max(idx) >= n:
         group = next(g for g in _SWIZZLE_GROUPS if name[0] in g)
-        raise SimgradSyntaxError(f"vec{n} only has attributes={tuple(group[:n])}, got={tuple(name)}", _loc())
+        text = f"vec{n} only has attributes={tuple(group[:n])}, got={tuple(name)}"
+        if cls is not None:
+            raise cls(text)
+        raise SimgradSyntaxError(text, _loc())
 
 
 def vector_key(key):
@@ -228,17 +232,17 @@ class Matrix:
             raise IndexError("assigning through a kernel-value index is not supported on a temporary matrix")
         self.entries[idx] = value
 
-    def _swizzle(self, name: str) -> list[int]:
+    def _swizzle(self, name: str, reading: bool = False) -> list[int]:
         idx = _swizzle_indices(name)
         if idx is None or name.startswith("_"):
             raise AttributeError(f"'Matrix' object has no attribute '{name}'")
         if self.m != 0:
             raise AttributeError(f"a {self.shape} matrix has no swizzle '{name}'")
-        check_swizzle(name, idx, self.n)
+        check_swizzle(name, idx, self.n, AttributeError if reading else None)
         return idx
 
     def __getattr__(self, name):
-        idx = self._swizzle(name)
+        idx = self._swizzle(name, reading=True)
         if len(idx) == 1:
             return self.entries[idx[0]]
         return Matrix([self.entries[i] for i in idx])

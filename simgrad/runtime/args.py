@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradRuntimeError, SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.errors import ArgumentValueError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.runtime.abi import CTX_ARGS
 from simgrad.runtime.tensors import tensor_grad_info, tensor_info
 
@@ -266,9 +266,9 @@ def array_info(a, kernel, param, ndim):
         if not a.flags.c_contiguous:
             if a.flags.f_contiguous:  # a transposed array: the kernel runs on a C-ordered copy (compiler/kernel.py)
                 raise FortranOrderArray(f"kernel {kernel}: ndarray argument '{param}' is in Fortran order")
-            raise SimgradValueError(f"kernel {kernel}: ndarray argument '{param}': Non contiguous numpy arrays are "
-                                    "not supported, please call np.ascontiguousarray(arr) before passing it into "
-                                    "the kernel")
+            raise ArgumentValueError(f"kernel {kernel}: ndarray argument '{param}' is not C-contiguous: Non "
+                                     "contiguous numpy arrays are not supported, please call np.ascontiguousarray(arr) "
+                                     "before passing it into the kernel", caller_loc())
         return a.ctypes.data, a.shape
     if hasattr(a, "_ndarray"):
         return array_info(a._ndarray, kernel, param, ndim)

@@ -119,7 +119,7 @@ def test_undefined_name():
     def k() -> ti.f32:
         return undefined_thing * 2  # noqa: F821
 
-    _raises_located(k, match="name 'undefined_thing' is not defined", line_text="return undefined_thing * 2",
+    _raises_located(k, match="Name \"undefined_thing\" is not defined", line_text="return undefined_thing * 2",
                     exc=NameError)
 
 

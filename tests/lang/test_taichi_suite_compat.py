@@ -711,3 +711,64 @@ def test_kernels_return_tuples_of_scalars_vectors_and_structs():
     assert i == 7 and v.to_numpy().tolist() == [1, 2] and s.a.to_numpy().tolist() == [4, 5, 6] and s.b == 3
     assert qux() == (0.5, 2)
     _compile_error(wrong, ti.TaichiCompilationError, "returns a struct of type")
+
+
+def test_scoping_annotations_names_and_gradients_as_taichi():
+    ti.init(arch=ti.cpu)
+    x = ti.field(ti.f32, shape=())
+
+    @ti.kernel
+    def scoped():
+        if True:  # a plain if is a scope even when its condition is known (taichi: NameError below)
+            a = 0
+        print(a)  # noqa: F821
+
+    @ti.kernel
+    def overload():
+        d: ti.i32 = 2
+        d: ti.f32 = 2.0  # noqa: F842
+
+    @ti.kernel
+    def reannotate() -> ti.i32:
+        d: ti.i32 = 2
+        d: ti.i32 = 5
+        return d
+
+    @ti.kernel
+    def undefined():
+        a + 1  # noqa: F821
+
+    @ti.kernel
+    def no_grad(f: ti.template()):
+        x[None] = f.grad[None]
+
+    _compile_error(scoped, ti.TaichiNameError, 'Name "a" is not defined')
+    _compile_error(overload, ti.TaichiSyntaxError, "Static assign cannot have type overloading")
+    assert reannotate() == 5
+    _compile_error(undefined, ti.TaichiNameError, 'Name "a" is not defined')
+    _compile_error(no_grad, ti.TaichiCompilationError,
+                   r"Gradient x.grad has not been placed, check whether `needs_grad=True`", x)
+    with pytest.raises(ti.TaichiSyntaxError):
+        @ti.kernel
+        def no_annotation(v):
+            pass
+
+
+def test_uvec_follows_default_ip_and_vectors_take_columns():
+    # taichi 1.7.4: ti.math.uvec2 is default_up (u64 after ti.init(default_ip=ti.i64)); a vector field's
+    # from_numpy takes (..., 3, 1) and (..., 1, 3), to_numpy(keep_dims=True) gives (..., 3, 1)
+    ti.init(arch=ti.cpu, default_ip=ti.i64)
+    assert ti.math.uvec2.dtype == ti.u64
+
+    @ti.kernel
+    def big() -> ti.u64:
+        return ti.math.uvec2(ti.u64(2**63 - 1)).x
+
+    assert big() == 2**63 - 1
+    ti.init(arch=ti.cpu)
+    assert ti.math.uvec2.dtype == ti.u32
+    vec = ti.Vector.field(3, dtype=ti.i32, shape=(4, 7))
+    vec.from_numpy(np.arange(84, dtype=np.int32).reshape(4, 7, 3, 1))
+    vec.from_numpy(vec.to_numpy().reshape(4, 7, 1, 3))
+    assert vec.to_numpy(keep_dims=True).shape == (4, 7, 3, 1)
+    np.testing.assert_array_equal(vec.to_numpy().ravel(), np.arange(84))
