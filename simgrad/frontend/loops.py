@@ -346,7 +346,14 @@ def _emit_loop(comp, begin, end, body) -> None:
 
 
 def _visit(comp, node, bind):
-    """The loop body of a `for` statement: bind the target names, then visit the statements."""
+    """The loop body of a `for` statement: bind the target names, then visit the statements. A name already
+    declared in the function is refused as a loop variable (Taichi's rule: the loop would shadow it)."""
+    targets = node.target.elts if isinstance(node.target, (ast.Tuple, ast.List)) else [node.target]
+    for t in targets:
+        if isinstance(t, ast.Name) and any(t.id in scope for scope in comp.frame.scopes):
+            raise SimgradSyntaxError(f"Variable '{t.id}' is already declared in the outer scope and cannot be used "
+                                     "as loop variable", comp.loc(t))
+
     def body(i):
         bind(i)
         comp.visit_block(node.body)

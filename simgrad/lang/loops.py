@@ -132,9 +132,12 @@ def cache_read_only(*fields) -> None:
 
 
 def no_activate(*fields) -> None:
-    """Taichi's promise that this kernel touches only active cells of these fields, so its accesses need not
-    activate; activating anyway computes the same for a program that keeps the promise."""
-    _check_fields("no_activate", fields)
+    """Taichi's promise that this kernel touches only active cells of these fields or SNodes (Taichi passes
+    SNodes), so its accesses need not activate; activating anyway computes the same for a program that keeps
+    the promise."""
+    from simgrad.lang.snode import SNode
+
+    _check_fields("no_activate", [f for f in fields if not isinstance(f, SNode)])
 
 
 def assume_in_range(val, base, low: int, high: int):

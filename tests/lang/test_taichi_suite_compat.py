@@ -772,3 +772,43 @@ def test_uvec_follows_default_ip_and_vectors_take_columns():
     vec.from_numpy(vec.to_numpy().reshape(4, 7, 1, 3))
     assert vec.to_numpy(keep_dims=True).shape == (4, 7, 3, 1)
     np.testing.assert_array_equal(vec.to_numpy().ravel(), np.arange(84))
+
+
+def test_loop_variables_and_no_activate_snodes():
+    # taichi 1.7.4: a declared name cannot be a loop variable (TaichiSyntaxError); ti.no_activate takes SNodes
+    ti.init(arch=ti.cpu)
+    x = ti.field(ti.f32)
+    d = ti.root.dynamic(ti.i, 64, chunk_size=8)
+    d.place(x)
+
+    @ti.kernel
+    def reuse():
+        i = 0
+        for i in range(10):  # noqa: B007
+            pass
+
+    @ti.kernel
+    def fill():
+        for i in range(64):
+            x[i] = 1
+
+    @ti.kernel
+    def odd():
+        ti.no_activate(d)
+        for i in range(32):
+            x[i * 2 + 1] += 1
+
+    @ti.kernel
+    def twice() -> ti.i32:
+        s = 0
+        for i in range(3):
+            s += i
+        for i in range(4):  # the first loop's variable is gone after it
+            s += i
+        return s
+
+    _compile_error(reuse, ti.TaichiSyntaxError, "Variable 'i' is already declared in the outer scope")
+    fill()
+    odd()
+    assert [x[i] for i in range(4)] == [1, 2, 1, 2]
+    assert twice() == 9

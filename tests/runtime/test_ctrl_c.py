@@ -14,6 +14,9 @@ import pytest
 
 SCRIPT = textwrap.dedent("""
     import os, signal, sys, threading, time
+    # a SIGINT ignored or blocked by the process that started this one is inherited across exec: undo that
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     import simgrad as ti
 
     ti.init(arch=ti.cpu, cpu_max_num_threads=int(sys.argv[2]))
