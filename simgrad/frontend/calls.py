@@ -196,13 +196,19 @@ def _atomic(comp, node: ast.Call, kind: str):
     return ref.atomic("atomic_mul" if kind == "mul" else kind, comp.eval(node.args[1]))
 
 
-def _check_array_argument(name: str, ann, value, loc) -> None:
+def _check_array_argument(name: str, ann, value, loc, real: bool = False) -> None:
     """An ndarray passed to a ti.func parameter annotated ti.types.ndarray(dtype, ndim): its element type and
-    dimensions must be those (Taichi's TaichiCompilationError "Invalid value for argument a")."""
+    dimensions must be those (Taichi's TaichiCompilationError "Invalid value for argument a"); a real function
+    takes only the kernel's own ndarray arguments (not one the kernel reads from Python's globals)."""
     from simgrad.frontend.arrays import ArrayArg
     from simgrad.lang.types import MatrixType, NdarrayType
 
-    if not isinstance(ann, NdarrayType) or not isinstance(value, ArrayArg):
+    if not isinstance(ann, NdarrayType):
+        return
+    if not isinstance(value, ArrayArg):
+        if real:
+            raise SimgradTypeError(f"Expected ndarray in the kernel argument for argument {name}, got "
+                                   f"{type(value).__name__} (pass the ndarray to the kernel)", loc)
         return
     have = tuple(value.element_shape)
     wrong = None
@@ -237,7 +243,7 @@ def inline(comp, fn, args, kwargs, node):
     frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
-        _check_array_argument(name, ann, value, comp.loc(node))
+        _check_array_argument(name, ann, value, comp.loc(node), getattr(fn, "real", False))
         if by_reference(ann) or not isinstance(value, (Expr, Matrix, Struct, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local

@@ -812,3 +812,26 @@ def test_loop_variables_and_no_activate_snodes():
     odd()
     assert [x[i] for i in range(4)] == [1, 2, 1, 2]
     assert twice() == 9
+
+
+def test_real_func_takes_only_kernel_ndarray_arguments():
+    # taichi 1.7.4 (test_pass_ndarray_outside_kernel_to_real_func): TaichiTypeError "Expected ndarray in the kernel
+    # argument for argument weight" for a global ndarray handed to a real function
+    ti.init(arch=ti.cpu)
+    weight = ti.ndarray(dtype=ti.f32, shape=(2, 2, 2))
+
+    @ti.real_func
+    def bar(weight: ti.types.ndarray(ti.f32, ndim=3)) -> ti.f32:
+        return weight[1, 1, 1]
+
+    @ti.kernel
+    def from_global() -> ti.f32:
+        return bar(weight)
+
+    @ti.kernel
+    def from_argument(w: ti.types.ndarray(ti.f32, ndim=3)) -> ti.f32:
+        return bar(w)
+
+    weight.fill(42.0)
+    _compile_error(from_global, ti.TaichiTypeError, "Expected ndarray in the kernel argument for argument weight")
+    assert from_argument(weight) == 42.0
