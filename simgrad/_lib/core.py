@@ -2,6 +2,8 @@
 compiles for the CPU only, so every GPU probe answers False (and such programs fall back to ``ti.cuda``,
 which ``ti.init`` maps to the CPU).  GGUI is available: ``ti.ui`` renders on the CPU."""
 
+from simgrad.errors import TaichiRuntimeError  # noqa: F401  (Taichi's core module exports its error class)
+
 GGUI_AVAILABLE = True
 
 

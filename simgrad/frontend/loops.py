@@ -35,6 +35,11 @@ def lower_for(comp, node: ast.For) -> None:
         inner = node.iter.args[0] if isinstance(node.iter, ast.Call) and len(node.iter.args) == 1 else None
         if _is_static_call(comp, inner):
             raise SimgradSyntaxError("'ti.static' cannot be nested", comp.loc(node.iter))
+        if isinstance(inner, ast.Call):
+            group = comp.eval(inner)
+            if isinstance(group, grouped) and not isinstance(group.target, ndrange):  # Taichi's rule
+                raise SimgradSyntaxError("Only 'ti.ndrange' is allowed in 'ti.static(ti.grouped(...))': a field's "
+                                         "indices are unrolled by a struct-for", comp.loc(node.iter))
         _unroll(comp, node)
         return
     it = comp.eval(node.iter)

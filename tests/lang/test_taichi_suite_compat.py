@@ -835,3 +835,19 @@ def test_real_func_takes_only_kernel_ndarray_arguments():
     weight.fill(42.0)
     _compile_error(from_global, ti.TaichiTypeError, "Expected ndarray in the kernel argument for argument weight")
     assert from_argument(weight) == 42.0
+
+
+def test_zero_sized_fields_and_static_grouped_fields_are_refused():
+    # taichi 1.7.4: "Every dimension of a Taichi field should be positive" (ti._lib.core.TaichiRuntimeError);
+    # ti.static(ti.grouped(...)) unrolls a ti.ndrange only
+    ti.init(arch=ti.cpu)
+    with pytest.raises(ti._lib.core.TaichiRuntimeError, match="Every dimension of a Taichi field should be positive"):
+        ti.field(dtype=ti.f32, shape=0)
+    val = ti.field(ti.i32, shape=(1, 1))
+
+    @ti.kernel
+    def static_grouped_field():
+        for _I in ti.static(ti.grouped(val)):
+            pass
+
+    _compile_error(static_grouped_field, ti.TaichiSyntaxError, r"Only 'ti.ndrange' is allowed in 'ti.static\(ti")
