@@ -269,6 +269,7 @@ def _minmax(pyfn, op: Op):
             result = two(result, a)
         return result
 
+    f.__name__ = f.__qualname__ = op.name.lower()  # ti.max / ti.min, as Taichi names them
     return f
 
 

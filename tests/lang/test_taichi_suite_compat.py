@@ -851,3 +851,8 @@ def test_zero_sized_fields_and_static_grouped_fields_are_refused():
             pass
 
     _compile_error(static_grouped_field, ti.TaichiSyntaxError, r"Only 'ti.ndrange' is allowed in 'ti.static\(ti")
+
+
+def test_max_and_min_have_their_names():
+    # taichi's parametrized tests name ti.max / ti.min by __name__ (test ids "...-max-maximum")
+    assert (ti.max.__name__, ti.min.__name__) == ("max", "min")
