@@ -52,9 +52,6 @@ def _check_shape(shape):
     for d in dims:
         if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
             raise SimgradValueError(f"field shape must be non-negative integers, got {shape!r}", caller_loc())
-        if d == 0:  # Taichi's TaichiRuntimeError
-            raise SimgradRuntimeError(f"Every dimension of a Taichi field should be positive, got shape {shape!r}",
-                                      caller_loc())
     return tuple(int(d) for d in dims)
 
 
