@@ -61,6 +61,7 @@ from simgrad.lang.loops import (
     no_activate,
     stop_grad,
     loop_config,
+    loop_unique,
     ndrange,
     static,
     static_assert,
@@ -145,7 +146,6 @@ _NOT_SUPPORTED = {
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
     **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
-    "experimental": "Taichi's experimental namespace is not part of simgrad",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",
 }
@@ -160,6 +160,14 @@ def __getattr__(name):
         import simgrad.gui.tools as _tools
 
         return _tools
+    if name == "experimental":  # Taichi's: real_func, deprecated there in favour of ti.real_func
+        import simgrad.experimental as _experimental
+
+        return _experimental
+    if name == "_logging":  # Taichi's logging module: set_logging_level, is_logging_effective, the level names
+        import simgrad.lang.logging as _logging_module
+
+        return _logging_module
     if name == "_lib":  # ti._lib.core.with_vulkan() and the other backend probes answer False
         import simgrad._lib as _lib_module
 

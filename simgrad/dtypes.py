@@ -36,18 +36,19 @@ class DataType:
         """Taichi's name of the type (`ti.f32.to_string() == str(ti.f32) == "f32"`)."""
         return self.name
 
-    def __call__(self, value):
-        """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast in a kernel)."""
+    def __call__(self, *args, **kwargs):
+        """`ti.f32(1)` casts like Taichi (a Python value in Python scope, an IR cast or typed literal in a kernel:
+        lang/operators.py type_call)."""
         if cast_hook is None:
             raise RuntimeError("simgrad.lang is not loaded: `import simgrad` before casting with a type")
-        return cast_hook(value, self)
+        return cast_hook(self, args, kwargs)
 
     def __reduce__(self):
         return (_by_name, (self.name,))
 
 
 # how `ti.f32(x)` casts: lang/operators.py installs its `cast` here (dtypes sits below lang and imports none of it)
-cast_hook: Callable[[Any, DataType], Any] | None = None
+cast_hook: Callable[[DataType, tuple, dict], Any] | None = None
 
 i8 = DataType("i8", np.int8, 8, False, True, "i8")
 i16 = DataType("i16", np.int16, 16, False, True, "i16")
@@ -78,12 +79,27 @@ class Defaults:
     ip: DataType = i32
 
 
+class _DefaultUnsigned:
+    """Taichi's default_up: the unsigned type of default_ip's width (ti.math.uvec2 follows it, as in Taichi)."""
+
+    def __repr__(self) -> str:
+        return "default_up"
+
+    def __reduce__(self) -> str:
+        return "default_up"
+
+
+default_up = _DefaultUnsigned()
+
+
 def from_any(t) -> DataType:
     """Accept our types, numpy dtypes and the Python builtins `int`/`float`/`bool` as type names."""
     if isinstance(t, DataType):
         return t
     if t is int:
         return Defaults.ip
+    if t is default_up:
+        return {8: u8, 16: u16, 32: u32, 64: u64}[Defaults.ip.bits]
     if t is float:
         return Defaults.fp
     if t is bool:

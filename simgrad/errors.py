@@ -135,6 +135,10 @@ class ArgumentValueError(ArgumentTypeError, ValueError):
     the wrong dtype or ndim, TaichiRuntimeTypeError for a value that is no array at all."""
 
 
+class AnnotationError(SimgradTypeError, TaichiSyntaxError):
+    """A kernel or ti.func parameter annotation that cannot be evaluated (TaichiSyntaxError in Taichi)."""
+
+
 class ArgumentCountError(SimgradTypeError, TaichiSyntaxError):
     """Too many or too few arguments, or an unknown keyword, for a kernel or ti.func (Taichi:
     TaichiSyntaxError; a TypeError as Python says)."""
@@ -154,6 +158,10 @@ class SimgradAssertionError(TaichiAssertionError):
 
 class SimgradRuntimeError(TaichiRuntimeError):
     pass
+
+
+class FieldIndexTypeError(SimgradIndexError, TypeError):
+    """A Python-scope field index that is no integer (a slice, a float): Taichi's TypeError, still an IndexError."""
 
 
 class SimgradOutOfBoundError(SimgradIndexError, SimgradAssertionError):

@@ -2,6 +2,8 @@
 compiles for the CPU only, so every GPU probe answers False (and such programs fall back to ``ti.cuda``,
 which ``ti.init`` maps to the CPU).  GGUI is available: ``ti.ui`` renders on the CPU."""
 
+from simgrad.errors import TaichiRuntimeError  # noqa: F401  (Taichi's core module exports its error class)
+
 GGUI_AVAILABLE = True
 
 
@@ -31,3 +33,24 @@ def with_dx12() -> bool:
 
 def with_amdgpu() -> bool:
     return False
+
+
+def get_max_num_indices() -> int:
+    """Taichi's cap on a field's dimensionality (12; ti.field(shape=(1,) * 13) is its RuntimeError). simgrad has
+    no cap, so every program written within Taichi's runs here."""
+    return 12
+
+
+TAICHI_VERSION = (1, 7, 4)  # the Taichi release whose language and API simgrad follows
+
+
+def get_version_major() -> int:
+    return TAICHI_VERSION[0]
+
+
+def get_version_minor() -> int:
+    return TAICHI_VERSION[1]
+
+
+def get_version_patch() -> int:
+    return TAICHI_VERSION[2]

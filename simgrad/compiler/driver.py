@@ -10,6 +10,7 @@ import inspect
 import os
 import pickle
 import threading
+import typing
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -216,23 +217,36 @@ def _bind_params(kernel: KernelSource, comp: KernelLowering, args) -> tuple[tupl
             comp.bind(p.name, value)
             out.append(packing)
         ret = kernel.signature.return_annotation
-        ret_matrix: tuple[int, int] | StructType | None = None
+        ret_matrix: tuple | StructType | None = None
+        if typing.get_origin(ret) is tuple:  # tuple[f32, S] / typing.Tuple[f32, S]
+            ret = typing.get_args(ret)
         if ret is not inspect.Signature.empty and ret is not None:
             if isinstance(ret, MatrixType):
                 comp.return_types = [ret.dtype] * ret.num_entries
                 ret_matrix = (ret.n, ret.m)
             elif isinstance(ret, StructType):
-                comp.return_types = [x for _, lt in ret.leaves() for x in
-                                     ([lt.dtype] * lt.num_entries if isinstance(lt, MatrixType) else [lt])]
+                comp.return_types = _flat_return_types(ret)
+                comp.return_struct = ret
                 ret_matrix = ret  # the launcher rebuilds the struct from the returned leaves
             elif isinstance(ret, (tuple, list)):
-                comp.return_types = [dt.from_any(r) for r in ret]
+                comp.return_types = [t for r in ret for t in _flat_return_types(r)]
+                if any(isinstance(r, (MatrixType, StructType)) for r in ret):
+                    ret_matrix = ("tuple", tuple(ret))  # the launcher rebuilds each part
             else:
                 comp.return_types = [dt.from_any(ret)]
             comp.ir.returns = comp.return_types
     finally:
         context.pop()
     return (out, slots.count), ret_matrix
+
+
+def _flat_return_types(t) -> list:
+    """The scalar types a returned value of type `t` travels as: a matrix by entry, a struct leaf by leaf."""
+    if isinstance(t, MatrixType):
+        return [t.dtype] * t.num_entries
+    if isinstance(t, StructType):
+        return [x for _, lt in t.leaves() for x in _flat_return_types(lt)]
+    return [dt.from_any(t)]
 
 
 def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
@@ -257,6 +271,15 @@ def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
         bound = meta["tape_bound"]
         launcher.attach_tape(max(bound, 1) if bound is not None else prog.tape_capacity)
     ret_matrix = meta["ret_matrix"]
+    if isinstance(ret_matrix, tuple) and ret_matrix[0] == "tuple":
+        parts, inner_t = ret_matrix[1], launcher.launch
+
+        def launch_tuple(*a):
+            vals = iter(inner_t(*a))
+            return tuple(_take_part(t, vals) for t in parts)
+
+        launcher.launch = launch_tuple
+        return launcher
     if isinstance(ret_matrix, StructType):
         stype, inner = ret_matrix, launcher.launch
 
@@ -277,6 +300,13 @@ def _make_launcher(prog: Program, meta: dict, obj: bytes) -> Launcher:
 
         launcher.launch = launch
     return launcher
+
+
+def _take_part(t, vals):
+    """One part of a returned tuple from the flat values: a scalar, a matrix or a struct."""
+    if isinstance(t, StructType):
+        return t.from_leaves([_take_leaf(lt, vals) for _, lt in t.leaves()])
+    return _take_leaf(t, vals)
 
 
 def _take_leaf(t, vals):

@@ -7,6 +7,8 @@ import inspect
 import os
 import time
 
+import numpy as np
+
 from simgrad.autodiff.forward import adjoint_then_forward, make_forward
 from simgrad.autodiff.validate import check_and_adjoint, check_in_place_and_adjoint
 from simgrad.compiler import params
@@ -28,6 +30,7 @@ from simgrad.lang.argpack import ArgPackType
 from simgrad.lang.functions import KernelDef, binding_error, resolved_signature
 from simgrad.lang.pickling import function_loc, refuse_pickle
 from simgrad.lang.program import Program, get_program
+from simgrad.runtime.args import FortranOrderArray
 
 # mode -> (IR transform, symbol suffix) of a kernel's instantiations: "" the kernel; "grad" its adjoint;
 # "fwd" it with forward-mode tangents (inside ti.ad.FwdMode); "gradfwd" its adjoint with tangents
@@ -86,6 +89,8 @@ class Kernel(KernelDef):
             if prog.config.kernel_profiler:
                 return prog.profiled_launch(self.name, launch, args)
             return launch(*args)
+        except FortranOrderArray:
+            return _with_c_copies(launch, args)
         except SimgradTypeError as e:
             raise _argument_error(e, ArgumentTypeError) from None
 
@@ -217,6 +222,10 @@ class BoundKernel:
         refuse_pickle(f"kernel {self.name}", function_loc(self.kernel.func))
 
     def __call__(self, *args, **kwargs):
+        if not getattr(type(self.obj), "_data_oriented", False) and not isinstance(self.obj, type):
+            cls = type(self.obj).__name__  # Taichi's rule: kernel methods belong to @ti.data_oriented classes
+            raise SimgradSyntaxError(f"Please decorate class {cls} with @ti.data_oriented (kernel {self.name} is "
+                                     "one of its methods)", caller_loc())
         return self.kernel(self.obj, *args, **kwargs)
 
 
@@ -232,6 +241,21 @@ class _BoundGrad:
 
     def in_place(self, *args) -> None:
         self.grad.in_place(self.obj, *args)
+
+
+def _with_c_copies(launch, args):
+    """Run `launch` with C-ordered copies of the Fortran-ordered numpy arguments, then copy them back (Taichi's
+    handling of a transposed array: the kernel sees it as indexed, and its writes land in it)."""
+    copies = [(a, np.ascontiguousarray(a)) if isinstance(a, np.ndarray) and not a.flags.c_contiguous
+              and a.flags.f_contiguous else None for a in args]
+    try:
+        return launch(*[c[1] if c else a for a, c in zip(args, copies)])
+    except SimgradTypeError as e:
+        raise _argument_error(e, ArgumentTypeError) from None
+    finally:
+        for c in copies:
+            if c is not None:
+                np.copyto(c[0], c[1])
 
 
 def _argument_error(e: SimgradError, cls: type[SimgradTypeError]) -> SimgradError:

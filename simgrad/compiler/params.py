@@ -27,7 +27,7 @@ from typing import ClassVar
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.errors import AnnotationError, SimgradTypeError, SimgradValueError, caller_loc
 from simgrad.frontend.arrays import ArrayArg, BuilderArg
 from simgrad.frontend.fingerprint import KeyBuilder
 from simgrad.frontend.refs import tensor_text
@@ -230,7 +230,7 @@ class NdarrayParam(Param):
     def key(self, a, keep: list):
         if not hasattr(a, "dtype") or not hasattr(a, "shape"):
             raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects an ndarray, got "
-                                   f"{type(a).__name__}")
+                                   f"{type(a).__name__} (Invalid type for argument {self.name}, got {a})")
         arr = getattr(a, "_ndarray_data", a)  # a ti.ndarray object: its numpy data
         return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a))
 
@@ -260,6 +260,8 @@ class NdarrayParam(Param):
                                         f"element shape {elem}")
             return elem
         if isinstance(ann.dtype, MatrixType):
+            if isinstance(a, np.ndarray):  # the key holds the annotation's shape: check the array's here
+                self._check_external(a)
             return ann.dtype.shape
         elem = ann.element_shape_of(tuple(arr.shape))
         if not elem and ann.dtype is None and not ann.element_dim:
@@ -271,11 +273,39 @@ class NdarrayParam(Param):
         return arg, ArrayPacking(self.name, arg.slot, arg.dtype, arg.ndim, arg.ndim + len(arg.element_shape),
                                  arg.grad_slot)
 
+    def _check_external(self, a: np.ndarray) -> None:
+        """A numpy argument against the annotation, in Taichi's words for external arrays (ValueError, and
+        TypeError: compiler/kernel.py makes it an ArgumentValueError)."""
+        ann, name, shape = self.ann, self.name, tuple(a.shape)
+        where = f"kernel {self.kernel_name}: Invalid value for argument {name} - "
+        if isinstance(ann.dtype, MatrixType):
+            edim = 1 if ann.dtype.m == 0 else 2
+            if ann.ndim is not None and len(shape) != edim + ann.ndim:
+                raise SimgradTypeError(f"{where}required array has ndim={ann.ndim} element_dim={edim}, array with "
+                                        f"{len(shape)} dimensions is provided")
+            if len(shape) < edim:
+                raise SimgradTypeError(f"{where}required element_dim={edim}, array with {len(shape)} dimensions "
+                                        "is provided")
+            want = ann.dtype.shape
+            if ann.dtype.n is not None and None not in want and shape[len(shape) - edim:] != tuple(want):
+                raise SimgradTypeError(f"{where}required element_shape={tuple(want)}, array with element shape of "
+                                        f"{shape[len(shape) - edim:]} is provided")
+        elif ann.dtype is not None:
+            want_t, t = dt.from_any(ann.dtype), dt.from_numpy(a.dtype)
+            if want_t is not t:
+                raise SimgradTypeError(f"{where}required array has dtype={want_t}, array with dtype={t} is "
+                                        "provided")
+            if ann.ndim is not None and len(shape) != ann.ndim:
+                raise SimgradTypeError(f"{where}required array has ndim={ann.ndim}, array with {len(shape)} "
+                                        "dimensions is provided")
+
     def _array_arg(self, a, slots: Slots, grad: bool | None = None) -> ArrayArg:
         """The compiler's view of the argument, its dtype, dimensions and element shape checked (Taichi's
         messages: "Invalid value for argument a - required ...", "Expect element type ... but get ...")."""
         ann: NdarrayType = self.ann
         kernel_name, name = self.kernel_name, self.name
+        if isinstance(a, np.ndarray):
+            self._check_external(a)
         arr = getattr(a, "_ndarray_data", a) if hasattr(a, "dtype") else np.asarray(a)
         t = dt.from_numpy(arr.dtype) if isinstance(arr, np.ndarray) else array_dtype(arr)
         want: dt.DataType | None
@@ -283,6 +313,8 @@ class NdarrayParam(Param):
         own = tuple(getattr(a, "element_shape", ()) or ()) if hasattr(a, "_ndarray_data") else None
         if isinstance(ann.dtype, MatrixType):
             want = ann.dtype.dtype if ann.dtype._dtype is not None or ann.dtype.n is not None else None
+            if isinstance(a, np.ndarray):  # Taichi checks only the element shape of an external array
+                want = None
         else:
             want = dt.from_any(ann.dtype) if ann.dtype is not None else None
         if want is not None and not isinstance(ann.dtype, MatrixType) and own:
@@ -404,7 +436,7 @@ def make_param(name: str, ann, kernel_name: str, first: bool = False) -> Param:
     for kind in KINDS:
         if kind.accepts(ann):
             return kind(name, ann, kernel_name)
-    if ann is inspect.Parameter.empty:
-        raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
-                               "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
-    raise SimgradTypeError(f"kernel {kernel_name}: parameter '{name}' has an unsupported annotation {ann!r}")
+    if ann is inspect.Parameter.empty:  # a TypeError, and Taichi's TaichiSyntaxError
+        raise AnnotationError(f"kernel {kernel_name}: parameter '{name}' needs a type annotation "
+                              "(e.g. ti.f32, ti.template(), ti.types.ndarray())")
+    raise AnnotationError(f"kernel {kernel_name}: parameter '{name}' has an unsupported annotation {ann!r}")

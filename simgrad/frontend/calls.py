@@ -10,11 +10,12 @@ from typing import TYPE_CHECKING
 from simgrad import dtypes as dt
 from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
-from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef
+from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef, tensor_text
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
+from simgrad.lang.loops import static as _static
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
 
@@ -90,18 +91,23 @@ def call(comp, node: ast.Call):
         return _atomic(comp, node, kind)
     by_ref = _template_params(fn)
     args = []
-    for k, a in enumerate(node.args):
-        v = _by_reference(comp, a) if k in by_ref else comp.eval(a)
-        if type(v).__name__ == "_Starred":
-            args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
-        else:
-            args.append(v)
     kwargs = {}
-    for kw in node.keywords:
-        if kw.arg is None:
-            kwargs.update(comp.eval(kw.value))
-        else:
-            kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
+    static = fn is _static
+    comp.static_scope += static  # `in` / `is` are Python's on compile-time values there
+    try:
+        for k, a in enumerate(node.args):
+            v = _by_reference(comp, a) if k in by_ref else comp.eval(a)
+            if type(v).__name__ == "_Starred":
+                args.extend(list(v.value.entries if isinstance(v.value, Matrix) else v.value))
+            else:
+                args.append(v)
+        for kw in node.keywords:
+            if kw.arg is None:
+                kwargs.update(comp.eval(kw.value))
+            else:
+                kwargs[kw.arg] = _by_reference(comp, kw.value) if kw.arg in by_ref else comp.eval(kw.value)
+    finally:
+        comp.static_scope -= static
     if isinstance(getattr(fn, "__self__", None), str) and getattr(fn, "__name__", "") == "format":
         from simgrad.frontend.printing import str_format
 
@@ -190,6 +196,33 @@ def _atomic(comp, node: ast.Call, kind: str):
     return ref.atomic("atomic_mul" if kind == "mul" else kind, comp.eval(node.args[1]))
 
 
+def _check_array_argument(name: str, ann, value, loc, real: bool = False) -> None:
+    """An ndarray passed to a ti.func parameter annotated ti.types.ndarray(dtype, ndim): its element type and
+    dimensions must be those (Taichi's TaichiCompilationError "Invalid value for argument a"); a real function
+    takes only the kernel's own ndarray arguments (not one the kernel reads from Python's globals)."""
+    from simgrad.frontend.arrays import ArrayArg
+    from simgrad.lang.types import MatrixType, NdarrayType
+
+    if not isinstance(ann, NdarrayType):
+        return
+    if not isinstance(value, ArrayArg):
+        if real:
+            raise SimgradTypeError(f"Expected ndarray in the kernel argument for argument {name}, got "
+                                   f"{type(value).__name__} (pass the ndarray to the kernel)", loc)
+        return
+    have = tuple(value.element_shape)
+    wrong = None
+    if ann.ndim is not None and ann.ndim != value.ndim:
+        wrong = f"ndim={ann.ndim}, got an array of ndim={value.ndim}"
+    elif isinstance(ann.dtype, MatrixType) and ann.dtype.n is not None and tuple(ann.dtype.shape) != have:
+        wrong = f"element shape {tuple(ann.dtype.shape)}, got {have}"
+    elif ann.dtype is not None and not isinstance(ann.dtype, MatrixType) and (
+            have or dt.from_any(ann.dtype) is not value.dtype):
+        wrong = f"element type {dt.from_any(ann.dtype)}, got {tensor_text(have, value.dtype)}"
+    if wrong:
+        raise SimgradTypeError(f"Invalid value for argument {name} - required {wrong}", loc)
+
+
 def inline(comp, fn, args, kwargs, node):
     """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
     from simgrad.frontend.source import get_source
@@ -210,6 +243,7 @@ def inline(comp, fn, args, kwargs, node):
     frame.real = getattr(fn, "real", False)
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
+        _check_array_argument(name, ann, value, comp.loc(node), getattr(fn, "real", False))
         if by_reference(ann) or not isinstance(value, (Expr, Matrix, Struct, int, float)) or isinstance(value, bool):
             frame.scopes[0][name] = value
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local

@@ -40,6 +40,8 @@ class Frame:
     def __init__(self, src: FunctionSource, is_kernel: bool):
         self.src = src
         self.is_kernel = is_kernel
+        # a kernel's parameters are immutable (Taichi's rule): assigning one is an error, not a new local
+        self.arg_names = {a.arg for a in src.tree.args.args} if is_kernel else set()
         self.scopes: list[dict] = [{}]
         self.return_value = None
         self.has_returned = False

@@ -32,6 +32,14 @@ def _is_static_call(comp, node) -> bool:
 
 def lower_for(comp, node: ast.For) -> None:
     if _is_static_call(comp, node.iter):
+        inner = node.iter.args[0] if isinstance(node.iter, ast.Call) and len(node.iter.args) == 1 else None
+        if _is_static_call(comp, inner):
+            raise SimgradSyntaxError("'ti.static' cannot be nested", comp.loc(node.iter))
+        if isinstance(inner, ast.Call):
+            group = comp.eval(inner)
+            if isinstance(group, grouped) and not isinstance(group.target, ndrange):  # Taichi's rule
+                raise SimgradSyntaxError("Only 'ti.ndrange' is allowed in 'ti.static(ti.grouped(...))': a field's "
+                                         "indices are unrolled by a struct-for", comp.loc(node.iter))
         _unroll(comp, node)
         return
     it = comp.eval(node.iter)
@@ -107,8 +115,11 @@ def _binder(comp, node: ast.For, nd: int, grouped_: bool):
     if grouped_ and len(names) != 1:
         raise SimgradSyntaxError("a grouped loop takes exactly one loop variable", comp.loc(node.target))
     if not grouped_ and len(names) != nd:
-        raise SimgradSyntaxError(f"this loop has {nd} indices but {len(names)} loop variable(s)",
-                                 comp.loc(node.target))
+        what = "Ndrange" if isinstance(node.iter, ast.Call) and getattr(node.iter.func, "attr", "") == "ndrange" \
+            else "This"
+        raise SimgradSyntaxError(f"{what} for loop with number of the loop variables not equal to the dimension of "
+                                 f"the {'ndrange' if what == 'Ndrange' else 'loop'} is not supported: it has {nd} "
+                                 f"indices but {len(names)} loop variable(s)", comp.loc(node.target))
 
     def bind(idx):
         if grouped_:
@@ -347,7 +358,14 @@ def _emit_loop(comp, begin, end, body) -> None:
 
 
 def _visit(comp, node, bind):
-    """The loop body of a `for` statement: bind the target names, then visit the statements."""
+    """The loop body of a `for` statement: bind the target names, then visit the statements. A name already
+    declared in the function is refused as a loop variable (Taichi's rule: the loop would shadow it)."""
+    targets = node.target.elts if isinstance(node.target, (ast.Tuple, ast.List)) else [node.target]
+    for t in targets:
+        if isinstance(t, ast.Name) and any(t.id in scope for scope in comp.frame.scopes):
+            raise SimgradSyntaxError(f"Variable '{t.id}' is already declared in the outer scope and cannot be used "
+                                     "as loop variable", comp.loc(t))
+
     def body(i):
         bind(i)
         comp.visit_block(node.body)

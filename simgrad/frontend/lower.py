@@ -31,8 +31,8 @@ from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.functions import BoundFunc
-from simgrad.lang.matrix import Matrix, dtype_of
-from simgrad.lang.struct import Struct, StructField
+from simgrad.lang.matrix import Matrix, _swizzle_indices, dtype_of
+from simgrad.lang.struct import Struct, StructField, StructType
 from simgrad.lang.types import MatrixType
 
 _BINOPS = {
@@ -54,7 +54,7 @@ _CMPOPS = {
     ast.Eq: operators.eq, ast.NotEq: operators.ne,
 }
 _PY_CMP = {ast.Is: operator.is_, ast.IsNot: operator.is_not, ast.In: lambda a, b: a in b,
-           ast.NotIn: lambda a, b: a not in b}
+           ast.NotIn: lambda a, b: a not in b}  # `is` is refused (eval_Compare), `in` only on ti.static values
 
 
 class KernelLowering:
@@ -74,9 +74,11 @@ class KernelLowering:
         self.next_loop_config: dict | None = None
         self.debug = debug
         self.return_types: list | None = None
+        self.return_struct: StructType | None = None  # a struct return type (compiler/driver.py), checked at return
         self.guard = None  # a fingerprint.Guard when this instantiation may be cached
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
+        self.static_scope = 0  # > 0 while the arguments of a ti.static(...) call are evaluated (frontend/calls.py)
 
     @property
     def frame(self) -> Frame:
@@ -125,7 +127,7 @@ class KernelLowering:
             return src.globals[name]
         if hasattr(builtins, name):
             return getattr(builtins, name)
-        raise SimgradNameError(f"name '{name}' is not defined", src.loc(node))
+        raise SimgradNameError(f'Name "{name}" is not defined', src.loc(node))
 
     def new_var(self, value, dtype=None):
         """A fresh local initialised with `value` (a scalar, a matrix or a struct)."""
@@ -179,7 +181,7 @@ class KernelLowering:
                 if len(self.loop_stack) > frame.loop_base:
                     stop = self.builder.emit(Op.IF, None, (operators.ne(frame.ret_flag.load(), 0).stmt,), nblocks=2)
                     with self.dynamic(stop.blocks[0]):
-                        self._loop_jump(s, Op.BREAK)
+                        self._loop_jump(s, Op.BREAK, written=False)
                 rest = stmts[k + 1:]
                 if rest:
                     with self.unless_returned():
@@ -233,7 +235,7 @@ class KernelLowering:
         assert frame.ret_flag is not None
         frame.ret_flag.store(1)
         if len(self.loop_stack) > frame.loop_base:
-            self._loop_jump(node, Op.BREAK)
+            self._loop_jump(node, Op.BREAK, written=False)
         frame.dynamic_returns += 1
         frame.returned_here = True
 
@@ -243,9 +245,13 @@ class KernelLowering:
         try:
             method = getattr(self, "visit_" + type(node).__name__, None)
             if method is None:
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):  # Taichi's words
+                    where = "ti.kernel" if self.frame.is_kernel else "ti.func"
+                    raise SimgradSyntaxError(f"Function definition is not allowed in '{where}': define the "
+                                             "ti.func outside and call it", self.loc(node))
                 raise SimgradSyntaxError(
-                    f"the Python construct '{type(node).__name__}' is not supported in kernels", self.loc(node)
-                )
+                    f'Unsupported node "{type(node).__name__}": the Python construct is not supported in kernels',
+                    self.loc(node))
             method(node)
         except SimgradError as e:
             if e.loc is None:
@@ -270,15 +276,34 @@ class KernelLowering:
 
     def visit_Assign(self, node: ast.Assign) -> None:
         value = self.eval(node.value)
+        if getattr(value, "ndim", 0) and type(value).__module__ == "numpy" and not _is_static_call(node.value):
+            raise SimgradTypeError("Only 0-dimensional numpy array can be used to initialize a scalar expression "
+                                   "(keep an array as a compile-time value with ti.static(np.array(...)))",
+                                   self.loc(node))
         for target in node.targets:
             self.assign(target, value)
+
+    def _check_not_argument(self, target: ast.expr) -> None:
+        if isinstance(target, ast.Name) and target.id in self.frame.arg_names:
+            raise SimgradSyntaxError(f'Kernel argument "{target.id}" is immutable in the kernel. If you want to '
+                                     f"change its value, please create a new variable ({target.id}_ = {target.id})",
+                                     self.loc(target))
 
     def visit_AnnAssign(self, node: ast.AnnAssign) -> None:
         if not isinstance(node.target, ast.Name):
             raise SimgradSyntaxError("annotated assignment needs a plain name", self.loc(node))
+        self._check_not_argument(node.target)
         ann = self.eval(node.annotation)
         value = self.eval(node.value) if node.value is not None else 0
         from simgrad.lang.types import MatrixType
+
+        current = self.frame.scopes[-1].get(node.target.id)
+        if isinstance(current, VarRef) and isinstance(ann, dt.DataType):  # Taichi: an assignment, same type only
+            if current.dtype is not ann:
+                raise SimgradSyntaxError(f"Static assign cannot have type overloading: '{node.target.id}' is "
+                                         f"{current.dtype}, annotated {ann} here", self.loc(node))
+            current.store(operators.cast(value, ann))
+            return
 
         if isinstance(ann, MatrixType):
             self.bind(node.target.id, self.new_var(ann.make(value), ann.dtype))
@@ -287,6 +312,7 @@ class KernelLowering:
 
     def assign(self, target: ast.expr, value) -> None:
         if isinstance(target, ast.Name):
+            self._check_not_argument(target)
             name = target.id
             current = self._local(name)
             if isinstance(current, LOCAL_REFS):
@@ -351,6 +377,7 @@ class KernelLowering:
         if kind is None:
             raise SimgradSyntaxError(f"augmented assignment {type(node.op).__name__} is not supported",
                                      self.loc(node))
+        self._check_not_argument(node.target)
         value = self.eval(node.value)
         if isinstance(node.target, ast.Name):
             ref = self._local(node.target.id)
@@ -378,12 +405,17 @@ class KernelLowering:
         if not isinstance(cond, (Expr, Matrix)):
             # a Python value decides at compile time; unless it is ti.static(...), Taichi still treats the
             # body as nested, so a for loop inside is not an outermost (parallel) loop
+            # and its body is a scope of its own (Taichi's: `if True: a = 0` leaves no `a` after the if)
             nested = not _is_static_call(node.test)
             self.depth += nested
+            if nested:
+                self.frame.scopes.append({})
             try:
                 self.visit_block(node.body if cond else node.orelse)
             finally:
                 self.depth -= nested
+                if nested:
+                    self.frame.scopes.pop()
             return
         if isinstance(cond, Matrix):
             raise SimgradTypeError("the condition of an if must be a scalar (use .any() / .all())",
@@ -446,17 +478,22 @@ class KernelLowering:
     def visit_Continue(self, node) -> None:
         self._loop_jump(node, Op.CONTINUE)
 
-    def _loop_jump(self, node, op: Op) -> None:
+    def _loop_jump(self, node, op: Op, written: bool = True) -> None:
+        """A break/continue; `written`: the user's own, not the break an early return makes."""
         if self.static_loops and self.static_loops[-1] == self.static_jump_target():
             from simgrad.frontend.loops import StaticJump
 
             raise StaticJump(op is Op.BREAK)
+        word = op.name.lower()
+        if written and self.static_loops and self.static_loops[-1][:2] == self.static_jump_target()[:2]:
+            # the innermost loop is a ti.static one, and a run-time if lies in between (Taichi's words)
+            raise SimgradSyntaxError(f"You are trying to `{word}` a static `for` loop, but the `{word}` statement "
+                                     "is inside a non-static `if`", self.loc(node))
         if not self.loop_stack:
-            raise SimgradSyntaxError(f"'{op.name.lower()}' outside a run-time loop (inside ti.static loops it "
-                                     "is not supported)", self.loc(node))
+            raise SimgradSyntaxError(f"'{word}' outside a run-time loop", self.loc(node))
         if op is Op.BREAK and self.loop_stack[-1] == "parallel":
             raise SimgradSyntaxError(
-                "'break' is not allowed in the outermost (parallel) for loop; use a serial loop "
+                "Cannot break in the outermost loop: it is a parallel for; use a serial loop "
                 "(ti.loop_config(serialize=True)) or a flag", self.loc(node))
         self.builder.emit(op, None)
 
@@ -481,11 +518,19 @@ class KernelLowering:
         if self.return_types is None:
             raise SimgradSyntaxError("this kernel returns a value but has no return annotation (-> ti.f32)",
                                      self.loc(node))
-        if isinstance(value, Struct):  # its leaves in order, matrices by entry
-            value = [x for _, leaf in _struct_leaves(value) for x in
-                     (leaf.entries if isinstance(leaf, Matrix) else [leaf])]
-        values = value.entries if isinstance(value, Matrix) else list(value) \
-            if isinstance(value, (tuple, list)) else [value]
+        want = self.return_struct
+        have = getattr(value, "_type", None) if isinstance(value, Struct) else None
+        if want is not None and have is not None and have is not want and \
+                [(k, repr(t)) for k, t in have.members.items()] != [(k, repr(t)) for k, t in want.members.items()]:
+            raise SimgradTypeError(f"the kernel returns a struct of type {have!r}, but is annotated with {want!r}",
+                                   self.loc(node))
+
+        def flat(v) -> list:  # a struct's leaves in order, matrices by entry
+            if isinstance(v, Struct):
+                return [x for _, leaf in _struct_leaves(v) for x in flat(leaf)]
+            return list(v.entries) if isinstance(v, Matrix) else [v]
+
+        values = [x for v in value for x in flat(v)] if isinstance(value, (tuple, list)) else flat(value)
         if len(values) != len(self.return_types):
             raise SimgradTypeError(f"kernel returns {len(values)} values but is annotated with "
                                    f"{len(self.return_types)}", self.loc(node))
@@ -620,7 +665,15 @@ class KernelLowering:
         result = None
         for op, right_node in zip(node.ops, node.comparators):
             right = self.eval(right_node)
-            if type(op) in _PY_CMP:
+            if type(op) in _PY_CMP:  # Taichi's rules: `is` never, `in` on ti.static values only
+                if isinstance(op, (ast.Is, ast.IsNot)):
+                    name = "is" if isinstance(op, ast.Is) else "is not"
+                    raise SimgradSyntaxError(f'Operator "{name}" in Taichi scope is not supported (use == on '
+                                             "values; compare objects outside the kernel)", self.loc(node))
+                if not self.static_scope:
+                    name = "In" if isinstance(op, ast.In) else "NotIn"
+                    raise SimgradSyntaxError(f'"{name}" is only supported inside `ti.static`: wrap the comparison, '
+                                             "ti.static(a in b)", self.loc(node))
                 r = _PY_CMP[type(op)](left, right)
             else:
                 r = _CMPOPS[type(op)](left, right)
@@ -632,8 +685,9 @@ class KernelLowering:
         cond = self.eval(node.test)
         if not isinstance(cond, (Expr, Matrix)):
             return self.eval(node.body if cond else node.orelse)
-        if isinstance(cond, Matrix):
-            return operators.select(cond, self.eval(node.body), self.eval(node.orelse))
+        if isinstance(cond, Matrix):  # Taichi's rule: an element-wise choice is ti.select's
+            raise SimgradSyntaxError('The condition of `a if cond else b` is a vector or matrix: Please use '
+                                     '"ti.select" instead.', self.loc(node))
         return self.choose(cond, lambda: self.eval(node.body), lambda: self.eval(node.orelse))
 
     def choose(self, cond: Expr, then_fn, else_fn):
@@ -656,11 +710,14 @@ class KernelLowering:
             return operators.select(c, *values)
         a, b = values
         if isinstance(a, Matrix) or isinstance(b, Matrix):
-            if not (isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape == b.shape):
+            if isinstance(a, Matrix) and isinstance(b, Matrix) and a.shape != b.shape:
                 raise SimgradTypeError("both sides of a run-time choice must be matrices of one shape",
                                        self.builder.loc)
-            t = dt.promote(dtype_of(a), dtype_of(b))
-            ref: MatrixRef | VarRef = MatrixRef([VarRef(t) for _ in a.entries], a.n, a.m)
+            mat = a if isinstance(a, Matrix) else b  # a scalar side is broadcast to it (Taichi's `0 if c else v`)
+            values = [v if isinstance(v, Matrix) else Matrix(_entries=[v] * len(mat.entries), n=mat.n, m=mat.m)
+                      for v in values]
+            t = dt.promote(dtype_of(values[0]), dtype_of(values[1]))
+            ref: MatrixRef | VarRef = MatrixRef([VarRef(t) for _ in mat.entries], mat.n, mat.m)
         else:
             ref = VarRef(_choice_type(a, b))
         new = parent.stmts[at + 1:]  # the result's ALLOCAs go before the IF
@@ -866,7 +923,8 @@ def _maybe_global(node) -> bool:
 
 
 def _is_swizzle(name: str) -> bool:
-    return 0 < len(name) <= 4 and all(c in "xyzwrgba" for c in name)
+    """Letters of one of Taichi's groups (xyzw, rgba, stpq: `v.p` is v[2])."""
+    return _swizzle_indices(name) is not None
 
 
 def _is_array_arg(v) -> bool:

@@ -14,7 +14,7 @@ from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
 from simgrad.lang.field import ScalarField
-from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index
+from simgrad.lang.matrix import _SWIZZLE, Matrix, check_dynamic_index, check_swizzle, vector_key
 
 
 class VarRef:
@@ -134,6 +134,7 @@ class MatrixRef:
     def index(self, key):
         """The ref of `m[key]`: a scalar ref, a row (MatrixRef) for one index on a matrix, or the entries a
         compile-time slice picks (`v[1:]`, `m[0, :]`, `m[:2, 1:]`), assignable too."""
+        key = vector_key(key)
         key = key if isinstance(key, tuple) else (key,)
         if any(isinstance(k, slice) for k in key):
             return self._slice(key)
@@ -177,6 +178,7 @@ class MatrixRef:
 
     def swizzle(self, name: str):
         idx = [_SWIZZLE[c] for c in name]
+        check_swizzle(name, idx, self.n)
         if len(idx) == 1:
             return self.refs[idx[0]]
         return MatrixRef([self.refs[i] for i in idx], len(idx), 0)

@@ -28,12 +28,31 @@ def _colors_arg(color, n):
     return as_rgb(color, n)
 
 
+def _fast_pixels(arr: np.ndarray) -> np.ndarray:
+    """Float pixels as Taichi's fast GUI quantises them (``min(255, max(0, int(c * 255)))``); others unchanged."""
+    if arr.dtype.kind != "f":
+        return arr
+    scaled = np.nan_to_num(arr * arr.dtype.type(255))
+    return np.clip(np.trunc(scaled), 0, 255).astype(np.uint8)
+
+
+def _pack_fast(rgb: np.ndarray) -> np.ndarray:
+    """uint8 RGB (W, H, 3) -> Taichi's fast-GUI words, word ``j * W + i`` the pixel (i, H - 1 - j)."""
+    from simgrad._lib.utils import get_os_name
+
+    r, g, b = (rgb[:, ::-1, c].T.reshape(-1).astype(np.uint32) for c in range(3))
+    if get_os_name() == "osx":  # the window is ABGR there, opaque
+        return (b << 16) + (g << 8) + r + np.uint32(0xFF000000)
+    return (r << 16) + (g << 8) + b
+
+
 class GUI:
     """Taichi's ``ti.GUI(name, res, background_color, show_gui, fullscreen, fast_gui)``.
 
     ``res`` is an int or (width, height).  Radii and widths are in pixels; positions are
-    normalised with (0, 0) at the bottom-left.  ``fullscreen`` and ``fast_gui`` are accepted for
-    compatibility (``fast_gui`` takes any image ``set_image`` takes).
+    normalised with (0, 0) at the bottom-left.  ``fullscreen`` is accepted for compatibility; ``fast_gui``
+    keeps Taichi's packed ``img`` buffer (it takes any image ``set_image`` takes, where Taichi's takes only
+    3- or 4-vector fields).
     """
 
     class Event:
@@ -110,6 +129,8 @@ class GUI:
         self.res = (int(res[0]), int(res[1]))
         self.background_color = background_color
         self.canvas = ImageCanvas(self.res, background_color)
+        # fast_gui: Taichi's window reads packed 0x00RRGGBB words (top row first) that set_image writes
+        self._fast = np.zeros(self.res[0] * self.res[1], np.uint32) if self.fast_gui else None
         self.key_pressed = set()
         self.event = None
         self.frame = 0
@@ -168,17 +189,31 @@ class GUI:
         self.canvas.clear(self.background_color if color is None else color)
 
     def set_image(self, img):
-        """Show an image of shape (W, H[, C]) matching ``res``: floats in [0, 1] or unsigned ints."""
+        """Show an image of shape (W, H[, C]) matching ``res``: floats in [0, 1] or unsigned ints.
+
+        With ``fast_gui`` the pixels become 8-bit first as Taichi's fast path makes them (floats
+        ``clamp(int(c * 255), 0, 255)``, truncated, in the image's own precision), and ``img`` holds them packed.
+        """
+        if self._fast is not None:
+            img = _fast_pixels(to_numpy(img))
         arr = cook_image(img)
         if arr.shape[:2] != self.res:
             raise ValueError(f"Image resolution {arr.shape[:2]} does not match GUI resolution {self.res}")
         self.canvas.replace(arr)
+        if self._fast is not None:
+            self._fast[:] = _pack_fast(self.canvas.to_uint8())
 
     def get_image(self):
         """The canvas as float32 RGBA of shape (W, H, 4), like Taichi's."""
         rgba = np.ones(self.res + (4,), np.float32)
         rgba[..., :3] = self.canvas.img
         return rgba
+
+    @property
+    def img(self):
+        """Taichi's ``gui.img``: with ``fast_gui`` the (W * H,) uint32 words the window shows (0x00RRGGBB, the
+        top row first; 0xFFBBGGRR on macOS), else the canvas as float32 RGBA (W, H, 4)."""
+        return self._fast if self._fast is not None else self.get_image()
 
     def contour(self, scalar_field, normalize=False):
         """Show a scalar field as a grey image, optionally normalised to [0, 1]."""

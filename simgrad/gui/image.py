@@ -26,6 +26,8 @@ def _to_uint8(img) -> np.ndarray:
         return (np.clip(np.nan_to_num(arr), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     if arr.dtype == np.uint8:
         return arr
+    if arr.dtype in (np.uint16, np.uint32, np.uint64):  # scaled to [0, 255] by their bound, as Taichi's imwrite
+        return (arr // (np.iinfo(arr.dtype).max // 256)).astype(np.uint8)
     if arr.dtype.kind in "ui":
         return np.clip(arr, 0, 255).astype(np.uint8)
     raise ValueError(f"Data type {arr.dtype} not supported in imwrite")

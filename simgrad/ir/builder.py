@@ -12,6 +12,9 @@ from simgrad.ir import numeric
 from simgrad.ir.nodes import Block, Stmt
 from simgrad.ir.opdefs import FLOAT, OPS, Op, OpDef
 
+# Python's operator for the binary ops a type error names as Python does ("unsupported operand type(s) for '&'")
+_SYMBOLS = {"bit_and": "&", "bit_or": "|", "bit_xor": "^", "shl": "<<", "shr": ">>"}
+
 
 class Builder:
     def __init__(self, block: Block):
@@ -80,8 +83,12 @@ class Builder:
         """The result type of `d` on operands of type `t` (a located error where it does not take them)."""
         if not d.accepts(t):
             kind = "floating-point" if d.domain == FLOAT else "integer"
-            what = f"{kind} operands" if d.arity == 2 else f"a {'n' if kind[0] == 'i' else ''}{kind} operand"
-            raise SimgradTypeError(f"{d.name} needs {what}, got {t}", self.loc)
+            if d.arity == 1:  # Taichi's words
+                inputs = "real" if d.domain == FLOAT else "integral"
+                raise SimgradTypeError(f"'{d.name}' takes {inputs} inputs only, got {t}", self.loc)
+            symbol = _SYMBOLS.get(d.name)
+            taichi = f"unsupported operand type(s) for '{symbol}': " if symbol else ""
+            raise SimgradTypeError(f"{taichi}{d.name} needs {kind} operands, got {t}", self.loc)
         return d.result_type(t)
 
     def select(self, cond: Stmt, a, b) -> Stmt:

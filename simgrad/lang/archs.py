@@ -60,7 +60,9 @@ def gpu_mode() -> str | None:
     return None
 
 
-def resolve(arch) -> Arch:
+def resolve(arch, enable_fallback: bool = True) -> Arch:
+    """The arch a program runs on: the CPU, or the (simulated) GPU where available; another arch falls back to the
+    CPU with a warning, or is Taichi's RuntimeError with ti.init(enable_fallback=False)."""
     arch = requested(arch)
     if arch is None:
         return cpu
@@ -75,6 +77,11 @@ def resolve(arch) -> Arch:
         return cpu
     if arch.name in ("cuda", "gpu") and gpu_mode() is not None:
         return cuda
+    if not enable_fallback:
+        from simgrad.errors import SimgradRuntimeError
+
+        raise SimgradRuntimeError(f"Arch={arch.name} is not supported (simgrad runs on the CPU, and on CUDA where "
+                                  "enabled), and fallback is disabled")
     warnings.warn(f"arch={arch.name} is not available in this build of simgrad; falling back to the CPU "
                   f"({cpu.name})", stacklevel=4)
     return cpu

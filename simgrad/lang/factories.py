@@ -59,8 +59,30 @@ def _axes(ndim: int):
     return sn.axes(*range(ndim))
 
 
-def _place_new(f: Field, shape, offset, needs_grad: bool):
-    """`ti.field(shape=...)`: its own SNode tree, dense over the shape, gradient beside it."""
+def _order(shape, order) -> list[int] | None:
+    """The axes of `order` ("ji": axis j outermost in memory) checked as Taichi checks them; None: row-major."""
+    if order is None:
+        return None
+    if shape is None:
+        raise SimgradSyntaxError("shape cannot be None when order is set", caller_loc())
+    if len(order) != len(shape):
+        raise SimgradSyntaxError(f"The dimensionality of shape and order must be the same ({len(shape)} != "
+                                 f"{len(order)})", caller_loc())
+    if len(set(order)) != len(order):
+        raise SimgradSyntaxError("The axes in order must be different", caller_loc())
+    axes = [ord(ch) - ord("i") for ch in order]
+    for ch, a in zip(order, axes):
+        if not 0 <= a < len(shape):
+            raise SimgradSyntaxError(f"Invalid axis {ch}", caller_loc())
+    return axes
+
+
+def _place_new(f: Field, shape, offset, needs_grad: bool, order=None, layout=None):
+    """`ti.field(shape=...)`: its own SNode tree, dense over the shape, gradient beside it. With `order`, one dense
+    node per axis, outermost first (Taichi's layout: `order="ji"` puts j outermost); with ti.Layout.SOA a
+    vector/matrix field's entries each get their own node, one after another."""
+    from simgrad.lang.types import Layout
+
     if offset is not None:
         if shape is None:
             raise SimgradSyntaxError("shape cannot be None when offset is set", caller_loc())
@@ -68,19 +90,82 @@ def _place_new(f: Field, shape, offset, needs_grad: bool):
         if len(off) != len(shape):
             raise SimgradSyntaxError(f"The dimensionality of shape and offset must be the same: shape {shape}, "
                                      f"offset {off}", caller_loc())
+    axes = _order(shape, order)
     if shape is None:
-        f._needs_grad = needs_grad  # place() puts the gradient beside it, as Taichi's lazy_grad does
-        return f  # to be placed by the user with ti.root...place()
+        f._needs_grad = needs_grad  # the user places it, and its gradient (or ti.root.lazy_grad() does)
+        return _pending(f)  # to be placed by the user with ti.root...place()
     tree = sn.new_tree(get_program())
-    node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
-    node.place(f, offset=offset)
+
+    def place(g: Field) -> None:
+        for part in (g._components() if layout == Layout.SOA and isinstance(g, MatrixField) else [g]):
+            if axes is None:
+                node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
+            else:
+                node = tree.root
+                for a in axes:
+                    node = node.dense(sn.axes(a), shape[a])
+            node.place(part, offset=offset)
+
+    place(f)
     f._needs_grad = needs_grad  # after placing: the gradient gets its own dense node (Taichi's layout)
     dual = getattr(f, "_needs_dual", False)
     for wanted, g in ((needs_grad, f.grad), (dual, getattr(f, "dual", None)),
                       (needs_grad and dual, getattr(f.grad, "dual", None) if f.grad is not None else None)):
         if wanted and g is not None and g.snode is None:
-            gnode = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
-            gnode.place(g, offset=offset)
+            place(g)
+    return f
+
+
+class Pending:
+    """A field made without a shape, until the next kernel compile checks it as Taichi's materialisation does
+    (lang/program.py check_pending_fields): where it was made, and what may be missing."""
+
+    HEADERS = {
+        "field": "These field(s) are not placed:",
+        "grad": "These field(s) requrie `needs_grad=True`, however their grad field(s) are not placed:",
+        "dual": "These field(s) requrie `needs_dual=True`, however their dual field(s) are not placed:",
+        "shape": "Members of the following field have different shapes:",
+    }
+    HINTS = {
+        "field": "Place them (ti.root.dense(ti.i, n).place(x)) or give them a shape: x = ti.field(float, shape=(2, 3))",
+        "grad": "Place the gradients (ti.root.dense(ti.i, n).place(x.grad), or ti.root.lazy_grad()) or give the "
+                "fields a shape: x = ti.field(float, shape=(2, 3), needs_grad=True)",
+        "dual": "Place the duals (ti.root.dense(ti.i, n).place(x.dual), or ti.root.lazy_dual()) or give the "
+                "fields a shape: x = ti.field(float, shape=(2, 3), needs_dual=True)",
+        "shape": "Place every entry of a vector/matrix field under nodes of one shape",
+    }
+
+    def __init__(self, f: Field):
+        self.field = f
+        self.loc = caller_loc()
+
+    def _comps(self) -> list:
+        return [c for p in self.field.placeable() for c in p._components()]
+
+    def problem(self, kind: str) -> bool:
+        comps = self._comps()
+        if kind == "field":
+            return any(c.snode is None for c in comps)
+        if kind == "grad":
+            return any(getattr(p, "_needs_grad", False) and c.grad is not None and c.grad.snode is None
+                       for p in self.field.placeable() for c in p._components())
+        if kind == "dual":
+            return any(getattr(p, "_needs_dual", False) and getattr(getattr(c, "dual", None), "snode", 0) is None
+                       for p in self.field.placeable() for c in p._components())
+        return any(isinstance(p, MatrixField) and len({c.shape for c in p._components()}) > 1
+                   for p in self.field.placeable())
+
+    def message(self, kind: str, bad: list) -> str:
+        lines = [self.HEADERS[kind]]
+        for p in bad:
+            where = f" (made at {p.loc})" if p.loc is not None else ""
+            shapes = f" {[c.shape for c in p._comps()]}" if kind == "shape" else ""
+            lines.append(f"  {p.field.name}{shapes}{where}")
+        return "\n".join(lines + [self.HINTS[kind]])
+
+
+def _pending(f):
+    get_program().pending_fields.append(Pending(f))
     return f
 
 
@@ -119,7 +204,8 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
 
     require_init("field")
     if isinstance(dtype, MatrixType):
-        return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual)
+        return _matrix_field(dtype.n, dtype.m, dtype.dtype, shape, name, offset, needs_grad, needs_dual, order,
+                             layout)
     if is_quant(dtype):
         return _quant_field(lambda base: ScalarField(dtype.compute, base), [dtype], shape, name, needs_grad,
                             needs_dual)
@@ -128,7 +214,7 @@ def field(dtype, shape=None, name: str = "", offset=None, needs_grad: bool = Fal
     base, auto = _name(name)
     f = _with_grad(lambda suffix: ScalarField(t, base + suffix), needs_grad, needs_dual)
     f._auto_name = auto
-    return _place_new(f, shape, offset, needs_grad)
+    return _place_new(f, shape, offset, needs_grad, order)
 
 
 def _quant_field(make, qtypes: list, shape, name, needs_grad: bool, needs_dual: bool) -> Field:
@@ -149,7 +235,7 @@ def _quant_field(make, qtypes: list, shape, name, needs_grad: bool, needs_dual: 
     f.quant_type = qtypes[0]
     f._auto_name = auto
     f._needs_grad = False
-    return f
+    return _pending(f)
 
 
 def _entry_types(n: int, m: int, dtype) -> tuple[list, dt.DataType]:
@@ -173,12 +259,12 @@ def _entry_types(n: int, m: int, dtype) -> tuple[list, dt.DataType]:
     return flat, computes.pop()
 
 
-def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
+def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual, order=None, layout=None):
     require_init("field")
     if isinstance(dtype, (list, tuple)):
         types, compute = _entry_types(n, m, dtype)
         if not is_quant(types[0]):
-            return _matrix_field(n, m, compute, shape, name, offset, needs_grad, needs_dual)
+            return _matrix_field(n, m, compute, shape, name, offset, needs_grad, needs_dual, order, layout)
         return _quant_field(lambda base: MatrixField(n, m, compute, base), types, shape, name, needs_grad,
                             needs_dual)
     if is_quant(dtype):
@@ -189,24 +275,24 @@ def _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual):
     base, auto = _name(name)
     f = _with_grad(lambda suffix: MatrixField(n, m, t, base + suffix), needs_grad, needs_dual)
     f._auto_name = auto
-    return _place_new(f, shape, offset, needs_grad)
+    return _place_new(f, shape, offset, needs_grad, order, layout)
 
 
 def vector_field(n, dtype=None, shape=None, order=None, name="", offset=None, needs_grad=False,
                  needs_dual=False, layout=None):
     _check_layout(layout)
-    return _matrix_field(n, 0, dtype, shape, name, offset, needs_grad, needs_dual)
+    return _matrix_field(n, 0, dtype, shape, name, offset, needs_grad, needs_dual, order, layout)
 
 
 def matrix_field(n, m, dtype=None, shape=None, order=None, name="", offset=None, needs_grad=False,
                  needs_dual=False, layout=None):
     _check_layout(layout)
-    return _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual)
+    return _matrix_field(n, m, dtype, shape, name, offset, needs_grad, needs_dual, order, layout)
 
 
 def _check_layout(layout) -> None:
-    """ti.Layout.AOS or SOA: where a vector's components sit in memory. Values and indexing are the same
-    either way; simgrad stores the components side by side (AOS) in both cases today."""
+    """ti.Layout.AOS or SOA: where a vector's components sit in memory (side by side, or one array each: a field
+    made with a shape places them so, lang/factories.py _place_new). Values and indexing are the same either way."""
     from simgrad.lang.types import Layout
 
     if layout is not None and not isinstance(layout, Layout):
@@ -314,8 +400,9 @@ def place_struct_field(stype, shape, name, offset, needs_grad: bool, needs_dual:
     f = _struct_field(stype, base, needs_grad, needs_dual)
     f._auto_name = auto
     if shape is None:
-        return f
+        return _pending(f)
     tree = sn.new_tree(get_program())
     node = tree.root.dense(_axes(len(shape)), shape) if shape else tree.root
     node.place(f, offset=offset)
+    node.place_companions(f.placeable(), offset)
     return f

@@ -11,8 +11,8 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad.errors import (
+    FieldIndexTypeError,
     SimgradError,
-    SimgradIndexError,
     SimgradNotSupportedError,
     SimgradOutOfBoundError,
     SimgradOverflowError,
@@ -140,7 +140,7 @@ class Field:
         comps = self._components()
         for c in comps:
             if c.snode is None:
-                raise SimgradError(_unplaced_message(c), caller_loc())
+                raise _unplaced_error(c)
         self.check_alive()
         for c in comps:
             if c.view is None and c.gather is None:
@@ -251,7 +251,7 @@ class ScalarField(Field):
     def shape(self) -> tuple[int, ...]:
         if self._shape is None:
             if self._snode is None:
-                raise SimgradError(_unplaced_message(self), caller_loc())
+                raise _unplaced_error(self)
             self._shape = self._snode.access_terms()[2]
         return self._shape
 
@@ -398,13 +398,21 @@ def _check_copy_source(dst: Field, src) -> None:
                                f"{type(src).__name__} (use from_numpy for arrays)", caller_loc())
 
 
+def _unplaced_error(c: ScalarField) -> SimgradError:
+    """Using a field that is not placed: while a kernel compiles, Taichi's TaichiCompilationError."""
+    from simgrad.errors import TaichiCompilationError, compiling
+
+    return (TaichiCompilationError if compiling() else SimgradError)(_unplaced_message(c), caller_loc())
+
+
 def _unplaced_message(c: ScalarField) -> str:
     if c.is_dual:
         return (f"field {c.name[:-5]} has no dual: {c.name} exists only when the field is created with "
                 f"needs_dual=True (or placed and followed by ti.root.lazy_dual())")
     if not c.is_primal:
         primal = c.name[:-5] if c.name.endswith(".grad") else c.name
-        return (f"field {primal} has no gradient: {c.name} exists only when the field is created with "
+        return (f"Gradient {c.name} has not been placed, check whether `needs_grad=True`: field {primal} has no "
+                f"gradient: {c.name} exists only when the field is created with "
                 f"needs_grad=True (or placed and followed by ti.root.lazy_grad())")
     return f"field {c.name} is not placed in any SNode tree (call ti.root...place())"
 
@@ -413,10 +421,12 @@ def _check_bounds(key, shape, name):
     """Negative indices are out of bounds as in kernels (and with an offset they would silently alias)."""
     for k, n in zip(key, shape):
         if not isinstance(k, (int, np.integer)):
-            raise SimgradIndexError(f"field {name} is indexed with {k!r} ({type(k).__name__}); Python-scope "
-                                    f"indices must be integers", caller_loc())
-        if not 0 <= k < n:
-            raise SimgradIndexError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
+            raise FieldIndexTypeError(f"field {name} is indexed with {k!r} ({type(k).__name__}); Python-scope "
+                                      f"indices must be integers (Detected illegal element of type: "
+                                      f"{type(k).__name__}. Please be aware that slicing a ti.field is not "
+                                      f"supported so far.)", caller_loc())
+        if not 0 <= k < n:  # an IndexError, and the assertion failure Taichi's debug mode reports
+            raise SimgradOutOfBoundError(f"index {k} out of bounds for field {name} of shape {shape}", caller_loc())
 
 
 def _wrapped(value, dtype: dt.DataType):
@@ -504,11 +514,16 @@ class MatrixField(Field):
     def to_numpy(self, dtype=None, keep_dims=False) -> np.ndarray:
         packed = self._packed_view()
         out = np.array(packed) if packed is not None else self._stacked([c.to_numpy() for c in self.comps])
+        if keep_dims and len(self.entry_shape) == 1:  # a vector as the (n, 1) column Taichi keeps
+            out = out.reshape(out.shape + (1,))
         return out.astype(dtype) if dtype is not None else out
 
     def from_numpy(self, arr) -> None:
         arr = np.asarray(arr)
         want = self.shape + self.entry_shape
+        if len(self.entry_shape) == 1 and arr.shape in (self.shape + self.entry_shape + (1,),
+                                                       self.shape + (1,) + self.entry_shape):
+            arr = arr.reshape(want)  # a vector given as a column or a row (Taichi takes both)
         if arr.shape != want:
             raise ValueError(f"from_numpy: field {self.name} has shape {want}, array has {arr.shape}")
         packed = self._packed_view()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 
-from simgrad.errors import SimgradSyntaxError, SimgradTypeError, caller_loc
+from simgrad.errors import AnnotationError, SimgradSyntaxError, caller_loc
 from simgrad.ir import context
 
 
@@ -83,7 +83,9 @@ def real_func(fn):
     rules for real functions: every parameter annotated, the return value annotated, loops serial."""
     import inspect
 
-    for name, p in inspect.signature(fn).parameters.items():
+    for k, (name, p) in enumerate(inspect.signature(fn).parameters.items()):
+        if k == 0 and name == "self":  # a method of a @ti.data_oriented class (its object is compile-time)
+            continue
         if p.annotation is inspect.Parameter.empty:
             raise SimgradSyntaxError(f"Argument {name} of real function {fn.__name__} must be type annotated",
                                      caller_loc())
@@ -115,7 +117,7 @@ def resolved_signature(func) -> inspect.Signature:
             try:
                 return eval(a, scope)  # noqa: S307 - the user's own annotation text
             except Exception as e:
-                raise SimgradTypeError(f"{func.__name__}: cannot evaluate annotation {a!r}: {e}") from None
+                raise AnnotationError(f"{func.__name__}: cannot evaluate annotation {a!r}: {e}") from None
         return a
 
     params = [p.replace(annotation=ev(p.annotation)) for p in sig.parameters.values()]

@@ -31,6 +31,30 @@ class ArgKind(enum.Enum):
 _POSITIONAL = ("tag", "name", "dtype", "ndim", "field_dim", "element_shape")
 
 
+def _removed_arguments(tag, kwargs: dict) -> None:
+    """Arguments Taichi 1.7.0 removed, refused with its messages (TaichiRuntimeError) before anything else."""
+    from simgrad.errors import TaichiRuntimeError
+
+    why = None
+    if tag == ArgKind.SCALAR and "element_shape" in kwargs:
+        why = ("The element_shape argument for scalar is deprecated in v1.6.0, and is removed in v1.7.0. "
+               "Please remove them.")
+    elif tag == ArgKind.NDARRAY and "element_shape" in kwargs:
+        why = ("The element_shape argument for ndarray is deprecated in v1.6.0, and it is removed in v1.7.0. "
+               "Please use vector or matrix data type instead.")
+    elif tag in (ArgKind.TEXTURE, ArgKind.RWTEXTURE) and "shape" in kwargs:
+        why = ("The shape argument for texture is deprecated in v1.6.0, and it is removed in v1.7.0. "
+               "Please use ndim instead. (Note that you no longer need the exact texture size.)")
+    elif tag == ArgKind.RWTEXTURE and ("channel_format" in kwargs or "num_channels" in kwargs):
+        why = ("The channel_format and num_channels arguments for texture are deprecated in v1.6.0, "
+               "and they are removed in v1.7.0. Please use fmt instead.")
+    elif tag == ArgKind.TEXTURE and ("channel_format" in kwargs or "num_channels" in kwargs):
+        why = ("The channel_format and num_channels arguments are no longer required for non-RW textures "
+               "since v1.6.0, and they are removed in v1.7.0. Please remove them.")
+    if why is not None:
+        raise TaichiRuntimeError(why, caller_loc())
+
+
 class Arg:
     """A named placeholder for a kernel argument: ``Arg(ArgKind.NDARRAY, "x", dtype=ti.math.vec2, ndim=1)``."""
 
@@ -41,6 +65,7 @@ class Arg:
         tag, name = kwargs.pop("tag", None), kwargs.pop("name", None)
         if not isinstance(tag, ArgKind):
             raise SimgradError(f"ti.graph.Arg: tag must be a ti.graph.ArgKind, got {tag!r}", caller_loc())
+        _removed_arguments(tag, kwargs)
         if tag in (ArgKind.TEXTURE, ArgKind.RWTEXTURE):
             raise SimgradNotSupportedError("ti.graph.Arg: textures are a GPU rendering feature simgrad does not have",
                                            caller_loc())

@@ -30,6 +30,14 @@ class _Runtime:
     def default_ip(self, t) -> None:
         get_program().set_default_types(ip=t)
 
+    def set_default_fp(self, t) -> None:
+        """Taichi's runtime method (what ti.init(default_fp=...) calls)."""
+        get_program().set_default_types(fp=t)
+
+    def set_default_ip(self, t) -> None:
+        """Taichi's runtime method (what ti.init(default_ip=...) calls)."""
+        get_program().set_default_types(ip=t)
+
 
 def get_runtime() -> _Runtime:
     return _Runtime()

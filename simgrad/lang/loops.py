@@ -62,10 +62,15 @@ class ndrange:
         for a in args:
             if isinstance(a, (tuple, list)):
                 if len(a) != 2:
-                    raise SimgradSyntaxError("ndrange takes n or (begin, end) per dimension")
-                self.bounds.append((a[0], a[1]))
+                    raise SimgradSyntaxError("Every argument of ndrange should be a scalar or a tuple/list like "
+                                             f"(begin, end): ndrange takes n or (begin, end) per dimension, got {a!r}")
+                bounds = (a[0], a[1])
             else:
-                self.bounds.append((0, a))
+                bounds = (0, a)
+            if any(isinstance(b, float) for b in bounds):  # Python floats (run-time values are checked later)
+                raise SimgradTypeError("Every argument of ndrange should be an integer scalar or a tuple/list of "
+                                       f"(int, int), got {a!r}")
+            self.bounds.append(bounds)
 
     @property
     def dimensions(self):
@@ -127,9 +132,12 @@ def cache_read_only(*fields) -> None:
 
 
 def no_activate(*fields) -> None:
-    """Taichi's promise that this kernel touches only active cells of these fields, so its accesses need not
-    activate; activating anyway computes the same for a program that keeps the promise."""
-    _check_fields("no_activate", fields)
+    """Taichi's promise that this kernel touches only active cells of these fields or SNodes (Taichi passes
+    SNodes), so its accesses need not activate; activating anyway computes the same for a program that keeps
+    the promise."""
+    from simgrad.lang.snode import SNode
+
+    _check_fields("no_activate", [f for f in fields if not isinstance(f, SNode)])
 
 
 def assume_in_range(val, base, low: int, high: int):
@@ -137,6 +145,15 @@ def assume_in_range(val, base, low: int, high: int):
     itself is returned unchanged."""
     if not (isinstance(low, int) and isinstance(high, int)) or low > high:
         raise ValueError(f"assume_in_range: low and high must be integers with low <= high, got {low}, {high}")
+    return val
+
+
+def loop_unique(val, covers=None):
+    """Taichi's promise that `val` differs between the iterations of the enclosing parallel loop (so updates of
+    `y[val]` need no atomics, for the fields in `covers`); the value itself is returned unchanged, and the
+    updates stay as the atomics analysis decides (passes/parallel_strategy.py), which is correct either way."""
+    if covers is not None:
+        _check_fields("loop_unique", covers if isinstance(covers, (list, tuple)) else [covers])
     return val
 
 

@@ -24,7 +24,8 @@ nan = _m.nan
 
 vec2, vec3, vec4 = _vector(2), _vector(3), _vector(4)
 ivec2, ivec3, ivec4 = _vector(2, int), _vector(3, int), _vector(4, int)
-uvec2, uvec3, uvec4 = _vector(2, _dt.u32), _vector(3, _dt.u32), _vector(4, _dt.u32)
+# unsigned of default_ip's width (u32, or u64 after ti.init(default_ip=ti.i64)), as Taichi's
+uvec2, uvec3, uvec4 = _vector(2, _dt.default_up), _vector(3, _dt.default_up), _vector(4, _dt.default_up)
 mat2, mat3, mat4 = _matrix(2, 2), _matrix(3, 3), _matrix(4, 4)
 
 # the registry's math functions exported under ti.math (ir/opdefs.py: sqrt, sin, ..., atan2, ...)

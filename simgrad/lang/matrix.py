@@ -11,7 +11,14 @@ import numpy as np
 
 from simgrad import dtypes as dt
 from simgrad import errors
-from simgrad.errors import SimgradIndexError, SimgradTypeError, SimgradValueError, caller_loc
+from simgrad.errors import (
+    SimgradIndexError,
+    SimgradSyntaxError,
+    SimgradTypeError,
+    SimgradValueError,
+    TaichiRuntimeError,
+    caller_loc,
+)
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
@@ -30,11 +37,33 @@ def _swizzle_indices(name: str) -> list[int] | None:
     return None
 
 
+def check_swizzle(name: str, idx: list[int], n: int, cls: type[Exception] | None = None) -> None:
+    """A swizzle past the vector's length, in Taichi's words (a TaichiSyntaxError; reading one in Python scope is
+    an AttributeError, so that hasattr() keeps working)."""
+    if max(idx) >= n:
+        group = next(g for g in _SWIZZLE_GROUPS if name[0] in g)
+        text = f"vec{n} only has attributes={tuple(group[:n])}, got={tuple(name)}"
+        if cls is not None:
+            raise cls(text)
+        raise SimgradSyntaxError(text, _loc())
+
+
+def vector_key(key):
+    """A vector used as an index (`m[I]`, I from `ti.static(ti.grouped(ti.ndrange(2, 3)))`) stands for its
+    entries, as in Taichi."""
+    if isinstance(key, Matrix) and key.m == 0:
+        return tuple(key.entries)
+    return key
+
+
 class Matrix:
     """An n-vector (m == 0) or an n x m matrix of scalars (Python numbers or kernel values)."""
 
     __slots__ = ("entries", "n", "m")
     _is_matrix = True
+    # numpy defers to Matrix's reflected operators (`np.cos(0) + v` is a Matrix, as in Taichi), rather than
+    # treating it as a sequence
+    __array_priority__ = 1000
 
     def __init__(self, arr=None, dt=None, n=None, m=None, *, _entries=None):
         if _entries is not None:
@@ -91,8 +120,9 @@ class Matrix:
         for a in mats[1:]:
             if a.shape != shape:
                 # as Taichi: a TaichiTypeError in a kernel, numpy's ValueError in Python scope
-                if errors.compiling():
-                    raise SimgradTypeError(f"matrix shapes {shape} and {a.shape} do not match")
+                if errors.compiling():  # (Taichi's words first)
+                    raise SimgradTypeError(f"Cannot broadcast tensor to tensor: matrix shapes {shape} and {a.shape} "
+                                           "do not match")
                 raise SimgradValueError(f"matrix shapes {shape} and {a.shape} do not match", caller_loc())
         proto = mats[0]
         cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
@@ -133,6 +163,7 @@ class Matrix:
         return self[key if len(key) > 1 else key[0]]
 
     def __getitem__(self, key):
+        key = vector_key(key)
         if isinstance(key, slice) or (isinstance(key, tuple) and any(isinstance(k, slice) for k in key)):
             return self._slice(key)
         idx = self._flat_index(key)
@@ -191,6 +222,7 @@ class Matrix:
         return out
 
     def __setitem__(self, key, value):
+        key = vector_key(key)
         idx = self._flat_index(key)
         if idx is None:
             if self.m and not isinstance(key, tuple):
@@ -200,17 +232,17 @@ class Matrix:
             raise IndexError("assigning through a kernel-value index is not supported on a temporary matrix")
         self.entries[idx] = value
 
-    def _swizzle(self, name: str) -> list[int]:
+    def _swizzle(self, name: str, reading: bool = False) -> list[int]:
         idx = _swizzle_indices(name)
         if idx is None or name.startswith("_"):
             raise AttributeError(f"'Matrix' object has no attribute '{name}'")
-        if self.m != 0 or max(idx) >= self.n:
-            raise AttributeError(f"a {self.shape} {'vector' if self.m == 0 else 'matrix'} has no swizzle "
-                                 f"'{name}'")
+        if self.m != 0:
+            raise AttributeError(f"a {self.shape} matrix has no swizzle '{name}'")
+        check_swizzle(name, idx, self.n, AttributeError if reading else None)
         return idx
 
     def __getattr__(self, name):
-        idx = self._swizzle(name)
+        idx = self._swizzle(name, reading=True)
         if len(idx) == 1:
             return self.entries[idx[0]]
         return Matrix([self.entries[i] for i in idx])
@@ -222,7 +254,8 @@ class Matrix:
         idx = self._swizzle(name)
         vals = [value] if len(idx) == 1 else list(value)
         if len(vals) != len(idx):
-            raise ValueError(f"swizzle '{name}' takes {len(idx)} values, got {len(vals)}")
+            raise TaichiRuntimeError(f"value len does not match the swizzle pattern={name}: it takes {len(idx)} "
+                                     f"values, got {len(vals)}", _loc())
         for i, v in zip(idx, vals):
             self.entries[i] = v
 

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradTypeError
+from simgrad.errors import SimgradSyntaxError, SimgradTypeError
 from simgrad.ir import context, numeric
 from simgrad.ir.opdefs import OpDef
 from simgrad.ir.ops import OPS, Op
@@ -67,7 +67,7 @@ def _check_literal(v: int, t: dt.DataType) -> None:
     hi = (1 << (t.bits - 1 if t.is_signed else t.bits)) - 1
     if not lo <= v <= hi:
         hint = "default_ip" if t is dt.Defaults.ip else "its type"
-        raise SimgradTypeError(f"integer literal {v} exceeds the range of {hint} {t} ([{lo}, {hi}]); give it a "
+        raise SimgradTypeError(f"integer literal {v} exceeded the range of {hint} {t} ([{lo}, {hi}]); give it a "
                                f"wider type, e.g. ti.i64({v}) or ti.u64({v}), or set default_ip in ti.init()",
                                context.current_loc())
 
@@ -175,8 +175,11 @@ def _ipow(base: Expr, n: int) -> Expr:
     if n == 0:
         return cast_expr(to_expr(1, base.dtype), base.dtype)
     if n < 0:
-        if not base.dtype.is_float:
-            base = cast_expr(base, dt.Defaults.fp)
+        if not base.dtype.is_float:  # Taichi refuses it when compiling (alg_simp), in every mode
+            from simgrad.errors import SimgradRuntimeError
+
+            raise SimgradRuntimeError(f"Negative exponent in pow(int, int) is not allowed: {base.dtype} ** {n} "
+                                      "(make the base a float for 1 / x ** n)", context.current_loc())
         return truediv(1.0, _ipow(base, -n))
     result: Expr | None = None
     p = base
@@ -266,6 +269,7 @@ def _minmax(pyfn, op: Op):
             result = two(result, a)
         return result
 
+    f.__name__ = f.__qualname__ = op.name.lower()  # ti.max / ti.min, as Taichi names them
     return f
 
 
@@ -304,6 +308,9 @@ def logical_not(a):
         return _elementwise(logical_not, a)
     if not isinstance(a, Expr):
         return int(not a)
+    if a.dtype.is_float:  # Taichi's type check: `not x` needs an integer (compare with 0 for a float)
+        raise SimgradTypeError(f"'logical_not' takes integral inputs only, got {a.dtype} (write x == 0)",
+                               context.current_loc())
     return _emit1(Op.LOGICAL_NOT, a)
 
 
@@ -367,8 +374,9 @@ def _rounding(op: Op, pyfn):
         if not isinstance(x, Expr):
             r = pyfn(x)
             return cast(r, dtype) if dtype is not None else (float(r) if isinstance(x, float) else r)
-        if not x.dtype.is_float:
-            return cast(x, dtype) if dtype is not None else x
+        if not x.dtype.is_float:  # Taichi refuses them (its floor/ceil/round are float ops)
+            raise SimgradTypeError(f"'{op.name.lower()}' takes real inputs only, got {x.dtype}: "
+                                   f"ti.{op.name.lower()}(ti.cast(x, float)) for a float", context.current_loc())
         r = _emit1(op, x)
         return cast(r, dtype) if dtype is not None else r
 
@@ -475,4 +483,34 @@ def global_thread_idx():
     return Expr(context.builder().emit(Op.THREAD_INDEX, dt.i32))
 
 
-dt.cast_hook = cast  # `ti.f32(x)` (dtypes.DataType.__call__) casts through lang
+def type_call(t: dt.DataType, args: tuple, kwargs: dict):
+    """`ti.f32(x)`: a cast; in a kernel, as Taichi's primitive-type call, one scalar only, and a Python number is a
+    literal of that type (an int must fit it, and only an integer type takes an int and a float type a float)."""
+    if not context.in_kernel():
+        if len(args) != 1 or kwargs:
+            raise TypeError(f"{t}() takes one value")
+        return cast(args[0], t)
+    loc = context.current_loc()
+    if len(args) != 1 or kwargs:
+        raise SimgradSyntaxError("A primitive type can only decorate a single expression.", loc)
+    import numpy as np
+
+    x = args[0]
+    if is_matrix(x):
+        raise SimgradSyntaxError("A primitive type cannot decorate an expression with a compound type (use "
+                                 "ti.cast or .cast(dtype) on a vector or matrix).", loc)
+    if isinstance(x, (float, np.floating)) and not t.is_float:
+        raise SimgradTypeError("Floating-point literals must be annotated with a floating-point type. For type "
+                               "casting, use `ti.cast`.", loc)
+    if isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)):
+        if t.is_float:
+            raise SimgradTypeError("Integer literals must be annotated with a integer type. For type casting, "
+                                   "use `ti.cast`.", loc)
+        lo, hi = (-(1 << (t.bits - 1)), (1 << (t.bits - 1)) - 1) if t.is_signed else (0, (1 << t.bits) - 1)
+        if not lo <= int(x) <= hi:
+            raise SimgradTypeError(f"Integer literal {int(x)} exceeded the range of specified dtype: {t} ([{lo}, "
+                                   f"{hi}]); ti.cast({int(x)}, {t}) wraps it explicitly", loc)
+    return cast(x, t)
+
+
+dt.cast_hook = type_call  # `ti.f32(x)` (dtypes.DataType.__call__) goes through lang

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import time
-import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,8 +20,86 @@ if TYPE_CHECKING:
 DEFAULT_TAPE_ENTRIES = 1 << 16
 
 
+# Taichi 1.7.4's compile configuration (dir(ti.lang.impl.default_cfg()), less arch and the default types) with its
+# defaults: ti.init takes each as an argument or a TI_<KEY> environment variable and current_cfg() reports it.
+# Those simgrad acts on are read below; the others are kept as given (their effects are Taichi's code generator's).
+TAICHI_CONFIG: dict = {
+    "ad_stack_size": 0, "advanced_optimization": True, "allow_nv_shader_extension": True,
+    "auto_mesh_local_default_occupacy": 4, "cache_loop_invariant_global_vars": True, "cfg_optimization": True,
+    "check_out_of_bound": False, "cpu_block_dim_adaptive": True, "cpu_max_num_threads": 0, "cuda_stack_limit": 0,
+    "debug": False, "default_cpu_block_dim": 32, "default_gpu_block_dim": 128, "demote_dense_struct_fors": True,
+    "demote_no_access_mesh_fors": True, "detect_read_only": True, "device_memory_GB": 1.0,
+    "device_memory_fraction": 0.0, "experimental_auto_mesh_local": False, "fast_math": True, "flatten_if": False,
+    "force_scalarize_matrix": False, "gpu_max_reg": 0, "half2_vectorization": False, "kernel_profiler": False,
+    "lower_access": True, "make_block_local": True, "make_cpu_multithreading_loop": True,
+    "make_mesh_block_local": True, "make_thread_local": True, "max_block_dim": 0,
+    "mesh_localize_all_attr_mappings": False, "mesh_localize_from_end_mapping": False,
+    "mesh_localize_to_end_mapping": True, "move_loop_invariant_outside_if": False, "num_compile_threads": 4,
+    "offline_cache": True, "offline_cache_cleaning_factor": 0.25, "offline_cache_cleaning_policy": "lru",
+    "offline_cache_file_path": "", "offline_cache_max_size_of_files": 100 * 1024 * 1024, "opt_level": 1,
+    "optimize_mesh_reordered_mapping": True, "print_accessor_ir": False, "print_ir": False,
+    "print_ir_dbg_info": False, "print_kernel_amdgcn": False, "print_kernel_asm": False,
+    "print_kernel_llvm_ir": False, "print_kernel_llvm_ir_optimized": False, "print_preprocessed_ir": False,
+    "print_struct_llvm_ir": False, "quant_opt_atomic_demotion": True, "quant_opt_store_fusion": True,
+    "random_seed": 0, "real_matrix_scalarize": True, "saturating_grid_dim": 0, "simplify_after_lower_access": True,
+    "simplify_before_lower_access": True, "timeline": False, "use_llvm": True, "verbose": True,
+    "verbose_kernel_launches": False, "vk_api_version": "",
+}
+# Taichi's _SpecialConfig: options of its Python layer, returned by ti.init(_test_mode=True)
+SPECIAL_CONFIG: dict = {"log_level": "info", "gdb_trigger": False, "short_circuit_operators": True,
+                        "print_full_traceback": False, "unrolling_limit": 32}
+# accepted for older programs, without effect (not in Taichi 1.7.4's list)
+LEGACY_OPTIONS = {"packed", "dynamic_index", "excepthook", "debug_info"}
+
+
+class SpecialConfig:
+    """What ti.init(_test_mode=True) returns, as Taichi's: the Python-layer options as set."""
+
+    def __init__(self, kw: dict):
+        for k, v in SPECIAL_CONFIG.items():
+            setattr(self, k, kw.get(k, v))
+
+
+def _from_environment(kw: dict) -> None:
+    """TI_<KEY> for every option not given as an argument, as Taichi reads them ("0"/"1" for booleans)."""
+    for key, default in {**TAICHI_CONFIG, **SPECIAL_CONFIG}.items():
+        value = os.environ.get("TI_" + key.upper(), "")
+        if key in kw or not value:
+            continue
+        kw[key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
+    for key, types in (("default_fp", {"32": dt.f32, "64": dt.f64}), ("default_ip", {"32": dt.i32, "64": dt.i64})):
+        value = os.environ.get("TI_" + key.upper(), "")
+        if value and kw.get(key) is None:
+            if value not in types:
+                raise ValueError(f"Invalid TI_{key.upper()}={value}, should be 32 or 64")
+            kw[key] = types[value]
+
+
+def check_require_version(require_version: str) -> None:
+    """ti.init(require_version="major.minor[.patch][rest]"): the Taichi version simgrad follows must be at least
+    that (Taichi compares its own version; simgrad implements Taichi 1.7.4's language)."""
+    from simgrad._lib.core import TAICHI_VERSION
+
+    digits = require_version
+    for i, c in enumerate(require_version):
+        if not (c.isdigit() or c == "."):
+            digits = require_version[:i]
+            break
+    try:
+        parts = [int(n) for n in digits.split(".")]
+        wanted = (parts[0], parts[1], parts[2] if len(parts) > 2 else 0)
+    except (ValueError, IndexError):
+        raise ValueError("The require_version should be formatted following PEP 440, and include major, minor, "
+                         f"and patch number, e.g., major.minor.patch (got {require_version!r})") from None
+    if TAICHI_VERSION < wanted:
+        have = ".".join(map(str, TAICHI_VERSION))
+        raise RuntimeError(f"Taichi version mismatch: required >= {require_version}, simgrad implements {have}")
+
+
 class Config:
     def __init__(self, **kw):
+        for key, default in TAICHI_CONFIG.items():
+            setattr(self, key, kw.get(key, default))
         self.arch = kw.get("arch")
         self.debug = bool(kw.get("debug", False))
         self.default_fp = dt.from_any(kw.get("default_fp") or dt.f32)
@@ -35,6 +112,7 @@ class Config:
         self.offline_cache_file_path = kw.get("offline_cache_file_path")
         threads = kw.get("cpu_max_num_threads") or int(os.environ.get("SIMGRAD_NUM_THREADS", 0) or 0)
         self.num_threads = int(threads) if threads else (os.cpu_count() or 1)
+        self.cpu_max_num_threads = self.num_threads
 
 
 class Profiler:
@@ -109,6 +187,8 @@ class Program:
             self.sparse = SparseMemory(limit)
         self.trees: list = []
         self._open_tree = None
+        # fields made without a shape since the last kernel compile, checked then (lang/factories.py Pending)
+        self.pending_fields: list = []
         self.profiler = Profiler()
         self.compile_seconds = 0.0  # time spent instantiating kernels (compiles and kernel-cache hits)
         self.instantiations = 0  # kernel instances made (compiled or taken from the kernel cache)
@@ -126,9 +206,23 @@ class Program:
 
     # -- SNode trees -------------------------------------------------------------------------------
     def materialize_all(self) -> None:
+        if self.pending_fields:
+            self.check_pending_fields()
         for t in self.trees:
             if not t.materialized:
                 t.materialize()
+
+    def check_pending_fields(self) -> None:
+        """Taichi's checks when its fields are materialised: every field made since the last check is placed,
+        with its gradient (dual) when made with needs_grad (needs_dual), and a matrix field's entries have one
+        shape. A failure is a TaichiRuntimeError naming where each field was made, and stays until fixed."""
+        from simgrad.errors import SimgradRuntimeError
+
+        for kind in ("field", "grad", "dual", "shape"):
+            bad = [p for p in self.pending_fields if p.problem(kind)]
+            if bad:
+                raise SimgradRuntimeError(bad[0].message(kind, bad), bad[0].loc)
+        self.pending_fields = []
 
     def get_total_compilation_time(self) -> float:
         """Seconds spent compiling kernels in this program (taichi's `impl.get_runtime().prog` asks it)."""
@@ -295,25 +389,36 @@ def require_init(what: str) -> Program:
     return _program
 
 
-def init(arch=None, **kw) -> Program:
+def init(arch=None, default_fp=None, default_ip=None, _test_mode=False, enable_fallback=True, require_version=None,
+         **kw):
+    """ti.init: Taichi's options (TAICHI_CONFIG, SPECIAL_CONFIG) as arguments or TI_<KEY> environment variables;
+    an option Taichi does not know either is its KeyError. Returns the program (Taichi returns None), or with
+    `_test_mode` the SpecialConfig."""
     from simgrad.lang import archs
 
-    known = {"arch", "debug", "default_fp", "default_ip", "random_seed", "kernel_profiler", "ad_stack_size",
-             "offline_cache", "offline_cache_file_path", "cpu_max_num_threads", "log_level", "device_memory_GB",
-             "device_memory_fraction", "flatten_if", "fast_math", "advanced_optimization", "packed",
-             "dynamic_index", "print_ir", "verbose", "check_out_of_bound", "excepthook", "cfg_optimization",
-             "short_circuit_operators", "real_matrix_scalarize", "debug_info", "opt_level"}
-    unknown = sorted(set(kw) - known)
+    if require_version is not None:
+        check_require_version(require_version)
+    if "default_up" in kw:
+        raise KeyError("'default_up' is always the unsigned type of 'default_ip'. Please set 'default_ip' instead.")
+    kw["default_fp"], kw["default_ip"] = default_fp, default_ip
+    unknown = [k for k in kw if k not in TAICHI_CONFIG and k not in SPECIAL_CONFIG and k not in LEGACY_OPTIONS
+               and k not in ("default_fp", "default_ip")]
     if unknown:
-        warnings.warn(f"ti.init: ignoring unknown arguments {unknown}", stacklevel=3)
-    kw["arch"] = archs.resolve(arch)
+        raise KeyError(f"Unrecognized keyword argument(s) for ti.init: {', '.join(unknown)}")
+    _from_environment(kw)
+    spec = SpecialConfig(kw)
+    if not _test_mode:
+        from simgrad.lang.logging import set_logging_level
+
+        set_logging_level(spec.log_level)
+    kw["arch"] = archs.resolve(arch, enable_fallback)
     if _program is not None:
         _program.release()
     if kw.get("check_out_of_bound"):
         kw["debug"] = True
     p = Program(**kw)
     _set_program(p)
-    return p
+    return spec if _test_mode else p
 
 
 def reset() -> None:

@@ -186,6 +186,12 @@ class SNode:
                 self.children.append(node)
             if offset is not None:
                 f._set_offset(offset)
+        return self
+
+    def place_companions(self, fields, offset=None) -> None:
+        """Place the gradient and dual of each of `fields` that was made with needs_grad / needs_dual here
+        (a struct field made with a shape: its members' companions beside them). place() itself never does:
+        as in Taichi, a field placed by the user needs its gradient placed too (or ti.root.lazy_grad())."""
         for f in fields:
             if getattr(f, "_needs_grad", False) and f.grad is not None and f.grad.snode is None:
                 self.place(f.grad, offset=offset)
@@ -196,7 +202,6 @@ class SNode:
             if getattr(f, "_needs_dual", False) and gdual is not None and gdual.snode is None and \
                     f.grad.snode is not None:
                 self.place(gdual, offset=offset)
-        return self
 
     def _place_bitpack(self, pack, offset) -> None:
         """A BitpackedFields becomes one `bit_struct` node: a physical integer per cell of this node, each

@@ -36,7 +36,7 @@ def _kernels(t: dt.DataType) -> dict:
 
     @ti.kernel
     def dot(u: ti.template(), v: ti.template()) -> t:
-        acc = t(0)
+        acc = ti.cast(0, t)
         for I in ti.grouped(u):
             acc += u[I] * v[I]
         return acc

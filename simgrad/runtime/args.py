@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from simgrad import dtypes as dt
-from simgrad.errors import SimgradRuntimeError, SimgradTypeError, caller_loc
+from simgrad.errors import ArgumentValueError, SimgradRuntimeError, SimgradTypeError, caller_loc
 from simgrad.runtime.abi import CTX_ARGS
 from simgrad.runtime.tensors import tensor_grad_info, tensor_info
 
@@ -29,6 +29,7 @@ class LaunchCode:
         self.views = views
         self.before: list[str] = []  # lines before the packing
         self.after: list[str] = []
+        self.positions: dict[str, int] = {}  # each launch parameter's position (Taichi's messages name it)
         # runtime/gpu_launch.py Staging: host arrays copied to the device and back (on_device only)
         self.staging = staging
 
@@ -95,10 +96,11 @@ class ScalarPacking(Packing):
         exact, check = ("float", "_check_float") if t.is_float else ("int", "_check_int")
         gen.env[check] = check_float if t.is_float else check_int
         gen.env["_bad"] = bad_arg
-        return lines + [f"if {v}.__class__ is not {exact}: {check}({kernel!r}, {v!r}, {v}, {t.name!r})",
+        where = f"{kernel!r}, {v!r}, {v}, {t.name!r}, {None if self.path else gen.positions.get(self.name)!r}"
+        return lines + [f"if {v}.__class__ is not {exact}: {check}({where})",
                         # a u1 is any nonzero integer as 1 (as Taichi converts it)
                         f"try: {view}[{gen.word(self.slot) * scale}] = {'1 if ' + v + ' else 0' if t is dt.u1 else v}",
-                        f"except (TypeError, ValueError, OverflowError): _bad({kernel!r}, {v!r}, {v}, {t.name!r})"]
+                        f"except (TypeError, ValueError, OverflowError): _bad({where})"]
 
     def slot_values(self, value) -> dict:
         return {self.slot: member(value, self.path)}
@@ -219,22 +221,24 @@ class BuilderPacking(Packing):
 
 
 # -- run-time checks and conversions the launchers call ---------------------------------------------------
-def bad_arg(kernel, param, value, type_name):
+def bad_arg(kernel, param, value, type_name, pos=None):
     if isinstance(value, int):
         raise SimgradTypeError(f"kernel {kernel}: argument '{param}' = {value} is out of range for {type_name}",
                                caller_loc())
+    taichi = "" if pos is None else \
+        f" (Argument ({pos},) (type={type(value)}) cannot be converted into required type {type_name})"
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects a {type_name} scalar, got "
-                           f"{type(value).__name__}", caller_loc())
+                           f"{type(value).__name__}{taichi}", caller_loc())
 
 
-def check_float(kernel, param, value, type_name):
+def check_float(kernel, param, value, type_name, pos=None):
     if not isinstance(value, (int, float, np.integer, np.floating)):  # bool is an int
-        bad_arg(kernel, param, value, type_name)
+        bad_arg(kernel, param, value, type_name, pos)
 
 
-def check_int(kernel, param, value, type_name):
+def check_int(kernel, param, value, type_name, pos=None):
     if not isinstance(value, (int, np.integer)):
-        bad_arg(kernel, param, value, type_name)
+        bad_arg(kernel, param, value, type_name, pos)
 
 
 def flat_matrix(value, count, kernel, param):
@@ -270,17 +274,26 @@ def grad_info(a, shape, kernel, param, ndim, stage=None):
     return ptr
 
 
+class FortranOrderArray(SimgradTypeError):
+    """A Fortran-ordered numpy argument (`a.T`): Kernel.__call__ runs the launch again on C-ordered copies and
+    writes them back, as Taichi does; the launcher itself stays free of that check's cost for C arrays."""
+
+
 def array_info(a, kernel, param, ndim, stage=None):
     """(base address, shape) of an ndarray argument: a numpy array or a ti.ndarray (tensors: TensorPacking).
     `stage` (an asynchronous device's launcher): a numpy array's device copy (runtime/gpu_launch.py Staging)."""
     if isinstance(a, np.ndarray):
         if not a.flags.c_contiguous:
-            raise SimgradTypeError(f"kernel {kernel}: ndarray argument '{param}' must be C-contiguous "
-                                   "(use np.ascontiguousarray)")
+            if a.flags.f_contiguous:  # a transposed array: the kernel runs on a C-ordered copy (compiler/kernel.py)
+                raise FortranOrderArray(f"kernel {kernel}: ndarray argument '{param}' is in Fortran order")
+            raise ArgumentValueError(f"kernel {kernel}: ndarray argument '{param}' is not C-contiguous: Non "
+                                     "contiguous numpy arrays are not supported, please call np.ascontiguousarray(arr) "
+                                     "before passing it into the kernel", caller_loc())
         return (a.ctypes.data if stage is None else stage(a)), a.shape
     if hasattr(a, "_ndarray_data"):  # device memory already: no staging, and no synchronization
         return array_info(a._ndarray_data, kernel, param, ndim)
-    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__}")
+    raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__} "
+                           f"(Invalid type for argument {param}, got {a})")
 
 
 def builder_info(a, kernel, param, type_name):

@@ -106,6 +106,7 @@ class Launcher:
                "_acquire": LAUNCH_LOCK.acquire, "_release": LAUNCH_LOCK.release}
         gen = self.launch_code(env)
         names = [p.name for p in params]
+        gen.positions = {n: k for k, n in enumerate(names)}
         # each parameter's packing (runtime/args.py) writes its own lines: no per-argument loop per call
         lines = ["    " + ln for p in params for ln in p.launch_code(gen, p.name)]
         lines = ["    " + ln for ln in gen.before] + lines

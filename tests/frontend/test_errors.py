@@ -72,7 +72,7 @@ def test_unsupported_try():
         except Exception:
             pass
 
-    _raises_located(k, match="'Try' is not supported", line_text="try:")
+    _raises_located(k, match='Unsupported node "Try"', line_text="try:")
 
 
 def test_unsupported_with():
@@ -81,7 +81,7 @@ def test_unsupported_with():
         with open("x"):
             pass
 
-    _raises_located(k, match="'With' is not supported", line_text='with open("x"):')
+    _raises_located(k, match='Unsupported node "With"', line_text='with open("x"):')
 
 
 def test_unsupported_lambda():
@@ -99,7 +99,7 @@ def test_unsupported_class_definition():
         class Local:
             pass
 
-    _raises_located(k, match="'ClassDef' is not supported", line_text="class Local:")
+    _raises_located(k, match='Unsupported node "ClassDef"', line_text="class Local:")
 
 
 def test_unsupported_construct_caret_points_at_the_line():
@@ -108,7 +108,7 @@ def test_unsupported_construct_caret_points_at_the_line():
         x = 1
         del x
 
-    text = _raises_located(k, match="'Delete' is not supported", line_text="del x")
+    text = _raises_located(k, match='Unsupported node "Delete"', line_text="del x")
     lines = text.splitlines()
     src = next(i for i, s in enumerate(lines) if s.strip() == "del x")
     assert lines[src + 1].strip() == "^"
@@ -119,7 +119,7 @@ def test_undefined_name():
     def k() -> ti.f32:
         return undefined_thing * 2  # noqa: F821
 
-    _raises_located(k, match="name 'undefined_thing' is not defined", line_text="return undefined_thing * 2",
+    _raises_located(k, match="Name \"undefined_thing\" is not defined", line_text="return undefined_thing * 2",
                     exc=NameError)
 
 
@@ -132,7 +132,7 @@ def test_break_in_outermost_parallel_loop():
             if i > 2:
                 break
 
-    _raises_located(k, match=r"'break' is not allowed in the outermost \(parallel\) for loop",
+    _raises_located(k, match=r"Cannot break in the outermost loop",
                     line_text="break")
 
 
@@ -156,16 +156,25 @@ def test_assigning_an_argument_inside_a_loop_is_rejected():
             i += 2
         return i
 
-    _raises_located(k, 0, match=r"'i' is a kernel argument .* cannot be assigned here", line_text="i += 2")
+    _raises_located(k, 0, match=r'Kernel argument "i" is immutable in the kernel', line_text="i += 2")
+
+    @ti.kernel
+    def also(i: ti.i32) -> ti.i32:
+        i = i * 2  # in the argument's own scope too (Taichi's rule; simgrad used to take a new local here)
+        return i
+
+    _raises_located(also, 0, match=r'Kernel argument "i" is immutable in the kernel', line_text="i = i * 2")
+
+    @ti.func
+    def f(i: ti.i32) -> ti.i32:
+        i = i * 2  # a ti.func's parameter is a local, as in Taichi
+        return i
 
     @ti.kernel
     def ok(i: ti.i32) -> ti.i32:
-        i = i * 2  # in the argument's own scope a new local simply takes over the name
-        for _ in range(3):
-            i += 1
-        return i
+        return f(i)
 
-    assert ok(5) == 13
+    assert ok(5) == 10
 
 
 def test_loop_over_runtime_value_is_rejected():

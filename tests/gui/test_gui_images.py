@@ -108,3 +108,46 @@ def test_video_manager_automatic_build_and_mp4_fallback(tmp_path):
         vm.write_frames([np.random.default_rng(k).random((8, 8, 3)) for k in range(4)])
     assert (tmp_path / "video.gif").exists()  # built at the 4-frame checkpoint
     assert vm.next_video_checkpoint == 8
+
+
+def test_fast_gui_img_is_taichis_packed_words():
+    # taichi 1.7.4 (ti.GUI(res=(4, 3), fast_gui=True).set_image of an f32 3-vector field with offset (-1, 5)):
+    # word j * W + i is pixel (i, H - 1 - j) as 0x00RRGGBB, floats truncated (0.5 -> 0x7f, 0.999 -> 0xfe)
+    import simgrad as ti
+
+    ti.init(arch=ti.cpu)
+    img = ti.Vector.field(3, ti.f32, shape=(4, 3), offset=(-1, 5))
+    a = np.zeros((4, 3, 3), np.float32)
+    a[1, 0] = [0.5, 1.2, -0.3]
+    a[3, 2] = [0.999, 0.0, 1.0]
+    img.from_numpy(a)
+    gui = tg.GUI("t", res=(4, 3), show_gui=False, fast_gui=True)
+    gui.set_image(img)
+    want = np.zeros(12, np.uint32)
+    want[3], want[9] = 0xFE00FF, 0x7FFF00
+    assert gui.img.dtype == np.uint32
+    np.testing.assert_array_equal(gui.img, want)
+    np.testing.assert_array_equal(gui.canvas.to_uint8()[1, 0], [0x7F, 0xFF, 0])  # what show(file) saves
+
+
+def test_gui_img_without_fast_gui_is_float_rgba():
+    gui = tg.GUI(res=(4, 3), show_gui=False)
+    gui.set_image(np.full((4, 3), 0.5, np.float32))
+    assert gui.img.shape == (4, 3, 4) and gui.img.dtype == np.float32
+    np.testing.assert_array_equal(gui.img[..., 3], 1.0)
+
+
+def test_lib_utils_os_name():
+    import simgrad as ti
+
+    assert ti._lib.utils.get_os_name() in ("linux", "osx", "win", "unix")
+
+
+def test_imwrite_scales_wider_unsigned_ints_by_their_bound(tmp_path):
+    # taichi 1.7.4 (ti.tools.imwrite): a u16/u32/u64 pixel v is written as v // (max // 256)
+    for t in (np.uint16, np.uint32, np.uint64):
+        step = np.iinfo(t).max // 256
+        px = (np.arange(24, dtype=t).reshape(4, 2, 3) * 10) * t(step)
+        path = str(tmp_path / f"u{np.dtype(t).itemsize}.png")
+        tg.imwrite(px, path)
+        np.testing.assert_array_equal(tg.imread(path).astype(np.int64), (px // step).astype(np.int64))

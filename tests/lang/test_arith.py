@@ -578,14 +578,20 @@ def test_integer_power():
         out[1] = x ** n
         out[2] = 3 ** n
         out[3] = x ** 0
-        fo[0] = x ** -1
+        fo[0] = ti.cast(x, ti.f32) ** -1
         fo[1] = ti.pow(ti.cast(x, ti.f32), 2)
+
+    @ti.kernel
+    def negative(x: ti.i64):
+        fo[0] = x ** -1  # Taichi 1.7.4: "Negative exponent in pow(int, int) is not allowed." when compiling
 
     k(-3, 5)
     assert out.to_numpy().tolist() == [-27, -243, 243, 1]
     np.testing.assert_allclose(fo.to_numpy(), [-1 / 3, 9], rtol=1e-6)
     k(1000, 5)
     assert out.to_numpy()[:2].tolist() == [10**9, 10**15]
+    with pytest.raises(ti.TaichiRuntimeError, match=r"Negative exponent in pow\(int, int\)"):
+        negative(3)
 
 
 def test_int_literals_promote_like_taichi():

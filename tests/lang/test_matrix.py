@@ -71,7 +71,7 @@ def test_swizzles():
         _ = u.xr  # letters of two groups
     with pytest.raises(AttributeError):
         _ = ti.Matrix([[1, 2], [3, 4]]).x
-    with pytest.raises(ValueError):
+    with pytest.raises(ti.TaichiRuntimeError, match="value len does not match the swizzle pattern=xy"):
         u.xy = (1, 2, 3)
 
 

@@ -191,7 +191,7 @@ def test_integer_literal_out_of_range_is_refused():
     def k():
         x[0] = 2**40
 
-    with pytest.raises(TypeError, match=r"integer literal 1099511627776 exceeds the range of default_ip i32") as e:
+    with pytest.raises(TypeError, match=r"integer literal 1099511627776 exceeded the range of default_ip i32") as e:
         k()
     assert "x[0] = 2**40" in str(e.value)
 

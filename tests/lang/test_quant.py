@@ -88,9 +88,9 @@ def test_memory_is_packed():
     bp = ti.BitpackedFields(max_num_bits=32)
     bp.place(x, y)
     ti.root.dense(ti.i, 1000).place(bp)
-    bits = ti.field(dtype=ti.types.quant.int(1, False))
-    x[0] = 1
+    x[0] = 1  # (a field made before this and still unplaced would be an error here, as in Taichi)
     assert x.snode.tree.size == 4 * 1000
+    bits = ti.field(dtype=ti.types.quant.int(1, False))
     ti.root.dense(ti.i, 4096 // 32).quant_array(ti.i, 32, max_num_bits=32).place(bits)
     bits[5] = 1
     assert bits.snode.tree.size == 4096 // 8

@@ -14,9 +14,12 @@ import pytest
 
 SCRIPT = textwrap.dedent("""
     import os, signal, sys, threading, time
+    # a SIGINT ignored or blocked by the process that started this one is inherited across exec: undo that
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     import simgrad as ti
 
-    ti.init(arch=ti.cpu, num_threads=int(sys.argv[2]))
+    ti.init(arch=ti.cpu, cpu_max_num_threads=int(sys.argv[2]))
     x = ti.field(ti.i64, 4)
 
     @ti.kernel

@@ -11,9 +11,11 @@ from simgrad import lang as _lang
 
 # submodules test files import by name
 sys.modules[__name__ + ".lang"] = _lang
+sys.modules[__name__ + "._lib"] = _simgrad._lib  # `from taichi._lib.utils import get_os_name`
 _misc = _pytypes.ModuleType(__name__ + ".lang.misc")
 _misc.get_host_arch_list = lambda: [_simgrad.cpu]  # type: ignore[attr-defined]  # the host is the CPU
 _misc.is_arch_supported = lambda arch: arch == _simgrad.cpu  # type: ignore[attr-defined]
+_misc.__getattr__ = lambda name: getattr(_simgrad, name)  # type: ignore[method-assign]  # the ti.* it holds
 sys.modules[_misc.__name__] = _misc
 sys.modules[__name__ + ".lang.exception"] = _simgrad  # the Taichi exception names are simgrad's
 _util = _pytypes.ModuleType(__name__ + ".lang.util")

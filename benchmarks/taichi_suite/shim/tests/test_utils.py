@@ -52,6 +52,11 @@ def get_rel_eps():
     return 1e-6
 
 
+def mkdir_p(dir_path):
+    """Taichi's test_utils.mkdir_p: `mkdir -p`."""
+    os.makedirs(dir_path, exist_ok=True)
+
+
 def make_temp_file(*args, **kwargs):
     fd, name = tempfile.mkstemp(*args, **kwargs)
     os.close(fd)
