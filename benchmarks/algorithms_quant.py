@@ -368,7 +368,7 @@ def main() -> None:
     p.add_argument("--frameworks", default="simgrad,taichi,numpy")
     p.add_argument("--runs", type=int, default=3, help="interleaved runs of every case; medians are reported")
     p.add_argument("--tiny", action="store_true", help="small sizes (a smoke test, not a benchmark)")
-    p.add_argument("--markdown", action="store_true", help="print a table for RESULTS.md")
+    p.add_argument("--markdown", action="store_true", help="the table is always markdown (as run.py takes it)")
     p.add_argument("--json", help="write every run's raw results here")
     args = p.parse_args()
     if args.child:
