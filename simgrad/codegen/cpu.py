@@ -153,11 +153,7 @@ class CpuCodegen(KernelCodegen):
         if div is not None:
             t.names[div] = q
             t.bound.add(id(div))
-        t.loops.append((done, ilatch))
-        self.lower_block(t, s.blocks[0])
-        t.loops.pop()
-        t.emit(f"br label %{ilatch}")
-        t.start_block(ilatch)
+        self.loop_body(t, s, done, ilatch)
         t.emit(f"{rn} = add nuw nsw {ty} {r}, 1")
         t.emit(f"br label %{ihead}")
         t.start_block(olatch)

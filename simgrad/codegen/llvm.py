@@ -327,6 +327,15 @@ class KernelCodegen:
             op = "fadd" if adds[0].vtype.is_float else "add"
             f.emit(f"{f.tmp('old')} = atomicrmw {op} ptr {f.v(place)}, {rty} {total} monotonic")
 
+    def loop_body(self, f: FunctionText, loop: Stmt, brk: str, latch: str) -> None:
+        """The body of `loop` (break goes to `brk`, continue to `latch`), then the start of the `latch` block, where
+        the caller steps the index (every target's loops: serial, CPU row loops, GPU grid-stride)."""
+        f.loops.append((brk, latch))
+        self.lower_block(f, loop.blocks[0])
+        f.loops.pop()
+        f.emit(f"br label %{latch}")
+        f.start_block(latch)
+
     def serial_loop(self, f: FunctionText, s: Stmt, begin: str, end: str, cancel: bool = False) -> None:
         """`for i in [begin, end)`; with `cancel`, in strips of CANCEL_STRIDE iterations with a Ctrl-C check
         before each strip, so the inner loop stays a clean counted loop (LLVM still vectorises it)."""
@@ -367,11 +376,7 @@ class KernelCodegen:
         f.emit(f"br i1 {c}, label %{body}, label %{done}")
         f.start_block(body)
         f.names[s] = i
-        f.loops.append((exit_to, latch))  # a break leaves the strips too
-        self.lower_block(f, s.blocks[0])
-        f.loops.pop()
-        f.emit(f"br label %{latch}")
-        f.start_block(latch)
+        self.loop_body(f, s, exit_to, latch)  # a break leaves the strips too
         f.emit(f"{nxt} = add {ty} {i}, 1")
         f.emit(f"br label %{head}")
         f.start_block(done)

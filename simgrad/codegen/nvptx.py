@@ -294,11 +294,7 @@ class GpuCodegen(KernelCodegen):
             iv = f.tmp("iv")
             f.emit(f"{iv} = trunc i64 {i} to {ty}")
             f.names[s] = iv
-        f.loops.append((done, latch))
-        self.lower_block(f, s.blocks[0])
-        f.loops.pop()
-        f.emit(f"br label %{latch}")
-        f.start_block(latch)
+        self.loop_body(f, s, done, latch)
         f.emit(f"{nxt} = add i64 {i}, {stride64}")
         f.emit(f"br label %{head}")
         f.start_block(done)
