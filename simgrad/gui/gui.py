@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numbers
 import os
+import sys
 import time
 
 import numpy as np
@@ -32,16 +33,28 @@ def _fast_pixels(arr: np.ndarray) -> np.ndarray:
     """Float pixels as Taichi's fast GUI quantises them (``min(255, max(0, int(c * 255)))``); others unchanged."""
     if arr.dtype.kind != "f":
         return arr
-    scaled = np.nan_to_num(arr * arr.dtype.type(255))
-    return np.clip(np.trunc(scaled), 0, 255).astype(np.uint8)
+    scaled = arr * arr.dtype.type(255)
+    np.trunc(scaled, out=scaled)
+    np.fmax(scaled, 0, out=scaled)  # fmax/fmin pass over NaN: NaN and -inf -> 0, +inf -> 255 (as nan_to_num + clip)
+    np.fmin(scaled, 255, out=scaled)
+    return scaled.astype(np.uint8)
 
 
 def _pack_fast(rgb: np.ndarray) -> np.ndarray:
     """uint8 RGB (W, H, 3) -> Taichi's fast-GUI words, word ``j * W + i`` the pixel (i, H - 1 - j)."""
     from simgrad._lib.utils import get_os_name
 
+    osx = get_os_name() == "osx"  # the window is ABGR there, opaque
+    if sys.byteorder == "little":  # the words' bytes written in place: one pass, no uint32 arithmetic
+        w, h = rgb.shape[:2]
+        out = np.zeros((h, w, 4), np.uint8)
+        rows = rgb[:, ::-1].transpose(1, 0, 2)  # row j is the pixels (i, H - 1 - j)
+        out[..., :3] = rows if osx else rows[..., ::-1]
+        if osx:
+            out[..., 3] = 0xFF
+        return out.view(np.uint32).reshape(-1)
     r, g, b = (rgb[:, ::-1, c].T.reshape(-1).astype(np.uint32) for c in range(3))
-    if get_os_name() == "osx":  # the window is ABGR there, opaque
+    if osx:
         return (b << 16) + (g << 8) + r + np.uint32(0xFF000000)
     return (r << 16) + (g << 8) + b
 
@@ -201,7 +214,9 @@ class GUI:
             raise ValueError(f"Image resolution {arr.shape[:2]} does not match GUI resolution {self.res}")
         self.canvas.replace(arr)
         if self._fast is not None:
-            self._fast[:] = _pack_fast(self.canvas.to_uint8())
+            # 8-bit RGB already: the canvas would quantise its float copy back to these very bytes
+            rgb = img if img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 else self.canvas.to_uint8()
+            self._fast[:] = _pack_fast(rgb)
 
     def get_image(self):
         """The canvas as float32 RGBA of shape (W, H, 4), like Taichi's."""
