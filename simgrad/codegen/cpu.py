@@ -106,7 +106,6 @@ class CpuCodegen(KernelCodegen):
         t.emit("ret void")
         self.module.functions.append(t.text())
 
-
     def _row_loops(self, t: FunctionText, s: Stmt, lo: str, hi: str, mod: Stmt, div: Stmt | None,
                    extent: Stmt) -> None:
         """The chunk [lo, hi) of a flat index i whose body splits it as (i / n, i % n) (ti.ndrange, a struct-for

@@ -98,7 +98,7 @@ class GpuFunction(FunctionText):
                 all_, t64, off = self.ctx_slot(abi.CTX_TAPE, "ptr"), self.tmp("tt"), self.tmp("toff")
                 self.prologue += [f"  {t64} = zext i32 {self.tid} to i64", f"  {off} = mul i64 {t64}, {n}",
                                   f"  {base} = getelementptr i64, ptr {all_}, i64 {off}"]
-            self.prologue += [f"  {top} = alloca i64", "  store i64 0, ptr " + top]
+            self.prologue += [f"  {top} = alloca i64", f"  store i64 0, ptr {top}"]
             self._tape = (base, top, str(n))
         return self._tape
 
@@ -122,7 +122,6 @@ class GpuCodegen(KernelCodegen):
         self.spills: dict[int, int] = {}  # id(stmt) -> context slot of its scratch word
         self.scratch_slots = 0
         self.tape_top_slot: int | None = None  # 0 in the host context each launch copies to the device
-        self._serial = False  # emitting a one-thread kernel
 
     def emit_print(self, f: FunctionText, fmt: str, args: list[str]) -> None:
         """On the GPU: vprintf(fmt, buffer) with the promoted arguments in a struct, each at its natural
@@ -242,7 +241,6 @@ class GpuCodegen(KernelCodegen):
     def _serial_kernel(self, name: str, stmts: list[Stmt]) -> None:
         f = GpuFunction(self, name, self._params(name), in_task=False)
         self._inputs(f, stmts)
-        self._serial = True
         for s in stmts:
             LOWERING[s.op](self, f, s)
             slot = self.spills.get(id(s))
@@ -255,7 +253,6 @@ class GpuCodegen(KernelCodegen):
                 f.names[s] = p
             else:
                 f.emit(f"store {llvm_type(s.vtype)} {f.v(s)}, ptr {p}")
-        self._serial = False
         f.emit("ret void")
         self.module.functions.append(f.text())
         self.launches.append(Launch(name, 1, 1))
