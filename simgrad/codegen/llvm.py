@@ -22,7 +22,7 @@ from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import OPS, Op
 from simgrad.passes.parallel_strategy import PAIR, PLAIN, PRIVATE, REDUCE
 from simgrad.passes.privatize import access_key
-from simgrad.runtime import abi
+from simgrad.runtime import abi, fpenv
 
 
 def llvm_type(t: dt.DataType) -> str:
@@ -109,11 +109,12 @@ define internal i32 @sg_rand_u32(ptr %ctx, i32 %tid) {
 class FunctionText:
     """Emits one LLVM function; keeps allocas in the entry block so LLVM can promote them."""
 
-    def __init__(self, gen: KernelCodegen, name: str, params: str, in_task: bool):
+    def __init__(self, gen: KernelCodegen, name: str, params: str, in_task: bool, host_entry: bool = False):
         self.gen = gen
         self.name = name
         self.params = params
         self.in_task = in_task
+        self.host_entry = host_entry  # called from the host: it sets the float mode (runtime/fpenv.py)
         self.prologue: list[str] = []
         self.body: list[str] = []
         self.names: dict[Stmt, str] = {}
@@ -224,7 +225,13 @@ class FunctionText:
         return self.names[s]
 
     def text(self) -> str:
-        return "\n".join([f"define {self.params} {{", "entry:", *self.prologue, *self.body, "}"])
+        lines = ["entry:", *self.prologue, *self.body]
+        attrs = self.gen.fn_attrs
+        if self.host_entry and self.gen.switch_fp_mode:
+            for d in fpenv.DECLS:
+                self.gen.module.declare(d)
+            return fpenv.wrap_entry(self.params, attrs, lines)
+        return "\n".join([f"define {self.params}{' ' + attrs if attrs else ''} {{", *lines, "}"])
 
 
 # ti.init(fast_math=True), the default as in Taichi, lets LLVM ignore the sign of zero, which is what
@@ -243,11 +250,18 @@ class KernelCodegen:
     #: a slot of its own; a GPU's threads are far more than the slots, so its blocks are bumped one at a time
     batched_alloc = True
 
-    def __init__(self, kernel: Kernel, symbol: str, debug: bool = False, fast_math: bool = True):
+    #: the function attributes that tell LLVM results are flushed (runtime/fpenv.py), when they are
+    flush_attrs = fpenv.CPU_ATTRS
+
+    def __init__(self, kernel: Kernel, symbol: str, debug: bool = False, fast_math: bool = True,
+                 flush: bool = False):
         self.kernel = kernel
         self.symbol = symbol
         self.debug = debug
         self.fm = FAST_MATH_FLAGS if fast_math else ""
+        # flush-to-zero: every function says so to LLVM; host entries switch the mode (where the host can)
+        self.fn_attrs = self.flush_attrs if flush else ""
+        self.switch_fp_mode = flush and fpenv.switchable()
         self.module = ModuleText()
         self.error_table: list[tuple] = []  # (kind, loc, detail) per error code - 1
         # context slots after the returns that keep a privatised loop's per-thread copies between launches
@@ -261,7 +275,7 @@ class KernelCodegen:
         return k
 
     def generate(self) -> str:
-        f = FunctionText(self, self.symbol, f"void @{self.symbol}(ptr %ctx)", in_task=False)
+        f = FunctionText(self, self.symbol, f"void @{self.symbol}(ptr %ctx)", in_task=False, host_entry=True)
         # a new launch starts uncancelled (a Ctrl-C that came before it is Python's to raise)
         f.prologue.append(f"  store atomic i32 0, ptr {f.cancel_flag()} monotonic, align 4")
         self.lower_block(f, self.kernel.body)

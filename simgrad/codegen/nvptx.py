@@ -28,7 +28,7 @@ from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.opdefs import OPS, Libm
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
-from simgrad.runtime import abi
+from simgrad.runtime import abi, fpenv
 
 TRIPLE = "nvptx64-nvidia-cuda"
 DEFAULT_BLOCK = 128
@@ -62,7 +62,7 @@ class GpuFunction(FunctionText):
     """A segment's function: the tape in this thread's local memory, no Ctrl-C polling on the device."""
 
     def __init__(self, gen: GpuCodegen, name: str, params: str, in_task: bool):
-        super().__init__(gen, name, params, in_task)
+        super().__init__(gen, name, params, in_task, host_entry=True)  # each segment is launched
         self.gpu = gen
         self._sregs: dict[str, str] = {}
 
@@ -113,9 +113,12 @@ class GpuCodegen(KernelCodegen):
     batched_alloc = False
 
     def __init__(self, kernel: Kernel, symbol: str, *, sim: bool, tape_entries: int = 256, debug: bool = False,
-                 fast_math: bool = True):
-        super().__init__(kernel, symbol, debug=debug, fast_math=fast_math)
+                 fast_math: bool = True, flush: bool = False):
         self.sim = sim
+        if not sim:
+            self.flush_attrs = fpenv.GPU_ATTRS  # f32 in .ftz forms; f64 has none
+        super().__init__(kernel, symbol, debug=debug, fast_math=fast_math, flush=flush)
+        self.switch_fp_mode = self.switch_fp_mode and sim  # the simulated GPU's segments are host entries
         self.tape_entries = max(int(tape_entries), 1)
         self.tape_threads = 0  # regions of the deep-tape buffer the launcher allocates (0: none)
         self.launches: list[Launch] = []
@@ -236,6 +239,8 @@ class GpuCodegen(KernelCodegen):
             elif not all(s.op in PURE for s in stmts):
                 self._serial_kernel(name, stmts)
         self.module.globals.append("!0 = !{}")
+        if self.fn_attrs and not self.sim:  # libdevice's __nvvm_reflect("__CUDA_FTZ") answers 1: its .ftz paths
+            self.module.globals += ["!llvm.module.flags = !{!2}", '!2 = !{i32 4, !"nvvm-reflect-ftz", i32 1}']
         return self.module.text()
 
     def _serial_kernel(self, name: str, stmts: list[Stmt]) -> None:
@@ -414,9 +419,10 @@ def ptxas_check(ptx: str, archs: tuple[str, ...] = ("sm_80", "sm_90")) -> None:
 
 
 def kernel_ptx(kernel: Kernel, symbol: str, *, tape_entries: int = 256, debug: bool = False,
-               fast_math: bool = True) -> tuple[str, list[Launch]]:
+               fast_math: bool = True, flush: bool = False) -> tuple[str, list[Launch]]:
     """PTX of `kernel` (after the passes) and its launch sequence."""
-    cg = GpuCodegen(kernel, symbol, sim=False, tape_entries=tape_entries, debug=debug, fast_math=fast_math)
+    cg = GpuCodegen(kernel, symbol, sim=False, tape_entries=tape_entries, debug=debug, fast_math=fast_math,
+                    flush=flush)
     text = cg.generate()
     return compile_ptx(text, {ln.symbol for ln in cg.launches}), cg.launches
 

@@ -22,7 +22,7 @@ from simgrad.debug import debug_level
 from simgrad.frontend.fingerprint import Guard, KeyBuilder, environment
 from simgrad.frontend.lower import KernelLowering
 from simgrad.frontend.source import get_source
-from simgrad.ir import context
+from simgrad.ir import context, numeric
 from simgrad.ir.nodes import Kernel as IRKernel
 from simgrad.ir.nodes import walk
 from simgrad.ir.ops import Op
@@ -31,6 +31,7 @@ from simgrad.lang.program import Program
 from simgrad.lang.struct import StructType
 from simgrad.lang.types import MatrixType
 from simgrad.passes.manager import run_pipeline
+from simgrad.runtime import fpenv
 from simgrad.runtime.args import Packing
 from simgrad.runtime.launch import Launcher
 
@@ -135,7 +136,7 @@ def _ptx_check(ir: IRKernel, symbol: str, tape_entries: int, prog: Program) -> N
     from simgrad.codegen import nvptx
 
     ptx, _ = nvptx.kernel_ptx(ir, symbol, tape_entries=tape_entries, debug=prog.config.debug,
-                              fast_math=prog.config.fast_math)
+                              fast_math=prog.config.fast_math, flush=prog.config.flush_denormals)
     nvptx.ptxas_check(ptx)
 
 
@@ -157,8 +158,25 @@ def _cache_key(kernel: KernelSource, prog: Program, args, transform, name_suffix
     return kb.digest(parts), Guard(kb.covered)
 
 
+def flush_bits(prog: Program) -> frozenset[int]:
+    """The float widths whose subnormal results the program's kernels flush to zero (runtime/fpenv.py): f32 and
+    f64 on an x86-64 host (the simulated GPU too), f32 on a GPU (PTX has no .ftz for f64), none when the host
+    cannot switch or ti.init(flush_denormals=False)."""
+    if not prog.config.flush_denormals:
+        return frozenset()
+    if prog.on_gpu and not prog.gpu_sim:
+        return frozenset({32})
+    return frozenset({32, 64}) if fpenv.switchable() else frozenset()
+
+
 def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
-    """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs)."""
+    """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs), folding as the machine
+    computes in the program's flush-to-zero mode."""
+    with numeric.flushing(flush_bits(prog)):
+        return _build_in_mode(kernel, prog, args, transform, name_suffix, guard)
+
+
+def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
     ir = IRKernel(kernel.name + name_suffix)
     comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug, parallel_listgen=prog.on_gpu)
     comp.guard = guard
@@ -179,11 +197,12 @@ def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, gu
         from simgrad.codegen import nvptx
 
         cg = nvptx.GpuCodegen(ir, symbol, sim=prog.gpu_sim, tape_entries=tape_entries, debug=prog.config.debug,
-                              fast_math=prog.config.fast_math)
+                              fast_math=prog.config.fast_math, flush=bool(flush_bits(prog)))
     else:
         from simgrad.codegen.cpu import CpuCodegen  # loaded when first needed
 
-        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math)
+        cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math,
+                        flush=bool(flush_bits(prog)))
     text = cg.generate()
     if ptx_check_enabled():
         _ptx_check(ir, symbol, tape_entries, prog)

@@ -59,7 +59,9 @@ class Builder:
 
     @staticmethod
     def constant(value, type: DataType, loc: Loc | None = None) -> Stmt:
-        """A constant of an already exact value (a fold's result)."""
+        """A constant of an already exact value (a fold's result; flushed if subnormal in flush-to-zero mode)."""
+        if type.is_float:
+            value = numeric.flush(value, type)
         return Stmt(Op.CONST, type, (), {"value": value}, loc)
 
     def cast(self, v: Stmt, type: DataType) -> Stmt:

@@ -3,13 +3,16 @@
 Constant folding (ir/builder.py, passes/simplify.py) goes through here, so a folded result never
 differs from the instruction it replaces: floats are rounded to their width, integers wrap in two's
 complement, and conversions whose machine result is undefined (NaN or out-of-range float -> int) are
-not folded at all."""
+not folded at all. While a kernel compiles in flush-to-zero mode (runtime/fpenv.py) every float constant made
+goes through `flush` (ir/builder.py `constant`): a subnormal result is the zero the machine computes."""
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import math
+import sys
 import warnings
 
 import numpy as np
@@ -18,6 +21,27 @@ from simgrad import dtypes as dt
 from simgrad.dtypes import DataType
 
 _MANTISSA = {16: 11, 32: 24, 64: 53}  # significand bits, the implicit one included
+_SMALLEST_NORMAL = {32: float(np.finfo(np.float32).tiny), 64: sys.float_info.min}
+_flush_bits: frozenset[int] = frozenset()  # float widths whose subnormal results flush to zero now
+
+
+@contextlib.contextmanager
+def flushing(bits: frozenset[int]):
+    """Fold with results of these float widths flushed (the compile of one kernel; compiles hold a lock)."""
+    global _flush_bits
+    saved, _flush_bits = _flush_bits, bits
+    try:
+        yield
+    finally:
+        _flush_bits = saved
+
+
+def flush(v, t: DataType):
+    """`v` at float type `t` as the flush-to-zero machine leaves a result: a subnormal becomes a signed zero
+    (f16 keeps its subnormals: the conversion to half does not flush)."""
+    if t.bits in _flush_bits and _subnormal(v, t):
+        return math.copysign(0.0, v)
+    return v
 
 
 def wrap_int(v: int, t: DataType) -> int:
@@ -112,16 +136,24 @@ _LIBM = _load_libm()
 _C_TYPES = {64: ctypes.c_double, 32: ctypes.c_float}
 
 
-def libm(name: str, t: DataType, *vals: float) -> float:
+def libm(name: str, t: DataType, *vals: float) -> float | None:
     """The C library's `name` (double) or `name`f (float) called on `vals`: the very function a compiled
     kernel calls for this op (llvm.sin.f32 becomes a call of sinf), so the value is the machine's on this
     machine, bit for bit, whatever libm's accuracy. f16 goes through f32, as codegen and LLVM promote it."""
     if t.bits == 16:
-        return round_float(libm(name, dt.f32, *vals), t)
+        r = libm(name, dt.f32, *vals)
+        return None if r is None else round_float(r, t)
     c = _C_TYPES[t.bits]
     fn = getattr(_LIBM, name if t.bits == 64 else name + "f")
     fn.restype, fn.argtypes = c, [c] * len(vals)
-    return float(fn(*vals))
+    r = float(fn(*vals))
+    if t.bits in _flush_bits and any(_subnormal(v, t) for v in (*vals, r)):
+        return None  # libm's code under flush-to-zero may give another value than here: not folded
+    return r
+
+
+def _subnormal(v: float, t: DataType) -> bool:
+    return 0 < abs(v) < _SMALLEST_NORMAL[t.bits]
 
 
 def ieee(fn, t: DataType, *vals: float) -> float:

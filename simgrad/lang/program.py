@@ -48,6 +48,8 @@ TAICHI_CONFIG: dict = {
 # Taichi's _SpecialConfig: options of its Python layer, returned by ti.init(_test_mode=True)
 SPECIAL_CONFIG: dict = {"log_level": "info", "gdb_trigger": False, "short_circuit_operators": True,
                         "print_full_traceback": False, "unrolling_limit": 32}
+# simgrad's own options: flush_denormals (runtime/fpenv.py; Taichi always flushes, this is its way out)
+SIMGRAD_CONFIG: dict = {"flush_denormals": True}
 # accepted for older programs, without effect (not in Taichi 1.7.4's list)
 LEGACY_OPTIONS = {"packed", "dynamic_index", "excepthook", "debug_info"}
 
@@ -62,7 +64,7 @@ class SpecialConfig:
 
 def _from_environment(kw: dict) -> None:
     """TI_<KEY> for every option not given as an argument, as Taichi reads them ("0"/"1" for booleans)."""
-    for key, default in {**TAICHI_CONFIG, **SPECIAL_CONFIG}.items():
+    for key, default in {**TAICHI_CONFIG, **SPECIAL_CONFIG, **SIMGRAD_CONFIG}.items():
         value = os.environ.get("TI_" + key.upper(), "")
         if key in kw or not value:
             continue
@@ -108,6 +110,7 @@ class Config:
         self.kernel_profiler = bool(kw.get("kernel_profiler", False))
         self.ad_stack_size = int(kw.get("ad_stack_size", 0) or 0)
         self.fast_math = bool(kw.get("fast_math", True))  # Taichi's default; see codegen.llvm.FAST_MATH_FLAGS
+        self.flush_denormals = bool(kw.get("flush_denormals", SIMGRAD_CONFIG["flush_denormals"]))
         self.offline_cache = bool(kw.get("offline_cache", True))
         self.offline_cache_file_path = kw.get("offline_cache_file_path")
         threads = kw.get("cpu_max_num_threads") or int(os.environ.get("SIMGRAD_NUM_THREADS", 0) or 0)
@@ -402,7 +405,7 @@ def init(arch=None, default_fp=None, default_ip=None, _test_mode=False, enable_f
         raise KeyError("'default_up' is always the unsigned type of 'default_ip'. Please set 'default_ip' instead.")
     kw["default_fp"], kw["default_ip"] = default_fp, default_ip
     unknown = [k for k in kw if k not in TAICHI_CONFIG and k not in SPECIAL_CONFIG and k not in LEGACY_OPTIONS
-               and k not in ("default_fp", "default_ip")]
+               and k not in SIMGRAD_CONFIG and k not in ("default_fp", "default_ip")]
     if unknown:
         raise KeyError(f"Unrecognized keyword argument(s) for ti.init: {', '.join(unknown)}")
     _from_environment(kw)

@@ -23,7 +23,7 @@ import os
 import platform
 import threading
 
-from simgrad.runtime import ll
+from simgrad.runtime import fpenv, ll
 from simgrad.runtime.jit import get_jit
 
 #: futex(2) syscall numbers; on other machines the pool runs everything on the calling thread.
@@ -140,7 +140,7 @@ def pool_ir(futex_nr: int, machine: str, stats: bool = False) -> str:
     return ll.load("threadpool", futex_nr=futex_nr, pause_decl=pause_decl, pause=pause, a8=a8, a4=a4,
                    DEFAULT_SPIN_NS=DEFAULT_SPIN_NS, CHUNK_CAP=CHUNK_CAP, _CLOSED=_CLOSED, _JOINED=_JOINED,
                    _CLOSED_LAST=_CLOSED + 1, _INT_MAX=_INT_MAX, _FUTEX_WAIT=_FUTEX_WAIT, _FUTEX_WAKE=_FUTEX_WAKE,
-                   N_STATS=N_STATS, **counters)
+                   N_STATS=N_STATS, **fpenv.pool_params(machine), **counters)
 
 
 def pool_stats() -> dict:

@@ -67,3 +67,27 @@ def test_print_is_vprintf_with_its_argument_buffer(ptx_check):
 def test_ptxas_error_raises():
     with pytest.raises(RuntimeError, match="ptxas -arch=sm_80 rejected"):
         nvptx.ptxas_check(".version 7.0\n.target sm_80\n.address_size 64\n.visible .entry k() { bogus; }\n")
+
+
+@pytest.mark.parametrize("flush", [True, False])
+def test_flush_to_zero_is_the_ftz_forms_for_f32_only(ptx_check, flush):
+    """ti.init(flush_denormals=...) on the GPU (runtime/fpenv.py): f32 arithmetic in PTX's .ftz forms and
+    libdevice's FTZ paths (nvvm-reflect-ftz), as Taichi's CUDA backend; f64 has no .ftz form and stays IEEE."""
+    ti.init(arch=ti.cpu, flush_denormals=flush)
+    x = ti.field(ti.f32, shape=64)
+    y = ti.field(ti.f64, shape=64)
+
+    @ti.kernel
+    def k(u: ti.f32, v: ti.f64):
+        for i in x:
+            x[i] = u * i / (u + 1.0) + ti.exp(u * i)
+            y[i] = v * i / (v + 1.0)
+
+    k(0.5, 0.25)
+    (ptx,) = ptx_check
+    f32_ops = [ln for ln in ptx.splitlines() if ln.strip().startswith(("mul.", "div.", "add.", "fma."))
+               and ".f32" in ln]
+    f64_ops = [ln for ln in ptx.splitlines() if ".f64" in ln and ln.strip().startswith(("mul.", "div.", "add."))]
+    assert f32_ops and f64_ops
+    assert all(".ftz" in ln for ln in f32_ops) == flush and any(".ftz" in ln for ln in f32_ops) == flush
+    assert not any(".ftz" in ln for ln in f64_ops)

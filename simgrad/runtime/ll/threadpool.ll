@@ -1,6 +1,7 @@
 ; simgrad's native thread pool (runtime/threadpool.py; that module's docstring says how it works).
 ; Parameters (substituted by runtime/ll/__init__.py `load`): futex_nr and the futex operations _FUTEX_WAIT /
-; _FUTEX_WAKE, the machine's spin hint (pause, pause_decl: empty where there is none), the job state word's
+; _FUTEX_WAKE, the machine's spin hint (pause, pause_decl: empty where there is none), the float mode's
+; places (fp_decl, fp_publish, fp_adopt: runtime/fpenv.py pool_params), the job state word's
 ; bits (_CLOSED, _JOINED; _CLOSED_LAST = _CLOSED + 1), _INT_MAX, CHUNK_CAP, DEFAULT_SPIN_NS, and a4 / a8
 ; (the atomics' alignments); N_STATS and the st_... places, empty unless SIMGRAD_POOL_STATS=1 (then
 ; threadpool.py `_stat_code` fills them with counter updates of @simgrad_pool_stats).
@@ -20,6 +21,7 @@
 @sg_sleepers = internal global i32 0
 @sg_state = internal global i32 ${_CLOSED}, align 64
 @sg_caller_waiting = internal global i32 0
+@sg_job_mxcsr = internal global i32 8064, align 4   ; the launching thread's float mode (runtime/fpenv.py)
 @simgrad_pool_stats = global [${N_STATS} x i64] zeroinitializer, align 64   ; SIMGRAD_POOL_STATS counters
 
 declare i64 @syscall(i64, ...)
@@ -28,6 +30,7 @@ declare i32 @sched_yield()
 declare ptr @signal(i32, ptr)
 declare i64 @llvm.ctlz.i64(i64, i1)
 ${pause_decl}
+${fp_decl}
 
 define internal i64 @sg_now() {
   %ts = alloca { i64, i64 }, align 8
@@ -149,6 +152,7 @@ publish:
   %chunk0 = select i1 %cbig, i64 %c0, i64 %g1
   %ccap = icmp sgt i64 %chunk0, ${CHUNK_CAP}
   %chunk = select i1 %ccap, i64 ${CHUNK_CAP}, i64 %chunk0
+  ${fp_publish}
   store atomic ptr %task, ptr @sg_task monotonic, ${a8}
   store atomic ptr %clo, ptr @sg_closure monotonic, ${a8}
   store atomic i64 %end, ptr @sg_end monotonic, ${a8}
@@ -253,6 +257,7 @@ join_retry:
   br label %join_loop
 job:
   ${st_join}
+  ${fp_adopt}
   %ran = call i64 @sg_run_chunks(i32 %tid)
   ${st_wchunks}
   %old = atomicrmw sub ptr @sg_state, i32 1 seq_cst, ${a4}
