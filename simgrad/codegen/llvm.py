@@ -565,7 +565,8 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     elif form == PLAIN:  # serial code, a local of the iteration, an owned element or a private copy
         f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
         n = f.tmp("new")
-        f.emit(_combine_text(n, op, ty, r, f.v(v), g.fm))
+        fm = g.fm + "reassoc " if g.fm and s.attrs.get("reassoc") else g.fm  # a loop's sum (passes/accumulate.py)
+        f.emit(_combine_text(n, op, ty, r, f.v(v), fm))
         f.emit(f"store {ty} {n}, ptr {f.v(p)}")
     elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
         r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))

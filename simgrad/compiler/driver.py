@@ -188,7 +188,8 @@ def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_su
     if guard is not None and len(prog.trees) != trees:
         guard.taint("fields were created while compiling")
     ir.ret_slot = slots[1]
-    run_pipeline(ir, transform, debug=prog.config.debug)
+    run_pipeline(ir, transform, debug=prog.config.debug, fast_math=prog.config.fast_math,
+                 cache_sums=bool(getattr(prog.config, "cache_loop_invariant_global_vars", True)))
     symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
     tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
         else 1

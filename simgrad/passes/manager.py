@@ -21,9 +21,12 @@ def _verify_enabled() -> bool:
     return os.environ.get("SIMGRAD_VERIFY", "0") not in ("", "0") or _debug() > 0
 
 
-def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
-    """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics)."""
-    from simgrad.passes import hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
+def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math: bool = False,
+                 cache_sums: bool = True) -> None:
+    """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics);
+    `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
+    cache_loop_invariant_global_vars)."""
+    from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -37,6 +40,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False) -> None:
     steps.append(("quant", quant.expand_quant))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
+    if fast_math:  # sums in serial loops in locals, reassociable: LLVM vectorises them as reductions
+        steps.append(("accumulate", partial(accumulate.accumulate, cache_sums=cache_sums and not debug)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)
     steps.append(("lower_access", partial(lower_access.lower_access, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass
