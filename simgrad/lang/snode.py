@@ -68,7 +68,7 @@ class SNode:
         self.block_size = 0  # pointer/dynamic: bytes of one block from the pool
         self.mask_offset = 0  # bitmasked: where the activity bits start in the container
         self.pool = -1  # pointer/dynamic: the program's pool for this node's blocks
-        self.chunk_size = None  # dynamic: Taichi's chunk size (cells per block; None: the whole list)
+        self.chunk_size: int | None = None  # dynamic: Taichi's chunk size (cells per chunk; None: the whole list)
         self.physical: DataType | None = None  # bit_struct / quant_array: the integer type of the cell (lang/quant.py)
         self.bitpack = None  # bit_struct: the ti.BitpackedFields it was made from
         self._ref: object = None  # its IR record once materialised (lang/sparse.py snode_ref)

@@ -1,6 +1,6 @@
-"""Memory of sparse SNodes: one pool of fixed-size blocks per pointer / dynamic node, and a zero block and a
-discard block per sparse node, all described by a table that compiled kernels read (context slot
-CTX_SPARSE) and update with atomics.
+"""Memory of sparse SNodes: one pool of fixed-size blocks per pointer / dynamic node (a pointer node's cells; a
+dynamic node's chunks, chained into lists), and a zero block and a discard block per sparse node, all described by
+a table that compiled kernels read (context slot CTX_SPARSE) and update with atomics.
 
 A pool reserves address space for every block its node could ever need (mmap with MAP_NORESERVE: pages
 cost memory only once touched) and hands blocks out by bumping an index (an atomic add: many threads

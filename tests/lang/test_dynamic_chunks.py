@@ -30,6 +30,7 @@ def test_a_list_takes_memory_chunk_by_chunk():
 
     @ti.kernel
     def grow():
+        ti.loop_config(serialize=True)  # in order, so element k holds -(k - 10)
         for k in range(10000 - 10):  # list 7 to 10000 elements: 3 chunks
             ti.append(x.parent(), 7, -k)
 
