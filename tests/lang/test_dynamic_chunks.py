@@ -230,3 +230,23 @@ def test_gradients_through_chunked_lists_match_finite_differences():
             fd[i, j] = (value(p) - value(m)) / (2 * eps)
     np.testing.assert_allclose(got, fd, rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(got, 3 * ws * xs ** 2, rtol=1e-12)
+
+
+def test_running_out_of_chunks_is_a_located_error_and_the_program_goes_on():
+    ti.init(arch=ti.cpu, device_memory_GB=2**-16)  # 16 KiB per pool: 62 chunks of 8 + 64 * 4 bytes
+    x = ti.field(ti.i32)
+    node = ti.root.dynamic(ti.i, 1 << 16, chunk_size=64)
+    node.place(x)
+
+    @ti.kernel
+    def push(n: ti.i32):
+        ti.loop_config(serialize=True)
+        for k in range(n):
+            ti.append(node, [], k)
+
+    with pytest.raises(ti.SimgradRuntimeError, match="out of memory for dynamic SNode blocks") as e:
+        push(64 * 100)
+    assert "test_dynamic_chunks.py" in str(e.value)
+    node.deactivate_all()
+    push(64 * 30)
+    np.testing.assert_array_equal(x.to_numpy()[:64 * 31], np.r_[np.arange(64 * 30), np.zeros(64)])

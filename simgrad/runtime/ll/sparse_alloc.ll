@@ -181,7 +181,8 @@ define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
 ; them and stay until the list is deactivated.
 
 ; the chunk *slot points to; a write finding it null allocates it under the list's lock (one chunk per slot,
-; however many threads reach it at once). Null: a read of a chunk not allocated, or a pool that ran out
+; however many threads reach it at once). Threads waiting for the lock poll the slot, and go on as soon as the
+; chunk is there, without taking the lock in turn. Null: a read of a chunk not allocated, or a pool that ran out
 ; (reported by @sg_sparse_alloc).
 define internal ptr @sg_dyn_link(ptr %ctx, i64 %pool, ptr %hdr, ptr %slot, i1 %write, i64 %code, i32 %tid) {
 entry:
@@ -189,11 +190,17 @@ entry:
   %have = icmp ne ptr %v, null
   br i1 %have, label %done, label %absent
 absent:
-  br i1 %write, label %lock, label %done
-lock:
   %lp = getelementptr i8, ptr %hdr, i64 4
-  br label %try
+  br i1 %write, label %try, label %done
 try:
+  %v1 = load atomic ptr, ptr %slot acquire, align 8
+  %have1 = icmp ne ptr %v1, null
+  br i1 %have1, label %done, label %free
+free:
+  %held = load atomic i32, ptr %lp monotonic, align 4
+  %busy = icmp ne i32 %held, 0
+  br i1 %busy, label %try, label %grab
+grab:
   %old = atomicrmw xchg ptr %lp, i32 1 acquire
   %got = icmp eq i32 %old, 0
   br i1 %got, label %locked, label %try
@@ -209,7 +216,7 @@ unlock:
   %v3 = load atomic ptr, ptr %slot acquire, align 8
   br label %done
 done:
-  %r = phi ptr [ %v, %entry ], [ null, %absent ], [ %v3, %unlock ]
+  %r = phi ptr [ %v, %entry ], [ null, %absent ], [ %v1, %try ], [ %v3, %unlock ]
   ret ptr %r
 }
 
