@@ -126,11 +126,11 @@ def _slot(f, container: str, cell: str) -> str:
 
 def _cursor(f, pool: int) -> str:
     """This function's cursor over the lists of a dynamic node (runtime/ll/sparse_alloc.ll @sg_dyn_chunk):
-    {header, first chunk, chunk number, chunk}, starting at no list."""
+    {header, first chunk, chunk number, chunk}, starting at no list (every word set: the walk reads them all)."""
     cur = f.cursors.get(pool)
     if cur is None:
         cur = f.cursors[pool] = f.tmp("dcur")
-        f.prologue += [f"  {cur} = alloca [4 x i64], align 8", f"  store i64 0, ptr {cur}"]
+        f.prologue += [f"  {cur} = alloca [4 x i64], align 8", f"  store [4 x i64] zeroinitializer, ptr {cur}"]
     return cur
 
 
