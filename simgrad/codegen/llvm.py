@@ -132,6 +132,7 @@ class FunctionText:
         self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
         self.bound: set[int] = set()  # statements whose value the enclosing loop gives (lower_block skips them)
+        self.cursors: dict[int, str] = {}  # dynamic node's pool -> this function's chunk cursor (codegen/sparse.py)
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""

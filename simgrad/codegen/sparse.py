@@ -116,16 +116,56 @@ def _bit_set(f, word_ptr: str, bit: str) -> str:
     return r
 
 
-def _slot(f, container: str, cell: str, kind: str) -> str:
-    """Pointer to the block slot of a pointer node's cell, or to a dynamic node's list block (header + 8)."""
-    sa = f.tmp("sa")
-    if kind == "pointer":
-        so = f.tmp("so")
-        f.emit(f"{so} = mul i64 {cell}, 8")
-        f.emit(f"{sa} = add i64 {container}, {so}")
-    else:
-        f.emit(f"{sa} = add i64 {container}, 8")
+def _slot(f, container: str, cell: str) -> str:
+    """Pointer to the block slot of a pointer node's cell."""
+    sa, so = f.tmp("sa"), f.tmp("so")
+    f.emit(f"{so} = mul i64 {cell}, 8")
+    f.emit(f"{sa} = add i64 {container}, {so}")
     return _as_ptr(f, sa)
+
+
+def _cursor(f, pool: int) -> str:
+    """This function's cursor over the lists of a dynamic node (runtime/ll/sparse_alloc.ll @sg_dyn_chunk):
+    {header, first chunk, chunk number, chunk}, starting at no list (every word set: the walk reads them all)."""
+    cur = f.cursors.get(pool)
+    if cur is None:
+        cur = f.cursors[pool] = f.tmp("dcur")
+        f.prologue += [f"  {cur} = alloca [4 x i64], align 8", f"  store [4 x i64] zeroinitializer, ptr {cur}"]
+    return cur
+
+
+def _dyn_element(g, f, s, container: str, cell: str, level, mode: str) -> str:
+    """The address of element `cell` of the dynamic list whose header is at `container`: cell // chunk links
+    down its chain of chunks (from the function's cursor), then cell % chunk cells into that chunk (after its
+    8-byte link). A write allocates the chunks it reaches; an index past the node's size reads the zero block
+    and writes the discard block, rather than walking (and allocating) past the list's last chunk."""
+    _helpers(g)
+    hdr = _as_ptr(f, container)
+    write = "true" if mode == "write" else "false"
+    code = g.error_code("sparse_pool", s.loc, "dynamic") if mode == "write" else 0
+    chunk = level.chunk
+    k, r = "0", cell
+    if chunk < level.ncells:
+        inside, kk, kc, rr = f.tmp("din"), f.tmp("dk"), f.tmp("dkc"), f.tmp("dr")
+        f.emit(f"{inside} = icmp ult i64 {cell}, {level.ncells}")
+        f.emit(f"{kk} = udiv i64 {cell}, {chunk}")
+        f.emit(f"{kc} = mul i64 {kk}, {chunk}")
+        f.emit(f"{rr} = sub i64 {cell}, {kc}")
+        k, r = f.tmp("dkk"), rr
+        f.emit(f"{k} = select i1 {inside}, i64 {kk}, i64 0")
+    blk = f.tmp("dch")
+    f.emit(f"{blk} = call ptr @sg_dyn_chunk(ptr %ctx, i64 {level.pool}, ptr {hdr}, i64 {k}, i1 {write}, "
+           f"i64 {code}, i32 {f.tid}, ptr {_cursor(f, level.pool)})")
+    if chunk < level.ncells:  # past the node's size: the zero / discard block
+        side = _pool_word(f, level.pool, rt.POOL_DISCARD if mode == "write" else rt.POOL_ZERO)
+        sel = f.tmp("dsel")
+        f.emit(f"{sel} = select i1 {inside}, ptr {blk}, ptr {side}")
+        blk = sel
+    off, off8, r_ = f.tmp("eo"), f.tmp("eo8"), f.tmp("ea")
+    f.emit(f"{off} = mul i64 {r}, {level.cell_size}")
+    f.emit(f"{off8} = add i64 {off}, 8")
+    f.emit(f"{r_} = add i64 {_as_int(f, blk)}, {off8}")
+    return r_
 
 
 def lower_sparse_cell(g, f, s) -> None:
@@ -133,19 +173,16 @@ def lower_sparse_cell(g, f, s) -> None:
     level, mode = s.attrs["level"], s.attrs["mode"]
     kind = level.kind
     if kind == "pointer":
-        f.names[s] = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell, kind), level, mode))
+        f.names[s] = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell), level, mode))
         return
     if kind == "dynamic":
-        blk = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell, kind), level, mode))
+        addr = _dyn_element(g, f, s, container, cell, level, mode)
         if mode == "write":  # the list now reaches at least this element
             n1, n32 = f.tmp("dn"), f.tmp("dn32")
             f.emit(f"{n1} = add i64 {cell}, 1")
             f.emit(f"{n32} = trunc i64 {n1} to i32")
             f.emit(f"atomicrmw max ptr {_as_ptr(f, container)}, i32 {n32} monotonic")
-        off, r = f.tmp("eo"), f.tmp("ea")
-        f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
-        f.emit(f"{r} = add i64 {blk}, {off}")
-        f.names[s] = r
+        f.names[s] = addr
         return
     # bitmasked: the cells are in the container (reads see what is stored, as in Taichi); a write sets the bit
     off, addr = f.tmp("bo"), f.tmp("ba")
@@ -185,8 +222,18 @@ def lower_sparse_action(g, f, s) -> None:
     level = s.attrs["level"]
     kind = level.kind
     r = f.tmp("act")
-    if kind == "pointer" or (kind == "dynamic" and op in ("activate", "deactivate")):
-        slot = _slot(f, container, cell, kind)
+    if kind == "dynamic" and op in ("activate", "deactivate"):
+        if op == "activate":  # the chunks up to the cell's, the length unchanged
+            _dyn_element(g, f, s, container, cell, level, "write")
+        else:
+            f.emit(f"call void @sg_dyn_clear(ptr %ctx, i64 {level.pool}, ptr {_as_ptr(f, container)})")
+            f.emit(f"store i64 0, ptr {_cursor(f, level.pool)}")  # the cursor's chunks are free now
+            _helpers(g)
+        f.emit(f"{r} = add i32 0, 0")
+        f.names[s] = r
+        return
+    if kind == "pointer":
+        slot = _slot(f, container, cell)
         if op == "is_active":
             cur, c = f.tmp("cur"), f.tmp("c")
             f.emit(f"{cur} = load atomic ptr, ptr {slot} monotonic, align 8")
@@ -200,8 +247,6 @@ def lower_sparse_action(g, f, s) -> None:
             old, c = f.tmp("old"), f.tmp("c")
             f.emit(f"{old} = atomicrmw xchg ptr {slot}, ptr null monotonic")
             f.emit(f"{c} = icmp ne ptr {old}, null")
-            if kind == "dynamic":
-                f.emit(f"store atomic i32 0, ptr {_as_ptr(f, container)} monotonic, align 4")
             _branch(f, c, lambda: f.emit(f"call void @sg_sparse_free(ptr %ctx, i64 {level.pool}, ptr {old})"))
             f.emit(f"{r} = add i32 0, 0")
         else:

@@ -244,8 +244,8 @@ class KeyBuilder:
 def _path(node) -> tuple:
     """An SNode's path as compiled code sees it: kinds, sizes, offsets, and a sparse node's pool, mask and
     block (pool ids follow the order sparse nodes were materialised in, so they must be in the key)."""
-    return tuple((n.kind, n.axes, n.sizes, n.offset_in_parent, n.cell_size, n.pool, n.mask_offset, n.block_size)
-                 for n in node.path())
+    return tuple((n.kind, n.axes, n.sizes, n.offset_in_parent, n.cell_size, n.pool, n.mask_offset, n.block_size,
+                  n.chunk_size) for n in node.path())
 
 
 def _component(c) -> tuple:

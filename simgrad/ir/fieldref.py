@@ -22,7 +22,8 @@ class Level:
     dense: the cells, `cell_size` bytes each; bitmasked: the cells, then one activity bit per cell in u32
     words at `mask_offset`; pointer: one 8-byte slot per cell pointing to the cell's block (allocated
     from pool `pool` when the cell is activated, null while inactive); dynamic: a 16-byte header (i32
-    length, then the pointer to a block of `ncells` cells, allocated from `pool`)."""
+    length, i32 lock, then the pointer to the first of a chain of chunks from `pool`, each an 8-byte link to
+    the next and `chunk` cells, allocated as writes reach them; `ncells` is the list's most cells)."""
 
     kind: str
     offset: int
@@ -32,6 +33,7 @@ class Level:
     pool: int = -1
     mask_offset: int = 0
     total_cells: int = 0  # cells of this node in the whole tree (the length of its struct-for lists)
+    chunk: int = 0  # dynamic: cells per chunk
 
     @property
     def sparse(self) -> bool:

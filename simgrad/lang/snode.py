@@ -68,7 +68,7 @@ class SNode:
         self.block_size = 0  # pointer/dynamic: bytes of one block from the pool
         self.mask_offset = 0  # bitmasked: where the activity bits start in the container
         self.pool = -1  # pointer/dynamic: the program's pool for this node's blocks
-        self.chunk_size = None  # dynamic: Taichi's chunk size (blocks here hold the whole list)
+        self.chunk_size: int | None = None  # dynamic: Taichi's chunk size (cells per chunk; None: the whole list)
         self.physical: DataType | None = None  # bit_struct / quant_array: the integer type of the cell (lang/quant.py)
         self.bitpack = None  # bit_struct: the ti.BitpackedFields it was made from
         self._ref: object = None  # its IR record once materialised (lang/sparse.py snode_ref)
@@ -120,9 +120,18 @@ class SNode:
             if len(index) != 1:
                 raise SimgradError("dynamic(): a dynamic SNode has exactly one axis", caller_loc())
             index = index[0]
+        if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer))
+                                       or not 0 < chunk_size < 2**31):
+            raise SimgradError(f"dynamic(): chunk_size must be a positive 32-bit integer, got {chunk_size!r}",
+                               caller_loc())
         node = self._child("dynamic", index, dimension)
-        node.chunk_size = chunk_size
+        node.chunk_size = None if chunk_size is None else int(chunk_size)
         return node
+
+    @property
+    def chunk(self) -> int:
+        """A dynamic node's cells per chunk (Taichi's chunk_size, the whole list by default, as Taichi's)."""
+        return min(self.chunk_size or self.num_cells, self.num_cells)
 
     def quant_array(self, indices, dimensions, max_num_bits) -> SNode:
         """Cells of one quant field packed side by side into a single physical integer of max_num_bits bits
@@ -326,8 +335,8 @@ class SNode:
             self.block_size = max(8, (self.cell_size + 7) // 8 * 8)
             self.align = 8
             return 8 * self.num_cells
-        if self.kind == "dynamic":  # header: i32 length, then the pointer to a block of the whole list
-            self.block_size = max(8, (self.cell_size * self.num_cells + 7) // 8 * 8)
+        if self.kind == "dynamic":  # header: i32 length, i32 lock, the first chunk: {next chunk, cells}
+            self.block_size = 8 + (self.cell_size * self.chunk + 7) // 8 * 8
             self.align = 8
             return 16
         self.align = align
@@ -388,7 +397,7 @@ class SNode:
                 total *= m.num_cells
             kind = "dense" if n.kind == "quant_array" else n.kind  # bits of one cell: 0-byte cells
             levels.append(Level(kind, n.offset_in_parent, tuple(terms[::-1]), n.cell_size, n.num_cells,
-                                n.pool, n.mask_offset, total))
+                                n.pool, n.mask_offset, total, n.chunk if n.kind == "dynamic" else 0))
         return tuple(levels)
 
     def access_terms(self) -> tuple[int, tuple[AccessTerm, ...], tuple[int, ...]]:
@@ -490,15 +499,18 @@ class SNodeTree:
 
 
     def _add_pools(self, node: SNode, instances: int) -> None:
-        """A pool for every sparse node: blocks for each cell a pointer could activate (or each list of a
-        dynamic node), and the zero and discard blocks every sparse node reads and writes through."""
+        """A pool for every sparse node: blocks for each cell a pointer could activate (or each chunk of each
+        list of a dynamic node), and the zero and discard blocks every sparse node reads and writes through.
+        A dynamic node gets no struct-for lists (a struct-for runs along its lists by their lengths)."""
         for c in node.children:
             if c.kind == "place":
                 continue
             if c.is_sparse:
-                blocks = instances * c.num_cells if c.kind == "pointer" else instances if c.kind == "dynamic" else 0
+                blocks = {"pointer": instances * c.num_cells, "bitmasked": 0,
+                          "dynamic": instances * -(-c.num_cells // c.chunk)}[c.kind]
                 size = c.block_size if c.kind != "bitmasked" else c.cell_size
-                c.pool = self.program.sparse.add_pool(size, blocks, instances * c.num_cells)
+                lists = 0 if c.kind == "dynamic" else instances * c.num_cells
+                c.pool = self.program.sparse.add_pool(size, blocks, lists, line=c.kind != "dynamic")
             self._add_pools(c, instances * c.num_cells)
 
 

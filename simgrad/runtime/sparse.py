@@ -1,6 +1,6 @@
-"""Memory of sparse SNodes: one pool of fixed-size blocks per pointer / dynamic node, and a zero block and a
-discard block per sparse node, all described by a table that compiled kernels read (context slot
-CTX_SPARSE) and update with atomics.
+"""Memory of sparse SNodes: one pool of fixed-size blocks per pointer / dynamic node (a pointer node's cells; a
+dynamic node's chunks, chained into lists), and a zero block and a discard block per sparse node, all described by
+a table that compiled kernels read (context slot CTX_SPARSE) and update with atomics.
 
 A pool reserves address space for every block its node could ever need (mmap with MAP_NORESERVE: pages
 cost memory only once touched) and hands blocks out by bumping an index (an atomic add: many threads
@@ -77,9 +77,11 @@ class SparseMemory:
         words = (ctypes.c_int64 * (MAX_POOLS * POOL_WORDS)).from_address(self.address)
         self.table = np.ctypeslib.as_array(words).reshape(MAX_POOLS, POOL_WORDS)
 
-    def add_pool(self, block_size: int, capacity: int, cells: int) -> int:
+    def add_pool(self, block_size: int, capacity: int, cells: int, line: bool = True) -> int:
         """A pool of `capacity` blocks of `block_size` bytes (capacity 0: a bitmasked node's zero and
         discard blocks only) for a node of `cells` cells in all. Returns its id, the index the kernels use.
+        Blocks of 64 bytes or more are rounded up to whole cache lines unless `line` is false (a dynamic
+        node's chunks: 8 bytes of link and the cells, as Taichi's, are rounded up to 8 bytes only).
         With it come MAX_LISTS lists of `cells` i32 each: a struct-for whose first sparse node this is
         lists the active cells there before its parallel loop starts (as Taichi's listgen), so cells it
         activates itself (an adjoint's scatter) are not visited by the same loop."""
@@ -88,7 +90,7 @@ class SparseMemory:
             raise RuntimeError(f"more than {MAX_POOLS} sparse SNodes in one program")
         pid = self.count
         self.count += 1
-        block_size = max(8, (block_size + 63) // 64 * 64 if block_size >= 64 else (block_size + 7) // 8 * 8)
+        block_size = max(8, (block_size + 63) // 64 * 64 if block_size >= 64 and line else (block_size + 7) // 8 * 8)
         row = self.table[pid]
         row[POOL_BLOCK] = block_size
         if capacity:  # room for the blocks threads hold in unfinished batches (BATCH each)

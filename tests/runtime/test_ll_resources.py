@@ -45,7 +45,7 @@ def test_threadpool_ll_verifies(machine, futex_nr, stats):
 def test_sparse_alloc_ll_verifies(batched):
     helpers = cg_sparse._HELPERS[batched]
     _verify(helpers + _SPARSE_CONTEXT)
-    for name in ("sg_sparse_alloc", "sg_sparse_free", "sg_pool_push"):
+    for name in ("sg_sparse_alloc", "sg_sparse_free", "sg_pool_push", "sg_dyn_link", "sg_dyn_chunk", "sg_dyn_clear"):
         assert f"@{name}(" in helpers
 
 

@@ -174,3 +174,121 @@ define internal void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %blk) noinline {
   call void @sg_pool_push(ptr %row, ptr %blk, i64 0)
   ret void
 }
+
+; --- dynamic lists: a chain of chunks ---
+; A dynamic node's header (in its parent's cell) is {i32 length, i32 lock, ptr first chunk}; a chunk is a block
+; of the node's pool: {ptr next chunk, then chunk_size cells}, as Taichi's. Chunks are allocated as writes reach
+; them and stay until the list is deactivated.
+
+; the chunk *slot points to; a write finding it null allocates it under the list's lock (one chunk per slot,
+; however many threads reach it at once). Threads waiting for the lock poll the slot, and go on as soon as the
+; chunk is there, without taking the lock in turn. Null: a read of a chunk not allocated, or a pool that ran out
+; (reported by @sg_sparse_alloc).
+define internal ptr @sg_dyn_link(ptr %ctx, i64 %pool, ptr %hdr, ptr %slot, i1 %write, i64 %code, i32 %tid) {
+entry:
+  %v = load atomic ptr, ptr %slot acquire, align 8
+  %have = icmp ne ptr %v, null
+  br i1 %have, label %done, label %absent
+absent:
+  %lp = getelementptr i8, ptr %hdr, i64 4
+  br i1 %write, label %try, label %done
+try:
+  %v1 = load atomic ptr, ptr %slot acquire, align 8
+  %have1 = icmp ne ptr %v1, null
+  br i1 %have1, label %done, label %free
+free:
+  %held = load atomic i32, ptr %lp monotonic, align 4
+  %busy = icmp ne i32 %held, 0
+  br i1 %busy, label %try, label %grab
+grab:
+  %old = atomicrmw xchg ptr %lp, i32 1 acquire
+  %got = icmp eq i32 %old, 0
+  br i1 %got, label %locked, label %try
+locked:
+  %v2 = load atomic ptr, ptr %slot acquire, align 8
+  %have2 = icmp ne ptr %v2, null
+  br i1 %have2, label %unlock, label %alloc
+alloc:
+  %blk = call ptr @sg_sparse_alloc(ptr %ctx, i64 %pool, ptr %slot, i64 %code, i32 %tid)
+  br label %unlock
+unlock:
+  store atomic i32 0, ptr %lp release, align 4
+  %v3 = load atomic ptr, ptr %slot acquire, align 8
+  br label %done
+done:
+  %r = phi ptr [ %v, %entry ], [ null, %absent ], [ %v1, %try ], [ %v3, %unlock ]
+  ret ptr %r
+}
+
+; the chunk number %k of the list at %hdr: the zero block for a read where it is not allocated, the discard block
+; for a write whose pool ran out. %cur is the calling function's cursor {hdr, first chunk, k, chunk} for this
+; pool: a walk starts from the chunk found last when it is of the same list (same header and first chunk, so a
+; list emptied and refilled meanwhile is walked afresh) and not past %k; a loop running along a list then follows
+; one link per chunk, not k per element.
+define internal ptr @sg_dyn_chunk(ptr %ctx, i64 %pool, ptr %hdr, i64 %k, i1 %write, i64 %code, i32 %tid,
+                                  ptr %cur) alwaysinline {
+entry:
+  %first = getelementptr i8, ptr %hdr, i64 8
+  %f0 = load atomic ptr, ptr %first acquire, align 8
+  %ch = load ptr, ptr %cur
+  %cfp = getelementptr i64, ptr %cur, i64 1
+  %cf = load ptr, ptr %cfp
+  %ckp = getelementptr i64, ptr %cur, i64 2
+  %ck = load i64, ptr %ckp
+  %cpp = getelementptr i64, ptr %cur, i64 3
+  %cp = load ptr, ptr %cpp
+  %same_h = icmp eq ptr %ch, %hdr
+  %same_f = icmp eq ptr %cf, %f0
+  %behind = icmp ule i64 %ck, %k
+  %u1 = and i1 %same_h, %same_f
+  %use = and i1 %u1, %behind
+  br i1 %use, label %walk, label %head
+head:
+  %p0 = call ptr @sg_dyn_link(ptr %ctx, i64 %pool, ptr %hdr, ptr %first, i1 %write, i64 %code, i32 %tid)
+  %null0 = icmp eq ptr %p0, null
+  br i1 %null0, label %absent, label %walk
+walk:
+  %fc = phi ptr [ %f0, %entry ], [ %p0, %head ], [ %fc, %step ]
+  %j = phi i64 [ %ck, %entry ], [ 0, %head ], [ %j1, %step ]
+  %p = phi ptr [ %cp, %entry ], [ %p0, %head ], [ %q, %step ]
+  %more = icmp ult i64 %j, %k
+  br i1 %more, label %hop, label %found
+hop:
+  %q = call ptr @sg_dyn_link(ptr %ctx, i64 %pool, ptr %hdr, ptr %p, i1 %write, i64 %code, i32 %tid)
+  %nq = icmp eq ptr %q, null
+  br i1 %nq, label %absent, label %step
+step:
+  %j1 = add i64 %j, 1
+  br label %walk
+found:
+  store ptr %hdr, ptr %cur
+  store ptr %fc, ptr %cfp
+  store i64 %k, ptr %ckp
+  store ptr %p, ptr %cpp
+  ret ptr %p
+absent:
+  %row = call ptr @sg_pool(ptr %ctx, i64 %pool)
+  %word = select i1 %write, i64 ${POOL_DISCARD}, i64 ${POOL_ZERO}
+  %sp = getelementptr i64, ptr %row, i64 %word
+  %side = load ptr, ptr %sp
+  ret ptr %side
+}
+
+; empty the list at %hdr: its length to 0, its chunks zeroed and back to the pool
+define internal void @sg_dyn_clear(ptr %ctx, i64 %pool, ptr %hdr) noinline {
+entry:
+  %first = getelementptr i8, ptr %hdr, i64 8
+  %c0 = atomicrmw xchg ptr %first, ptr null acq_rel
+  store atomic i32 0, ptr %hdr monotonic, align 4
+  br label %loop
+loop:
+  %c = phi ptr [ %c0, %entry ], [ %next, %free ]
+  %more = icmp ne ptr %c, null
+  br i1 %more, label %free, label %done
+free:
+  %next = load ptr, ptr %c
+  call void @sg_sparse_free(ptr %ctx, i64 %pool, ptr %c)
+  br label %loop
+done:
+  ret void
+}
