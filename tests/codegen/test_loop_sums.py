@@ -140,7 +140,7 @@ def test_no_address_outside_the_field_is_touched():
     @ti.kernel
     def k():
         for i in range(n + 8):
-            for j in range(10):
+            for _j in range(10):
                 if i < n:
                     a[i] += 1.0
 
