@@ -36,10 +36,27 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
                         private_task: str, pfor: str, nthreads: str, begin: str, end: str, grain: int) -> None:
     """Caller side: run `private_task` over per-thread zeroed copies of the regions and add them into the
     fields when the loop's updates cost more as atomics than the copies cost to zero and sum (see
-    ATOMIC_COST); else run the atomic `task`."""
+    ATOMIC_COST); else run the atomic `task`. When the pool will run the whole loop on this thread (one
+    thread, or no more iterations than a grain: simgrad_parallel_for's serial path; launches never overlap),
+    `private_task` runs with the fields themselves as thread 0's copies: plain updates, nothing to sum."""
     elems = sum(r.count for r in regions)
     iters, work, need, big, multi, ok = (f.tmp("pv") for _ in range(6))
     f.emit(f"{iters} = sub i64 {end}, {begin}")
+    one, small, serial = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
+    f.emit(f"{one} = icmp sle i64 {nthreads}, 1")
+    f.emit(f"{small} = icmp sle i64 {iters}, {grain}")
+    f.emit(f"{serial} = or i1 {one}, {small}")
+    direct, decide = f.label("direct"), f.label("decide")
+    f.emit(f"br i1 {serial}, label %{direct}, label %{decide}")
+    f.start_block(direct)
+    for k, r in enumerate(regions):
+        slot = f.tmp("pslot")
+        f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
+        f.emit(f"store ptr {_field_slice(f, r)}, ptr {slot}")
+    f.emit(f"call void {pfor}(ptr @{private_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
+    done = f.label("scatterdone")
+    f.emit(f"br label %{done}")
+    f.start_block(decide)
     f.emit(f"{work} = mul i64 {iters}, {weight * ATOMIC_COST}")
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")
@@ -49,7 +66,7 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"{fits} = icmp ule i64 {nbytes}, {MAX_COPY_BYTES}")
     f.emit(f"{worth} = and i1 {big}, {multi}")
     f.emit(f"{ok} = and i1 {worth}, {fits}")
-    plain, alloc, run, done = f.label("atomic"), f.label("alloc"), f.label("private"), f.label("scatterdone")
+    plain, alloc, run = f.label("atomic"), f.label("alloc"), f.label("private")
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)
     f.gen.module.declare("declare noalias ptr @calloc(i64, i64)")
@@ -92,15 +109,21 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(done)
 
 
-def _emit_sum_into(f, r: Region, buf: str, nthreads: str, pfor: str, name: str) -> None:
-    """Add every thread's copy into the field, split across the pool by element ranges (task `name`)."""
+def _field_slice(f, r: Region) -> str:
+    """The address of the region's bytes in the field itself (the slice its prefix indices pick)."""
     lines: list[str] = []
     shift = slice_shift(lines, lambda: f.tmp("sh"), f.v, r)
     for line in lines:
         f.emit(line)
-    real, at, clo = f.tmp("real"), f.tmp("real"), f.tmp("sclo")
+    real, at = f.tmp("real"), f.tmp("real")
     f.emit(f"{at} = getelementptr i8, ptr {f.root(r.tree_id)}, i64 {shift}")
     f.emit(f"{real} = getelementptr i8, ptr {at}, i64 {r.lo}")
+    return real
+
+
+def _emit_sum_into(f, r: Region, buf: str, nthreads: str, pfor: str, name: str) -> None:
+    """Add every thread's copy into the field, split across the pool by element ranges (task `name`)."""
+    real, clo = _field_slice(f, r), f.tmp("sclo")
     f.prologue.append(f"  {clo} = alloca [3 x i64], align 8")
     for k, (ty, v) in enumerate((("ptr", buf), ("ptr", real), ("i64", nthreads))):
         slot = f.tmp("sslot")

@@ -223,91 +223,107 @@ entry:
   %cv.7 = load ptr, ptr %cp.6
   %cp.8 = getelementptr i64, ptr %ctx, i64 7
   %cv.9 = load i64, ptr %cp.8
-  %cp.46 = getelementptr i64, ptr %ctx, i64 0
-  %cv.47 = load ptr, ptr %cp.46
-  %rp.48 = getelementptr ptr, ptr %cv.47, i64 0
-  %root.49 = load ptr, ptr %rp.48, !invariant.load !0
-  %sclo.45 = alloca [3 x i64], align 8
-  %cp.56 = getelementptr i64, ptr %ctx, i64 0
-  %cv.57 = load ptr, ptr %cp.56
-  %rp.58 = getelementptr ptr, ptr %cv.57, i64 1
-  %root.59 = load ptr, ptr %rp.58, !invariant.load !0
-  %sclo.55 = alloca [3 x i64], align 8
+  %cp.24 = getelementptr i64, ptr %ctx, i64 0
+  %cv.25 = load ptr, ptr %cp.24
+  %rp.26 = getelementptr ptr, ptr %cv.25, i64 0
+  %root.27 = load ptr, ptr %rp.26, !invariant.load !0
+  %cp.31 = getelementptr i64, ptr %ctx, i64 0
+  %cv.32 = load ptr, ptr %cp.31
+  %rp.33 = getelementptr ptr, ptr %cv.32, i64 1
+  %root.34 = load ptr, ptr %rp.33, !invariant.load !0
+  %sclo.64 = alloca [3 x i64], align 8
+  %sclo.70 = alloca [3 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
   %pv.10 = sub i64 %e.5, %b.4
+  %pv.16 = icmp sle i64 %cv.9, 1
+  %pv.17 = icmp sle i64 %pv.10, 455
+  %pv.18 = or i1 %pv.16, %pv.17
+  br i1 %pv.18, label %direct.19, label %decide.20
+direct.19:
+  %pslot.21 = getelementptr i64, ptr %clo.3, i64 1
+  %real.23 = getelementptr i8, ptr %root.27, i64 0
+  %real.22 = getelementptr i8, ptr %real.23, i64 0
+  store ptr %real.22, ptr %pslot.21
+  %pslot.28 = getelementptr i64, ptr %clo.3, i64 2
+  %real.30 = getelementptr i8, ptr %root.34, i64 0
+  %real.29 = getelementptr i8, ptr %real.30, i64 0
+  store ptr %real.29, ptr %pslot.28
+  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  br label %scatterdone.35
+decide.20:
   %pv.11 = mul i64 %pv.10, 24
   %pv.12 = mul i64 %cv.9, 24
   %pv.13 = icmp sge i64 %pv.11, %pv.12
   %pv.14 = icmp sgt i64 %cv.9, 1
-  %pv.16 = mul i64 %cv.9, 96
-  %pv.17 = icmp ule i64 %pv.16, 268435456
-  %pv.18 = and i1 %pv.13, %pv.14
-  %pv.15 = and i1 %pv.18, %pv.17
-  br i1 %pv.15, label %alloc.20, label %atomic.19
-alloc.20:
-  %pctx.23 = getelementptr i64, ptr %ctx, i64 11
-  %phave.24 = load ptr, ptr %pctx.23
-  %pnull.27 = icmp eq ptr %phave.24, null
-  br i1 %pnull.27, label %pfresh.25, label %pready.26
-pfresh.25:
-  %pnew.28 = call ptr @calloc(i64 %cv.9, i64 64)
-  store ptr %pnew.28, ptr %pctx.23
-  br label %pready.26
-pready.26:
-  %priv.29 = load ptr, ptr %pctx.23
-  %pslot.30 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.29, ptr %pslot.30
-  %pnn.31 = icmp ne ptr %priv.29, null
-  %pok.32 = and i1 true, %pnn.31
-  %pctx.33 = getelementptr i64, ptr %ctx, i64 12
-  %phave.34 = load ptr, ptr %pctx.33
-  %pnull.37 = icmp eq ptr %phave.34, null
-  br i1 %pnull.37, label %pfresh.35, label %pready.36
-pfresh.35:
-  %pnew.38 = call ptr @calloc(i64 %cv.9, i64 32)
-  store ptr %pnew.38, ptr %pctx.33
-  br label %pready.36
-pready.36:
-  %priv.39 = load ptr, ptr %pctx.33
-  %pslot.40 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.39, ptr %pslot.40
-  %pnn.41 = icmp ne ptr %priv.39, null
-  %pok.42 = and i1 %pok.32, %pnn.41
-  br i1 %pok.42, label %private.21, label %atomic.19
-private.21:
+  %pv.36 = mul i64 %cv.9, 96
+  %pv.37 = icmp ule i64 %pv.36, 268435456
+  %pv.38 = and i1 %pv.13, %pv.14
+  %pv.15 = and i1 %pv.38, %pv.37
+  br i1 %pv.15, label %alloc.40, label %atomic.39
+alloc.40:
+  %pctx.42 = getelementptr i64, ptr %ctx, i64 11
+  %phave.43 = load ptr, ptr %pctx.42
+  %pnull.46 = icmp eq ptr %phave.43, null
+  br i1 %pnull.46, label %pfresh.44, label %pready.45
+pfresh.44:
+  %pnew.47 = call ptr @calloc(i64 %cv.9, i64 64)
+  store ptr %pnew.47, ptr %pctx.42
+  br label %pready.45
+pready.45:
+  %priv.48 = load ptr, ptr %pctx.42
+  %pslot.49 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.48, ptr %pslot.49
+  %pnn.50 = icmp ne ptr %priv.48, null
+  %pok.51 = and i1 true, %pnn.50
+  %pctx.52 = getelementptr i64, ptr %ctx, i64 12
+  %phave.53 = load ptr, ptr %pctx.52
+  %pnull.56 = icmp eq ptr %phave.53, null
+  br i1 %pnull.56, label %pfresh.54, label %pready.55
+pfresh.54:
+  %pnew.57 = call ptr @calloc(i64 %cv.9, i64 32)
+  store ptr %pnew.57, ptr %pctx.52
+  br label %pready.55
+pready.55:
+  %priv.58 = load ptr, ptr %pctx.52
+  %pslot.59 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.58, ptr %pslot.59
+  %pnn.60 = icmp ne ptr %priv.58, null
+  %pok.61 = and i1 %pok.51, %pnn.60
+  br i1 %pok.61, label %private.41, label %atomic.39
+private.41:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.44 = getelementptr i8, ptr %root.49, i64 0
-  %real.43 = getelementptr i8, ptr %real.44, i64 0
-  %sslot.50 = getelementptr i64, ptr %sclo.45, i64 0
-  store ptr %priv.29, ptr %sslot.50
-  %sslot.51 = getelementptr i64, ptr %sclo.45, i64 1
-  store ptr %real.43, ptr %sslot.51
-  %sslot.52 = getelementptr i64, ptr %sclo.45, i64 2
-  store i64 %cv.9, ptr %sslot.52
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.45, i64 0, i64 16, i64 8192)
-  %real.54 = getelementptr i8, ptr %root.59, i64 0
-  %real.53 = getelementptr i8, ptr %real.54, i64 0
-  %sslot.60 = getelementptr i64, ptr %sclo.55, i64 0
-  store ptr %priv.39, ptr %sslot.60
-  %sslot.61 = getelementptr i64, ptr %sclo.55, i64 1
-  store ptr %real.53, ptr %sslot.61
-  %sslot.62 = getelementptr i64, ptr %sclo.55, i64 2
-  store i64 %cv.9, ptr %sslot.62
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.55, i64 0, i64 8, i64 8192)
-  br label %scatterdone.22
-atomic.19:
+  %real.63 = getelementptr i8, ptr %root.27, i64 0
+  %real.62 = getelementptr i8, ptr %real.63, i64 0
+  %sslot.65 = getelementptr i64, ptr %sclo.64, i64 0
+  store ptr %priv.48, ptr %sslot.65
+  %sslot.66 = getelementptr i64, ptr %sclo.64, i64 1
+  store ptr %real.62, ptr %sslot.66
+  %sslot.67 = getelementptr i64, ptr %sclo.64, i64 2
+  store i64 %cv.9, ptr %sslot.67
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.64, i64 0, i64 16, i64 8192)
+  %real.69 = getelementptr i8, ptr %root.34, i64 0
+  %real.68 = getelementptr i8, ptr %real.69, i64 0
+  %sslot.71 = getelementptr i64, ptr %sclo.70, i64 0
+  store ptr %priv.58, ptr %sslot.71
+  %sslot.72 = getelementptr i64, ptr %sclo.70, i64 1
+  store ptr %real.68, ptr %sslot.72
+  %sslot.73 = getelementptr i64, ptr %sclo.70, i64 2
+  store i64 %cv.9, ptr %sslot.73
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.70, i64 0, i64 8, i64 8192)
+  br label %scatterdone.35
+atomic.39:
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.22
-scatterdone.22:
-  %cancel.63 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.64 = icmp ne i32 %cancel.63, 0
-  br i1 %cancelled.64, label %stop.65, label %go.66
-stop.65:
+  br label %scatterdone.35
+scatterdone.35:
+  %cancel.74 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.75 = icmp ne i32 %cancel.74, 0
+  br i1 %cancelled.75, label %stop.76, label %go.77
+stop.76:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.66:
+go.77:
   ret void
 }
 
