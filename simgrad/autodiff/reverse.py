@@ -432,8 +432,8 @@ class Reverse:
                     if c is not None:
                         self.acc(o, c)
         elif self.has_adj(s):
-            if op in ZERO_GRADIENT or not s.vtype.is_float:
-                self.take(s)
+            if op in ZERO_GRADIENT or not s.vtype.is_float or s.attrs.get("zero_gradient"):
+                self.take(s)  # (zero_gradient: a piecewise-constant value built from bits, lang/linalg.py)
             else:
                 raise GradientError(f"no derivative rule for the operation '{op.name.lower()}' on {s.type}",
                                     s.loc)

@@ -293,3 +293,38 @@ def test_polar_2x2_over_the_whole_exponent_range(t):
     np.testing.assert_allclose(R.to_numpy(), np.broadcast_to(rot, (len(sc), 2, 2)), atol=TOL[t])
     Pn = P.to_numpy().astype(np.float64) / sc[:, None, None]
     np.testing.assert_allclose(Pn, Pn.transpose(0, 2, 1), atol=TOL[t])
+
+
+@pytest.mark.parametrize("t", [ti.f32, ti.f64], ids=str)
+def test_svd_scale_at_powers_of_two_and_extremes(t):
+    """The input scale is taken from the bits of the largest |entry| (lang/linalg.py `scaled`): entries at a
+    power of two, one ulp below it, tiny and huge magnitudes and zero all give U S V^T = A and numpy's
+    singular values."""
+    f = np.float32 if t == ti.f32 else np.float64
+    below = float(np.nextafter(f(4.0), f(0)))
+    mats = [np.array(m, np.float64) for m in (
+        [[4.0, 1.0, 0.5], [0.25, -2.0, 1.0], [1.0, 0.0, 3.0]],
+        [[below, 1.0, 0.5], [0.25, -2.0, 1.0], [1.0, 0.0, 3.0]],
+        [[1e-30, 2e-31, 0.0], [0.0, 3e-30, 1e-31], [5e-31, 0.0, 2e-30]],
+        [[1e30, 2e29, 0.0], [0.0, -3e30, 1e29], [5e29, 0.0, 2e30]],
+        [[0.0] * 3] * 3)]
+    a = ti.Matrix.field(3, 3, t, shape=len(mats))
+    r = ti.Matrix.field(3, 3, t, shape=len(mats))
+    s = ti.Vector.field(3, t, shape=len(mats))
+    a.from_numpy(np.stack(mats).astype(f))
+
+    @ti.kernel
+    def k():
+        for i in a:
+            U, S, V = ti.svd(a[i], t)
+            r[i] = U @ S @ V.transpose()
+            s[i] = ti.Vector([S[0, 0], S[1, 1], S[2, 2]])
+
+    k()
+    eps = 1e-5 if t == ti.f32 else 1e-12
+    for i, m in enumerate(mats):
+        m = m.astype(f).astype(np.float64)
+        scale = max(np.abs(m).max(), 1e-300)
+        np.testing.assert_allclose(r.to_numpy()[i], m, rtol=0, atol=eps * scale)
+        want = np.linalg.svd(m, compute_uv=False)
+        np.testing.assert_allclose(np.abs(s.to_numpy()[i]), want, rtol=0, atol=eps * scale)
