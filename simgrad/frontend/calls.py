@@ -126,9 +126,9 @@ def call(comp, node: ast.Call):
     from simgrad.lang.functions import BoundFunc, Func, KernelDef
 
     if isinstance(fn, Func):
-        return inline(comp, fn, args, kwargs, node)
+        return call_func(comp, fn, args, kwargs, node)
     if isinstance(fn, BoundFunc):  # a ti.func method of a data-oriented object
-        return inline(comp, fn.func, [fn.obj, *args], kwargs, node)
+        return call_func(comp, fn.func, [fn.obj, *args], kwargs, node)
     if isinstance(fn, KernelDef):
         raise SimgradSyntaxError(f"kernel {fn.name} cannot be called from inside a kernel; make it a @ti.func",
                                  comp.loc(node))
@@ -223,14 +223,9 @@ def _check_array_argument(name: str, ann, value, loc, real: bool = False) -> Non
         raise SimgradTypeError(f"Invalid value for argument {name} - required {wrong}", loc)
 
 
-def inline(comp, fn, args, kwargs, node):
-    """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
-    from simgrad.frontend.source import get_source
-    from simgrad.lang.types import MatrixType, by_reference
-
-    if len(comp.frames) > comp.MAX_INLINE_DEPTH:
-        raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
-                                 comp.loc(node))
+def call_func(comp, fn, args, kwargs, node):
+    """A ti.func call: inlined; a real function's too, unless the same specialisation is being inlined
+    already (run-time recursion): then a CALL of its Function (frontend/realfuncs.py)."""
     from simgrad.lang.functions import binding_error
 
     sig = fn.signature
@@ -239,8 +234,29 @@ def inline(comp, fn, args, kwargs, node):
         raise ArgumentCountError(f"calling ti.func {fn.name}: {wrong}", comp.loc(node))
     bound = sig.bind(*args, **kwargs)
     bound.apply_defaults()
+    key = None
+    if getattr(fn, "real", False):
+        from simgrad.frontend.realfuncs import call_real, specialisation
+
+        key = specialisation(fn, bound)
+        if key is not None and (key in comp.real_functions or any(f.real_key == key for f in comp.frames)):
+            return call_real(comp, fn, bound, key, node)
+    return inline(comp, fn, bound, node, key)
+
+
+def inline(comp, fn, bound, node, real_key=None):
+    """Inline a ti.func (its arguments bound): parameters are fresh locals (pass by value) except ti.template()
+    ones."""
+    from simgrad.frontend.source import get_source
+    from simgrad.lang.types import MatrixType, by_reference
+
+    if len(comp.frames) > comp.MAX_INLINE_DEPTH:
+        raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
+                                 comp.loc(node))
+    sig = fn.signature
     frame = Frame(get_source(fn.func), False)
     frame.real = getattr(fn, "real", False)
+    frame.real_key = real_key
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
         _check_array_argument(name, ann, value, comp.loc(node), getattr(fn, "real", False))
@@ -302,4 +318,4 @@ def _is_scalar_type(ann) -> bool:
     return isinstance(ann, dt.DataType) or ann in (int, float)
 
 
-__all__ = ["call", "inline", "VarRef", "MatrixRef", "Op"]
+__all__ = ["call", "call_func", "inline", "VarRef", "MatrixRef", "Op"]

@@ -79,6 +79,8 @@ class KernelLowering:
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
         self.static_scope = 0  # > 0 while the arguments of a ti.static(...) call are evaluated (frontend/calls.py)
+        # specialisation key -> (IR Function, result annotation) of the recursive real functions (frontend/realfuncs.py)
+        self.real_functions: dict = {}
 
     @property
     def frame(self) -> Frame:
@@ -87,9 +89,9 @@ class KernelLowering:
     # -- what lang objects ask of the compiler on the context stack (lang imports no frontend) -----------
     def call_func(self, fn, args: list, kwargs: dict):
         """A ti.func called from Python code running at compile time: inlined here."""
-        from simgrad.frontend.calls import inline
+        from simgrad.frontend.calls import call_func
 
-        return inline(self, fn, args, kwargs, self.frame.src.tree)
+        return call_func(self, fn, args, kwargs, self.frame.src.tree)
 
     def stop_grad(self, field) -> None:
         """ti.stop_grad(x): no gradient flows through x's elements for the rest of this top-level loop
