@@ -5,11 +5,11 @@ from __future__ import annotations
 import ast
 import builtins
 import inspect
-from typing import TYPE_CHECKING
 
 from simgrad import dtypes as dt
 from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
+from simgrad.frontend.realfuncs import call_real, check_matrix_argument, specialisation
 from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef, tensor_text
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
@@ -18,9 +18,6 @@ from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.loops import static as _static
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
-
-if TYPE_CHECKING:
-    from simgrad.lang.types import MatrixType
 
 
 def _builtin_int(x=0, *rest):
@@ -236,8 +233,6 @@ def call_func(comp, fn, args, kwargs, node):
     bound.apply_defaults()
     key = None
     if getattr(fn, "real", False):
-        from simgrad.frontend.realfuncs import call_real, specialisation
-
         key = specialisation(fn, bound)
         if key is not None and (key in comp.real_functions or any(f.real_key == key for f in comp.frames)):
             return call_real(comp, fn, bound, key, node)
@@ -265,7 +260,7 @@ def inline(comp, fn, bound, node, real_key=None):
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
             frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
-            _check_matrix_argument(name, ann, value, comp.loc(node))
+            check_matrix_argument(name, ann, value, comp.loc(node))
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
             frame.scopes[0][name] = comp.new_var(value, ann)
@@ -297,21 +292,6 @@ def inline(comp, fn, bound, node, real_key=None):
         if _is_scalar_type(ann) and isinstance(rv, (Expr, int, float)):
             rv = operators.cast(rv, ann)
     return rv
-
-
-def _check_matrix_argument(name: str, ann: MatrixType, value, loc) -> None:
-    """A matrix for a parameter annotated with a matrix type has its shape (Taichi's TaichiSyntaxError texts);
-    it was reinterpreted silently."""
-    if not isinstance(value, Matrix) or ann.n is None:
-        return
-    want, got = ann.shape, value.shape
-    if len(want) != len(got):
-        raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with ndim {len(want)}, "
-                                 f"but got {len(got)}.", loc)
-    for axis, letter in enumerate("nm"[:len(want)]):
-        if want[axis] != got[axis]:
-            raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with {letter} "
-                                     f"{want[axis]}, but got {got[axis]}.", loc)
 
 
 def _is_scalar_type(ann) -> bool:

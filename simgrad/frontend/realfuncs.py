@@ -49,6 +49,21 @@ def specialisation(fn, bound: inspect.BoundArguments):
     return tuple(parts)
 
 
+def check_matrix_argument(name: str, ann: MatrixType, value, loc) -> None:
+    """A matrix for a parameter annotated with a matrix type has its shape (Taichi's TaichiSyntaxError texts);
+    it was reinterpreted silently."""
+    if not isinstance(value, Matrix) or ann.n is None:
+        return
+    want, got = ann.shape, value.shape
+    if len(want) != len(got):
+        raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with ndim {len(want)}, "
+                                 f"but got {len(got)}.", loc)
+    for axis, letter in enumerate("nm"[:len(want)]):
+        if want[axis] != got[axis]:
+            raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with {letter} "
+                                     f"{want[axis]}, but got {got[axis]}.", loc)
+
+
 def _flat_type(ann, what: str, fn, loc) -> list[dt.DataType]:
     """The scalar types a run-time parameter or the result travels as (a matrix: its entries in order)."""
     if isinstance(ann, MatrixType) and ann.n is not None:
@@ -75,9 +90,7 @@ def call_real(comp, fn, bound: inspect.BoundArguments, key, node):
         if not runtime_param(ann, value):
             continue
         if isinstance(ann, MatrixType):
-            from simgrad.frontend.calls import _check_matrix_argument
-
-            _check_matrix_argument(name, ann, value, loc)
+            check_matrix_argument(name, ann, value, loc)
             entries = ann.make(value).entries
         else:
             entries = [value]
