@@ -225,3 +225,31 @@ def test_what_a_recursive_real_function_cannot_take_is_located():
 
     with pytest.raises(ti.TaichiSyntaxError, match="parameter a of the recursive real function bump is a ti.ref"):
         run()
+
+
+def test_recursion_in_debug_mode_checks_indices_and_asserts_inside_the_function():
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(ti.f32, shape=8)
+
+    @ti.real_func
+    def walk(k: ti.i32, n: ti.i32) -> ti.f32:
+        r = 0.0
+        if k > 0:
+            assert k < 50, "too deep"
+            r = 1.0 + walk(k - 1, n)
+            x[n] += 1.0
+        return r
+
+    @ti.kernel
+    def run(k: ti.i32, n: ti.i32) -> ti.f32:
+        s = 0.0
+        for _ in range(4):
+            s += walk(k, n)
+        return s
+
+    assert run(5, 3) == 20.0
+    np.testing.assert_array_equal(x.to_numpy(), [0, 0, 0, 20, 0, 0, 0, 0])
+    with pytest.raises(ti.TaichiAssertionError, match="too deep"):
+        run(60, 3)
+    with pytest.raises(Exception, match="index 9 is out of bounds"):
+        run(5, 9)
