@@ -57,8 +57,8 @@ class LoopStrategy:
 def parallel_strategy(kernel: Kernel, debug: bool = False) -> bool:
     """Annotate every parallel loop and every atomic of the kernel. In debug mode no pairs (each update
     is bounds-checked on its own), no slices of copies (an out-of-bounds slice index must be reported,
-    not summed into) and no per-thread sums of field elements (the final add addresses the element after the
-    loop, where its checked offset, computed in the loop, is not defined: LLVM's verifier refused it)."""
+    not summed into) and no per-thread sums of indexed field elements (the final add addresses the element after
+    the loop, where its checked offset, computed in the loop, is not defined: LLVM's verifier refused it)."""
     uses: dict[int, int] = {}
     for x in walk(kernel.body):
         for o in x.operands:
@@ -164,8 +164,8 @@ def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
 
 def _reductions(loop: Stmt, inside: set, uses: dict, debug: bool = False) -> dict:
     """Places a parallel loop only accumulates into: every access is an atomic add whose old value is
-    unused, at loop-invariant indices (in debug mode locals only). {key: (a pointer statement, [the ATOMIC
-    statements])}."""
+    unused, at loop-invariant indices (in debug mode locals and 0-D fields only). {key: (a pointer statement,
+    [the ATOMIC statements])}."""
     groups: dict[tuple, tuple[Stmt, list[Stmt]]] = {}
     spoiled: set[int] = set()
     inside = inside | {id(loop)}  # the loop index varies too
@@ -176,7 +176,9 @@ def _reductions(loop: Stmt, inside: set, uses: dict, debug: bool = False) -> dic
                 continue
             key: tuple
             if o.op is Op.GLOBAL_PTR:
-                if debug or getattr(o.attrs["target"], "sparse", False):  # its address is computed in the loop
+                # its address is computed in the loop: a sparse element's, or in debug mode an indexed element's
+                # (its checked offset is; a 0-D field's offset is a constant)
+                if (debug and o.operands) or getattr(o.attrs["target"], "sparse", False):
                     spoiled.add(id(o.attrs["target"]))
                     continue
                 if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):
