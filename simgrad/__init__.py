@@ -140,12 +140,10 @@ def get_runtime():
 
 
 _NOT_SUPPORTED = {
-    "sparse": "the taichi.sparse grid helper module is not built (sparse SNodes are: ti.root.pointer / "
-              "bitmasked / dynamic)",
     "aot": "Taichi's AOT deployment is not part of simgrad",
     **{n: "Taichi's mesh extension is not part of simgrad" for n in ("Mesh", "MeshInstance", "mesh_local",
                                                                      "mesh_patch_idx")},
-    **{n: "textures are a GPU rendering feature simgrad does not have" for n in ("Texture", "Format")},
+    "Texture": "textures are a GPU rendering feature simgrad does not have",
     "simt": "warp/block intrinsics (ti.simt) are GPU-only and not built",
     "DeviceCapability": "device capabilities are a GPU-backend notion simgrad does not have",
 }
@@ -172,6 +170,14 @@ def __getattr__(name):
         import simgrad._lib as _lib_module
 
         return _lib_module
+    if name == "sparse":  # Taichi's sparse-grid helper (grid, usage), kernels of the public language
+        import simgrad.sparse as _sparse
+
+        return _sparse
+    if name == "Format":  # texture formats: named by ti.graph.Arg(..., fmt=...), refused there
+        from simgrad.lang.graph import Format as _Format
+
+        return _Format
     if name == "graph":  # compute graphs, replayed as kernel launches in order
         import simgrad.lang.graph as _graph
 

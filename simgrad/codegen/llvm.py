@@ -20,7 +20,7 @@ from simgrad.codegen.access import lower_global_ptr as global_address
 from simgrad.codegen.sparse import lower_sparse_action, lower_sparse_cell, lower_tree_root
 from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import OPS, Op
-from simgrad.passes.parallel_strategy import PAIR, PLAIN, PRIVATE, REDUCE
+from simgrad.passes.parallel_strategy import ATOMIC, PAIR, PLAIN, PRIVATE, REDUCE
 from simgrad.passes.privatize import access_key
 from simgrad.runtime import abi, fpenv
 
@@ -133,6 +133,11 @@ class FunctionText:
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
         self.bound: set[int] = set()  # statements whose value the enclosing loop gives (lower_block skips them)
         self.cursors: dict[int, str] = {}  # dynamic node's pool -> this function's chunk cursor (codegen/sparse.py)
+        # a real function (KernelCodegen.emit_functions): its thread and call depth are parameters, a Ctrl-C
+        # leaves it by `exit` (the kernel's entry reports the interruption), its updates of shared places are atomic
+        self.is_function = False
+        self.depth = "0"
+        self.exit = "ret void"
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -171,9 +176,9 @@ class FunctionText:
         stop, go = self.label("stop"), self.label("go")
         self.emit(f"br i1 {c}, label %{stop}, label %{go}")
         self.start_block(stop)
-        if not self.in_task:
+        if not self.in_task and not self.is_function:
             self.emit(f"call void @sg_report(ptr %ctx, i64 {abi.ERR_INTERRUPTED}, i64 0)")
-        self.emit("ret void")
+        self.emit(self.exit)
         self.start_block(go)
 
     def ctx_slot(self, slot: int, ty: str) -> str:
@@ -283,8 +288,38 @@ class KernelCodegen:
         f.cancel_point()  # a parallel loop may have been cut short: say so
         f.emit("ret void")
         self.module.functions.append(f.text())
+        self.emit_functions()
         self.module.globals.append("!0 = !{}")
         return self.module.text()
+
+    # -- real functions ------------------------------------------------------------------------------------
+    #: calls deep a real function may recurse: a deeper call reports a located error instead of overflowing the
+    #: thread's stack (8 MiB for the caller and the pool's threads: 800 bytes a frame)
+    max_call_depth = 10000
+
+    def function_text(self, name: str, params: str) -> FunctionText:
+        """The emitter of one real function (the GPU target's has its own registers and tape)."""
+        return FunctionText(self, name, params, in_task=False)
+
+    def function_symbol(self, func) -> str:
+        return f"{self.symbol}_fn{self.kernel.functions.index(func)}"
+
+    @staticmethod
+    def result_type(func) -> str:
+        """A real function's LLVM return type: void, or a struct of its results."""
+        return "{ " + ", ".join(llvm_type(t) for t in func.returns) + " }" if func.returns else "void"
+
+    def emit_functions(self) -> None:
+        """`internal RT @sym_fnK(ptr %ctx, i32 %tid, i32 %depth, params...)` per real function: the thread it runs
+        on (ti.random's state, thread-indexed buffers) and its call depth travel with each call."""
+        for func in self.kernel.functions:
+            name, rt = self.function_symbol(func), self.result_type(func)
+            params = "".join(f", {llvm_type(t)} %p{k}" for k, t in enumerate(func.params))
+            f = self.function_text(name, f"internal {rt} @{name}(ptr %ctx, i32 %tid, i32 %depth{params})")
+            f.is_function, f.tid, f.depth = True, "%tid", "%depth"
+            f.exit = f"ret {rt} zeroinitializer" if func.returns else "ret void"
+            self.lower_block(f, func.body)
+            self.module.functions.append(f.text())
 
     def emit_print(self, f: FunctionText, fmt: str, args: list[str]) -> None:
         """printf(fmt, args...) on the host, flushed at once (a kernel's output interleaves with Python's)."""
@@ -424,7 +459,10 @@ CANCEL_STRIDE = 1 << 16
 
 def atomic_form(f: FunctionText, s: Stmt) -> str:
     """How this function does an ATOMIC (passes/parallel_strategy.py): outside tasks always plain; a
-    `private|x` update is plain in the variant over per-thread copies and `x` in the others."""
+    `private|x` update is plain in the variant over per-thread copies and `x` in the others. A real function
+    may run on any thread: its updates are atomic."""
+    if f.is_function:
+        return ATOMIC
     if not f.in_task:
         return PLAIN
     form = s.attrs["strategy"]
@@ -760,6 +798,69 @@ def lower_random(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     f.names[s] = arith.random_value(f, s.vtype)
 
 
+# -- real functions ----------------------------------------------------------------------------------
+def lower_param(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    f.names[s] = f"%p{s.attrs['index']}"
+
+
+def lower_call(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    """`call @sym_fnK(ctx, tid, depth + 1, args...)`; inside a real function, a call deeper than max_call_depth
+    reports the located error and gives zeros instead (its callers unwind, the launcher raises)."""
+    func = s.attrs["func"]
+    rt = g.result_type(func)
+    args = "".join(f", {llvm_type(o.vtype)} {f.v(o)}" for o in s.operands)
+    sym = g.function_symbol(func)
+    if not f.is_function:
+        r = f.tmp("call")
+        f.emit(f"{r} = call {rt} @{sym}(ptr %ctx, i32 {f.tid}, i32 1{args})" if func.returns else
+               f"call void @{sym}(ptr %ctx, i32 {f.tid}, i32 1{args})")
+        f.names[s] = r
+        return
+    depth, ok, r = f.tmp("depth"), f.tmp("shallow"), f.tmp("call")
+    f.emit(f"{depth} = add i32 {f.depth}, 1")
+    f.emit(f"{ok} = icmp ule i32 {depth}, {g.max_call_depth}")
+    go, deep, join = f.label("call"), f.label("deep"), f.label("called")
+    f.emit(f"br i1 {ok}, label %{go}, label %{deep}, !prof !2")
+    f.start_block(deep)
+    code = g.error_code("recursion", s.loc, f"real function {func.name.rsplit('_', 1)[0]} recursed deeper than "
+                                            f"{g.max_call_depth} calls (simgrad's limit on this target, which keeps "
+                                            "the thread's stack from overflowing)")
+    f.emit(f"call void @sg_report(ptr %ctx, i64 {code}, i64 0)")
+    f.emit(f"br label %{join}")
+    f.start_block(go)
+    if func.returns:
+        f.emit(f"{r}.c = call {rt} @{sym}(ptr %ctx, i32 {f.tid}, i32 {depth}{args})")
+    else:
+        f.emit(f"call void @{sym}(ptr %ctx, i32 {f.tid}, i32 {depth}{args})")
+    f.emit(f"br label %{join}")
+    f.start_block(join)
+    if func.returns:
+        f.emit(f"{r} = phi {rt} [zeroinitializer, %{deep}], [{r}.c, %{go}]")
+    f.names[s] = r
+    if "!2 = " not in "".join(g.module.globals):
+        g.module.globals.append('!2 = !{!"branch_weights", i32 1000000, i32 1}')
+
+
+def lower_call_result(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    (call,) = s.operands
+    r = f.tmp("res")
+    f.emit(f"{r} = extractvalue {g.result_type(call.attrs['func'])} {f.v(call)}, {s.attrs['index']}")
+    f.names[s] = r
+
+
+def lower_func_return(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    if not s.operands:
+        f.emit("ret void")
+        return
+    rt = "{ " + ", ".join(llvm_type(o.vtype) for o in s.operands) + " }"  # the function's result_type
+    acc = "undef"
+    for k, o in enumerate(s.operands):
+        nxt = f.tmp("rv")
+        f.emit(f"{nxt} = insertvalue {rt} {acc}, {llvm_type(o.vtype)} {f.v(o)}, {k}")
+        acc = nxt
+    f.emit(f"ret {rt} {acc}")
+
+
 def _not_lowered(s: Stmt) -> None:
     raise AssertionError(f"internal: {s!r} reached codegen without passes/lower_access.py")
 
@@ -790,4 +891,5 @@ LOWERING: dict[Op, Lowering] = {
     Op.TAPE_PUSH: lower_tape_push, Op.TAPE_POP: lower_tape_pop,
     Op.SNODE_OP: lambda g, f, s: _not_lowered(s), Op.TREE_ROOT: lower_tree_root,
     Op.SPARSE_CELL: lower_sparse_cell, Op.SPARSE_ACTION: lower_sparse_action,
+    Op.PARAM: lower_param, Op.CALL: lower_call, Op.CALL_RESULT: lower_call_result, Op.FUNC_RETURN: lower_func_return,
 }

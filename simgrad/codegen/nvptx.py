@@ -126,6 +126,12 @@ class GpuCodegen(KernelCodegen):
         self.scratch_slots = 0
         self.tape_top_slot: int | None = None  # 0 in the host context each launch copies to the device
 
+    #: a GPU thread's stack is small: 1 KiB unless ti.init(cuda_stack_limit=...) says more (runtime/device.py)
+    max_call_depth = 256
+
+    def function_text(self, name: str, params: str) -> FunctionText:
+        return GpuFunction(self, name, params, in_task=False)
+
     def emit_print(self, f: FunctionText, fmt: str, args: list[str]) -> None:
         """On the GPU: vprintf(fmt, buffer) with the promoted arguments in a struct, each at its natural
         alignment (the layout CUDA's device printf reads); the driver prints at the next synchronisation."""
@@ -238,6 +244,7 @@ class GpuCodegen(KernelCodegen):
                 self._loop_kernel(name, stmts[0])
             elif not all(s.op in PURE for s in stmts):
                 self._serial_kernel(name, stmts)
+        self.emit_functions()  # real functions: device functions the segments call (recursion uses the stack)
         self.module.globals.append("!0 = !{}")
         if self.fn_attrs and not self.sim:  # libdevice's __nvvm_reflect("__CUDA_FTZ") answers 1: its .ftz paths
             self.module.globals += ["!llvm.module.flags = !{!2}", '!2 = !{i32 4, !"nvvm-reflect-ftz", i32 1}']

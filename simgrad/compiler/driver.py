@@ -220,7 +220,8 @@ def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_su
             "launches": [(ln.symbol.replace(symbol, "sg_kernel"), ln.grid, ln.block)
                          for ln in getattr(cg, "launches", ())],
             # a kernel that prints waits on arch=cuda, so its output comes before the next statement's (Taichi)
-            "prints": prog.on_gpu and any(s.op is Op.PRINT for s in walk(ir.body))}
+            "prints": prog.on_gpu and any(s.op is Op.PRINT for body in (ir.body, *(f.body for f in ir.functions))
+                                          for s in walk(body))}
     return ir, stable, meta
 
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import ast
 import builtins
 import inspect
-from typing import TYPE_CHECKING
 
 from simgrad import dtypes as dt
 from simgrad.errors import ArgumentCountError, SimgradError, SimgradSyntaxError, SimgradTypeError
 from simgrad.frontend.frames import Frame, RangeSpec
+from simgrad.frontend.realfuncs import call_real, check_matrix_argument, specialisation
 from simgrad.frontend.refs import LOCAL_REFS, MatrixRef, VarRef, tensor_text
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
@@ -18,9 +18,6 @@ from simgrad.lang.field import Field, MatrixField, ScalarField
 from simgrad.lang.loops import static as _static
 from simgrad.lang.matrix import Matrix
 from simgrad.lang.struct import Struct
-
-if TYPE_CHECKING:
-    from simgrad.lang.types import MatrixType
 
 
 def _builtin_int(x=0, *rest):
@@ -126,9 +123,9 @@ def call(comp, node: ast.Call):
     from simgrad.lang.functions import BoundFunc, Func, KernelDef
 
     if isinstance(fn, Func):
-        return inline(comp, fn, args, kwargs, node)
+        return call_func(comp, fn, args, kwargs, node)
     if isinstance(fn, BoundFunc):  # a ti.func method of a data-oriented object
-        return inline(comp, fn.func, [fn.obj, *args], kwargs, node)
+        return call_func(comp, fn.func, [fn.obj, *args], kwargs, node)
     if isinstance(fn, KernelDef):
         raise SimgradSyntaxError(f"kernel {fn.name} cannot be called from inside a kernel; make it a @ti.func",
                                  comp.loc(node))
@@ -223,14 +220,9 @@ def _check_array_argument(name: str, ann, value, loc, real: bool = False) -> Non
         raise SimgradTypeError(f"Invalid value for argument {name} - required {wrong}", loc)
 
 
-def inline(comp, fn, args, kwargs, node):
-    """Inline a ti.func: parameters are fresh locals (pass by value) except ti.template() ones."""
-    from simgrad.frontend.source import get_source
-    from simgrad.lang.types import MatrixType, by_reference
-
-    if len(comp.frames) > comp.MAX_INLINE_DEPTH:
-        raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
-                                 comp.loc(node))
+def call_func(comp, fn, args, kwargs, node):
+    """A ti.func call: inlined; a real function's too, unless the same specialisation is being inlined
+    already (run-time recursion): then a CALL of its Function (frontend/realfuncs.py)."""
     from simgrad.lang.functions import binding_error
 
     sig = fn.signature
@@ -239,8 +231,27 @@ def inline(comp, fn, args, kwargs, node):
         raise ArgumentCountError(f"calling ti.func {fn.name}: {wrong}", comp.loc(node))
     bound = sig.bind(*args, **kwargs)
     bound.apply_defaults()
+    key = None
+    if getattr(fn, "real", False):
+        key = specialisation(fn, bound)
+        if key is not None and (key in comp.real_functions or any(f.real_key == key for f in comp.frames)):
+            return call_real(comp, fn, bound, key, node)
+    return inline(comp, fn, bound, node, key)
+
+
+def inline(comp, fn, bound, node, real_key=None):
+    """Inline a ti.func (its arguments bound): parameters are fresh locals (pass by value) except ti.template()
+    ones."""
+    from simgrad.frontend.source import get_source
+    from simgrad.lang.types import MatrixType, by_reference
+
+    if len(comp.frames) > comp.MAX_INLINE_DEPTH:
+        raise SimgradSyntaxError(f"ti.func {fn.name} recurses too deeply (recursion is not supported)",
+                                 comp.loc(node))
+    sig = fn.signature
     frame = Frame(get_source(fn.func), False)
     frame.real = getattr(fn, "real", False)
+    frame.real_key = real_key
     for name, value in bound.arguments.items():
         ann = sig.parameters[name].annotation
         _check_array_argument(name, ann, value, comp.loc(node), getattr(fn, "real", False))
@@ -249,7 +260,7 @@ def inline(comp, fn, args, kwargs, node):
         elif isinstance(value, Struct):  # by value, as matrices: `s.b *= 2` in the callee's loop assigns a local
             frame.scopes[0][name] = comp.new_var(value)
         elif isinstance(ann, MatrixType):
-            _check_matrix_argument(name, ann, value, comp.loc(node))
+            check_matrix_argument(name, ann, value, comp.loc(node))
             frame.scopes[0][name] = comp.new_var(ann.make(value), ann.dtype)
         elif ann is not inspect.Parameter.empty and _is_scalar_type(ann):
             frame.scopes[0][name] = comp.new_var(value, ann)
@@ -283,23 +294,8 @@ def inline(comp, fn, args, kwargs, node):
     return rv
 
 
-def _check_matrix_argument(name: str, ann: MatrixType, value, loc) -> None:
-    """A matrix for a parameter annotated with a matrix type has its shape (Taichi's TaichiSyntaxError texts);
-    it was reinterpreted silently."""
-    if not isinstance(value, Matrix) or ann.n is None:
-        return
-    want, got = ann.shape, value.shape
-    if len(want) != len(got):
-        raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with ndim {len(want)}, "
-                                 f"but got {len(got)}.", loc)
-    for axis, letter in enumerate("nm"[:len(want)]):
-        if want[axis] != got[axis]:
-            raise SimgradSyntaxError(f"Argument {name} of type {ann} is expected to be a Matrix with {letter} "
-                                     f"{want[axis]}, but got {got[axis]}.", loc)
-
-
 def _is_scalar_type(ann) -> bool:
     return isinstance(ann, dt.DataType) or ann in (int, float)
 
 
-__all__ = ["call", "inline", "VarRef", "MatrixRef", "Op"]
+__all__ = ["call", "call_func", "inline", "VarRef", "MatrixRef", "Op"]

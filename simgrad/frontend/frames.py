@@ -57,3 +57,4 @@ class Frame:
         self.dynamic_returns = 0
         self.returned_here = False
         self.real = False  # a ti.real_func: its loops are serial (it is a function the kernel calls)
+        self.real_key = None  # a real function's specialisation (frontend/realfuncs.py): calling it inside recurses

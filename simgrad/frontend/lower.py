@@ -79,6 +79,8 @@ class KernelLowering:
         self.stopped_grads: dict[int, object] = {}  # id(FieldRef) -> the top-level loop ti.stop_grad is in
         self.static_loops: list[tuple] = []  # the ti.static loops being unrolled (frontend/loops.py _unroll)
         self.static_scope = 0  # > 0 while the arguments of a ti.static(...) call are evaluated (frontend/calls.py)
+        # specialisation key -> (IR Function, result annotation) of the recursive real functions (frontend/realfuncs.py)
+        self.real_functions: dict = {}
 
     @property
     def frame(self) -> Frame:
@@ -87,9 +89,9 @@ class KernelLowering:
     # -- what lang objects ask of the compiler on the context stack (lang imports no frontend) -----------
     def call_func(self, fn, args: list, kwargs: dict):
         """A ti.func called from Python code running at compile time: inlined here."""
-        from simgrad.frontend.calls import inline
+        from simgrad.frontend.calls import call_func
 
-        return inline(self, fn, args, kwargs, self.frame.src.tree)
+        return call_func(self, fn, args, kwargs, self.frame.src.tree)
 
     def stop_grad(self, field) -> None:
         """ti.stop_grad(x): no gradient flows through x's elements for the rest of this top-level loop
@@ -755,6 +757,8 @@ class KernelLowering:
             return ref.load()
         value = self.eval(node.value)
         index = self.eval_index(node.slice)
+        if isinstance(value, (Expr, Matrix)):
+            _refuse_negative(index, self.loc(node))
         return value[index]
 
     def eval_index(self, node):
@@ -830,6 +834,7 @@ class KernelLowering:
                     return None
                 key = self.eval_index(node.slice)
                 key = key if isinstance(key, tuple) else (key,)
+                _refuse_negative(key, self.loc(node))
                 if any(isinstance(k, Expr) for k in key) and not any(isinstance(k, slice) for k in key):
                     return DynamicElementRef(base_ref, key)
                 return base_ref.index(key if len(key) > 1 else key[0])
@@ -837,7 +842,10 @@ class KernelLowering:
                 return None
             base = self.eval(node.value)
             if isinstance(base, (Field,)) or _is_array_arg(base):
-                return global_ref(self, base, self.eval_index(node.slice), node)
+                index = self.eval_index(node.slice)
+                if not isinstance(base, Field):  # a field's Python-number index may be negative (Taichi's rule)
+                    _refuse_negative(index, self.loc(node))
+                return global_ref(self, base, index, node)
             if _is_builder_arg(base):
                 return base.ref(self.eval_index(node.slice), self.loc(node))
             return None
@@ -851,6 +859,18 @@ class KernelLowering:
                 return base_ref.member(node.attr)
             return None
         return None
+
+
+def _refuse_negative(index, loc) -> None:
+    """Taichi's rule for subscripts of kernel values other than fields (local matrices, ndarrays): a compile-time
+    index or slice bound below zero is a syntax error, not Python's count from the end."""
+    if isinstance(index, (tuple, list)):
+        for k in index:
+            _refuse_negative(k, loc)
+    elif isinstance(index, slice):
+        _refuse_negative((index.start, index.stop), loc)
+    elif isinstance(index, (int, float)) and not isinstance(index, bool) and index < 0:
+        raise SimgradSyntaxError("Negative indices are not supported in Taichi kernels.", loc)
 
 
 class VarList(list):

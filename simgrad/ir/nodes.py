@@ -94,3 +94,19 @@ class Kernel:
         self.ret_slot = 0  # the first context slot after the arguments: return values go there
         self.uses_tape = False  # an adjoint that pushes values on the per-thread tape (autodiff sets it)
         self.tape_bound: int | None = None  # tape entries a thread needs, when the loop bounds prove it
+        self.functions: list[Function] = []  # the real functions its CALLs (and theirs) reach
+
+
+class Function(Kernel):
+    """A real function of a kernel (a recursive ti.real_func, frontend/calls.py): a body block that begins
+    with its PARAMs and ends with one FUNC_RETURN; the passes run on it as on a kernel body, codegen emits
+    it as an LLVM function. `returns` are its results' types (not kernel return slots)."""
+
+    def __init__(self, name: str, params: list[DataType], returns: list[DataType], loc: Loc | None):
+        super().__init__(name)
+        self.params = params
+        self.returns = returns
+        self.loc = loc
+
+    def ir_name(self) -> str:
+        return f"@{self.name}"

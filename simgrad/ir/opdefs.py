@@ -118,6 +118,14 @@ class Op(Enum):
     TAPE_RESET = auto()
     TAPE_PUSH = auto()
     TAPE_POP = auto()
+    # real functions (a recursive ti.real_func, ir/nodes.py Function): PARAM is a parameter's value inside the
+    # function (attrs: index); CALL calls one (attrs: func; operands: the arguments; no value); CALL_RESULT is
+    # one of its results (operand: the CALL; attrs: index); FUNC_RETURN ends the function's body (operands: the
+    # results, one per entry of Function.returns)
+    PARAM = auto()
+    CALL = auto()
+    CALL_RESULT = auto()
+    FUNC_RETURN = auto()
 
 
 # -- lowering, as data (codegen/arith.py interprets these) -----------------------------------------------

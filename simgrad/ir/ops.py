@@ -18,7 +18,7 @@ INT_ONLY = {op for op, d in OPS.items() if d.domain == INT}
 SIDE_EFFECTS = {
     Op.LOCAL_STORE, Op.GLOBAL_STORE, Op.ATOMIC, Op.RET_STORE, Op.IF, Op.RANGE_FOR, Op.WHILE, Op.BREAK,
     Op.CONTINUE, Op.PRINT, Op.ASSERT, Op.RANDOM, Op.TAPE_RESET, Op.TAPE_PUSH, Op.TAPE_POP, Op.CHECK_INDEX,
-    Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION,
+    Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION, Op.CALL, Op.FUNC_RETURN,
 }
 # Pure value computations: candidates for common-subexpression elimination and folding.
 PURE = ELEMENTWISE | {Op.CONST, Op.CAST, Op.BITCAST, Op.SELECT, Op.ARG, Op.ARRAY_SHAPE, Op.GLOBAL_PTR, Op.TREE_ROOT}

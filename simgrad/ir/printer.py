@@ -27,7 +27,7 @@ def _operand_text(o: Stmt, names: dict[Stmt, str]) -> str:
 
 def _stmt_text(s: Stmt, names: dict[Stmt, str]) -> str:
     ops = ", ".join(_operand_text(o, names) for o in s.operands)
-    lhs = f"%{s.id}:{s.type} = " if s.type is not None else ""
+    lhs = f"%{s.id}:{s.type} = " if s.type is not None else f"%{s.id} = " if s.op is Op.CALL else ""
     where = f"  # {os.path.basename(s.loc.file)}:{s.loc.line}" if s.loc else ""
     return f"{lhs}{s.op.name.lower()} {ops}{_attr_text(s)}".rstrip() + where
 
@@ -50,4 +50,9 @@ def print_block(block: Block, indent: int = 0, names: dict | None = None) -> lis
 
 
 def print_kernel(kernel: Kernel) -> str:
-    return "\n".join([f"kernel {kernel.name} {{", *print_block(kernel.body, 1), "}"])
+    lines = [f"kernel {kernel.name} {{", *print_block(kernel.body, 1), "}"]
+    for fn in kernel.functions:
+        params = ", ".join(str(t) for t in fn.params)
+        rets = ", ".join(str(t) for t in fn.returns)
+        lines += [f"function @{fn.name}({params}) -> ({rets}) {{", *print_block(fn.body, 1), "}"]
+    return "\n".join(lines)

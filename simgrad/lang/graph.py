@@ -17,7 +17,7 @@ import enum
 from simgrad.errors import SimgradError, SimgradNotSupportedError, caller_loc
 from simgrad.runtime.launch import Sequence, replay_key
 
-__all__ = ["Arg", "ArgKind", "Graph", "GraphBuilder"]
+__all__ = ["Arg", "ArgKind", "Format", "Graph", "GraphBuilder"]
 
 
 class ArgKind(enum.Enum):
@@ -27,6 +27,14 @@ class ArgKind(enum.Enum):
     TEXTURE = 3
     RWTEXTURE = 4
 
+
+# Taichi's texture formats (ti.Format), in its order: only so that a program naming one reaches Arg's checks, as
+# Taichi's removed-argument errors come before anything about the texture itself (textures are not built)
+Format = enum.IntEnum("Format", [
+    "unknown", "r8", "rg8", "rgba8", "rgba8srgb", "bgra8", "bgra8srgb", "r8u", "rg8u", "rgba8u", "r8i", "rg8i",
+    "rgba8i", "r16", "rg16", "rgb16", "rgba16", "r16u", "rg16u", "rgb16u", "rgba16u", "r16i", "rg16i", "rgb16i",
+    "rgba16i", "r16f", "rg16f", "rgb16f", "rgba16f", "r32u", "rg32u", "rgb32u", "rgba32u", "r32i", "rg32i", "rgb32i",
+    "rgba32i", "r32f", "rg32f", "rgb32f", "rgba32f", "depth16", "depth24stencil8", "depth32f"], start=0)
 
 _POSITIONAL = ("tag", "name", "dtype", "ndim", "field_dim", "element_shape")
 

@@ -5,10 +5,24 @@ from __future__ import annotations
 from simgrad.lang.program import Program, get_program
 
 
+class _ProgramView:
+    """Taichi's `prog` object: the current Program's attributes, and `config()` a method as in Taichi (simgrad's
+    Program keeps its config as an attribute, read all over the compiler)."""
+
+    def __init__(self, program: Program):
+        self._program = program
+
+    def config(self):
+        return self._program.config
+
+    def __getattr__(self, name: str):
+        return getattr(self._program, name)
+
+
 class _Runtime:
     @property
-    def prog(self) -> Program:
-        return get_program()
+    def prog(self) -> _ProgramView:
+        return _ProgramView(get_program())
 
     @property
     def default_fp(self):

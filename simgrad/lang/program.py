@@ -310,7 +310,8 @@ class Program:
             from simgrad.lang.archs import gpu_mode
             from simgrad.runtime import device
 
-            self._device = device.CudaDriver() if gpu_mode() == "cuda" else \
+            self._device = device.CudaDriver(stack_bytes=int(self.config.cuda_stack_limit or 0)) \
+                if gpu_mode() == "cuda" else \
                 device.HostDriver(deferred=self.on_gpu and device.sim_deferred())
         return self._device
 

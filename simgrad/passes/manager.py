@@ -49,9 +49,25 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     else:  # the frontend's output and the last pass's always (linear, cheap next to LLVM): invalid IR is a
         # located internal error, never LLVM's verifier or a silently wrong fold of an out-of-scope value
         steps = [("verify", verify.verify), *steps, ("verify", verify.verify)]
+    if transform is not None and kernel.functions:
+        _refuse_transform(kernel)
     for name, fn in steps:
         if level >= 1:
             print(f"[simgrad] {kernel.name}: {name}")
         fn(kernel)
+        for func in kernel.functions:  # a real function's body: the same passes, never the transform
+            if fn is not transform:
+                fn(func)
         if level >= 2:
             print(print_kernel(kernel))
+
+
+def _refuse_transform(kernel: Kernel) -> None:
+    """Taichi compiles no gradient of a kernel that calls a real function; simgrad inlines the ones that do not
+    recurse (so their gradients work) and refuses, at the call, a kernel that still calls one."""
+    from simgrad.errors import SimgradSyntaxError
+    from simgrad.ir.nodes import walk
+    from simgrad.ir.ops import Op
+
+    call = next(s for s in walk(kernel.body) if s.op is Op.CALL)
+    raise SimgradSyntaxError("Real function in gradient kernels unsupported.", call.loc)

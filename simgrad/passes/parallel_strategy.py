@@ -56,8 +56,9 @@ class LoopStrategy:
 
 def parallel_strategy(kernel: Kernel, debug: bool = False) -> bool:
     """Annotate every parallel loop and every atomic of the kernel. In debug mode no pairs (each update
-    is bounds-checked on its own) and no slices of copies (an out-of-bounds slice index must be reported,
-    not summed into)."""
+    is bounds-checked on its own), no slices of copies (an out-of-bounds slice index must be reported,
+    not summed into) and no per-thread sums of indexed field elements (the final add addresses the element after
+    the loop, where its checked offset, computed in the loop, is not defined: LLVM's verifier refused it)."""
     uses: dict[int, int] = {}
     for x in walk(kernel.body):
         for o in x.operands:
@@ -84,7 +85,7 @@ def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
     shared = {id(x.operands[0].attrs["target"]) for x in walk(loop.blocks[0])
               if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
               and not injective_in(loop, x.operands[0], inside)}
-    reductions = _reductions(loop, inside, uses)
+    reductions = _reductions(loop, inside, uses, debug)
     reduced = {key[0] for key in reductions}
     regions, weight = private_regions(loop, inside, uses, shared, reduced, debug)
     grain = loop.attrs.get("block_dim") or max(1, 4096 // max(1, sum(1 for _ in walk(loop.blocks[0]))))
@@ -161,9 +162,10 @@ def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
     return digit_chain(ptr.operands, loop) is not None
 
 
-def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
+def _reductions(loop: Stmt, inside: set, uses: dict, debug: bool = False) -> dict:
     """Places a parallel loop only accumulates into: every access is an atomic add whose old value is
-    unused, at loop-invariant indices. {key: (a pointer statement, [the ATOMIC statements])}."""
+    unused, at loop-invariant indices (in debug mode locals and 0-D fields only). {key: (a pointer statement,
+    [the ATOMIC statements])}."""
     groups: dict[tuple, tuple[Stmt, list[Stmt]]] = {}
     spoiled: set[int] = set()
     inside = inside | {id(loop)}  # the loop index varies too
@@ -174,7 +176,9 @@ def _reductions(loop: Stmt, inside: set, uses: dict) -> dict:
                 continue
             key: tuple
             if o.op is Op.GLOBAL_PTR:
-                if getattr(o.attrs["target"], "sparse", False):  # its address is looked up in the loop
+                # its address is computed in the loop: a sparse element's, or in debug mode an indexed element's
+                # (its checked offset is; a 0-D field's offset is a constant)
+                if (debug and o.operands) or getattr(o.attrs["target"], "sparse", False):
                     spoiled.add(id(o.attrs["target"]))
                     continue
                 if any(i.op is not Op.CONST and id(i) in inside for i in o.operands):

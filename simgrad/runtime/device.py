@@ -297,7 +297,7 @@ class CudaDriver(Device):
     name = "CUDA"
     asynchronous = True
 
-    def __init__(self, ordinal: int = 0) -> None:
+    def __init__(self, ordinal: int = 0, stack_bytes: int = 0) -> None:
         from cuda.bindings import driver as cu  # type: ignore[import-not-found]
 
         self.cu = cu
@@ -305,6 +305,8 @@ class CudaDriver(Device):
         self.device = self._check(cu.cuDeviceGet(ordinal))
         self.context = self._check(cu.cuDevicePrimaryCtxRetain(self.device))
         self._check(cu.cuCtxSetCurrent(self.context))
+        if stack_bytes > 0:  # ti.init(cuda_stack_limit=...): a thread's stack, which recursive real functions use
+            self._check(cu.cuCtxSetLimit(cu.CUlimit.CU_LIMIT_STACK_SIZE, int(stack_bytes)))
         major = self._check(cu.cuDeviceGetAttribute(
             cu.CUdevice_attribute.CU_DEVICE_ATTRIBUTE_COMPUTE_CAPABILITY_MAJOR, self.device))
         minor = self._check(cu.cuDeviceGetAttribute(

@@ -156,7 +156,7 @@ class Launcher:
             if not isinstance(detail, str):
                 detail = assert_message(detail, saved[ERR_ARGS:].tolist())
             raise SimgradAssertionError(f"assertion failed: {detail}", loc)
-        if kind == "adstack":
+        if kind in ("adstack", "recursion"):
             raise SimgradRuntimeError(detail, loc)
         if kind == "sparse_pool":
             raise SimgradRuntimeError(f"out of memory for {detail} SNode blocks: its pool holds {value} blocks "

@@ -40,7 +40,7 @@ def test_slices_of_local_vectors_and_matrices_read_and_write():
         out[2], out[3] = v[0], v[1]
         out[4], out[5] = m[0, 2], m[1, 2]
         w = m[:2, 1:]
-        out[6], out[7] = w[0, 0] + w[1, 1], v[-1]
+        out[6], out[7] = w[0, 0] + w[1, 1], v[3]  # v[-1] is refused, as in Taichi
 
     k(1.5)
     np.testing.assert_allclose(out.to_numpy(), [2 * 1.5 + 4, 3 * 1.5 + 5, -1, -2, 7, 8, 2 + 8, 6.0])
@@ -145,3 +145,47 @@ def test_python_values_in_a_list_assigned_under_runtime_control_flow_are_an_erro
     with pytest.raises(ti.SimgradSyntaxError, match="run-time control flow") as e:
         k()
     assert "counts[0] = x[i]" in str(e.value)
+
+
+def test_negative_indices_of_kernel_values_are_taichis_syntax_error():
+    """Taichi refuses a negative compile-time index or slice bound on a local matrix or an ndarray (not Python's
+    count from the end); a field's index and a Python list's stay as they are. Values from taichi 1.7.4."""
+    ti.init(arch=ti.cpu)
+    a = ti.ndarray(ti.f32, 4)
+    f = ti.field(ti.f32, 4)
+
+    @ti.kernel
+    def local_slice(i: int):
+        x = ti.Vector([i, i + 1, i + 2])
+        print(x[:-1])
+
+    @ti.kernel
+    def local_index(i: int) -> int:
+        x = ti.Vector([i, i + 1, i + 2])
+        return x[-1]
+
+    @ti.kernel
+    def temporary(i: int) -> int:
+        x = ti.Vector([i, i + 1, i + 2])
+        return (x * 2)[:-1].sum()
+
+    @ti.kernel
+    def array(a: ti.types.ndarray()) -> float:
+        return a[-1]
+
+    @ti.kernel
+    def python_list(i: int) -> int:
+        x = [i, i + 1, i + 2]
+        return x[-1] + x[:-1][0]
+
+    @ti.kernel
+    def positive(i: int) -> int:
+        x = ti.Vector([i, i + 1, i + 2])
+        return x[1:].sum() + x[::2].sum()
+
+    for kernel, args in ((local_slice, (0,)), (local_index, (0,)), (temporary, (1,)), (array, (a,))):
+        with pytest.raises(ti.TaichiSyntaxError, match="Negative indices are not supported in Taichi kernels"):
+            kernel(*args)
+    assert python_list(1) == 4 and positive(1) == 5 + 4
+    f[3] = 2.0
+    assert f[3] == 2.0

@@ -1,6 +1,6 @@
 """A representative set of kernels (arith, math, atomics, loops, while/break, local matrices, a Tape adjoint with
-a serial inner loop, f16, ndarray args, sparse SNodes, a tape deeper than local memory) for the GPU tests: each
-`case` compiles and runs its kernels and returns (result, numpy reference)."""
+a serial inner loop, f16, ndarray args, sparse SNodes, a tape deeper than local memory, recursive real functions)
+for the GPU tests: each `case` compiles and runs its kernels and returns (result, numpy reference)."""
 
 from __future__ import annotations
 
@@ -270,5 +270,55 @@ def deep_tape():
     return [(x.grad.to_numpy(), reference(1500)[1], 1e-9)]
 
 
+def recursion():
+    """Recursive real functions (device functions that call themselves): from a parallel loop, with an atomic
+    update and a matrix result, and from serial code (Taichi's test_recursion)."""
+    out = ti.field(ti.i32, shape=N)
+    calls = ti.field(ti.i32, shape=())
+    pw = ti.Vector.field(2, ti.f32, shape=N)
+    f = ti.field(ti.i32, shape=100)
+    f.from_numpy(np.arange(100, dtype=np.int32))
+
+    @ti.real_func
+    def fib(k: ti.i32) -> ti.i32:
+        calls[None] += 1
+        r = k
+        if k >= 2:
+            r = fib(k - 1) + fib(k - 2)
+        return r
+
+    @ti.real_func
+    def power(v: ti.math.vec2, k: ti.i32) -> ti.math.vec2:
+        r = ti.math.vec2(1.0, 1.0)
+        if k > 0:
+            r = v * power(v, k - 1)
+        return r
+
+    @ti.real_func
+    def total(g: ti.template(), lo: ti.i32, hi: ti.i32) -> ti.i32:
+        if lo == hi:
+            return g[lo]
+        else:
+            return total(g, lo, (lo + hi) // 2) + total(g, (lo + hi) // 2 + 1, hi)
+
+    @ti.kernel
+    def k() -> ti.i32:
+        for i in out:
+            out[i] = fib(i % 10)
+            pw[i] = power(ti.math.vec2(1.0 + i % 8 * 0.5, 0.5), i % 5)
+        return total(f, 0, 99)
+
+    s = k()
+    i = np.arange(N)
+    fibs = [0, 1]
+    ncalls = [1, 1]
+    for _ in range(8):
+        fibs.append(fibs[-1] + fibs[-2])
+        ncalls.append(1 + ncalls[-1] + ncalls[-2])
+    base = np.stack([1.0 + i % 8 * 0.5, np.full(N, 0.5)], 1)
+    return [(s, 4950, 0), (out.to_numpy(), np.array(fibs)[i % 10], 0),
+            (calls[None], np.array(ncalls)[i % 10].sum(), 0), (pw.to_numpy(), base ** (i % 5)[:, None], 1e-6)]
+
+
 CASES = [arith_math, registry_math, atomics, loops_while, local_matrix, tape_adjoint, half_and_ndarray,
-         serial_and_return, sparse_nodes, deep_tape]
+         serial_and_return, sparse_nodes, deep_tape, recursion]

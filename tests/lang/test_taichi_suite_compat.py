@@ -299,6 +299,23 @@ def test_graph_arguments_removed_in_taichi_1_7():
         ti.graph.Arg(ti.graph.ArgKind.NDARRAY, "x", ti.f32, ndim=1, element_shape=(1,))
     with pytest.raises(ti.TaichiRuntimeError, match="shape argument for texture is deprecated"):
         ti.graph.Arg(ti.graph.ArgKind.TEXTURE, "x", shape=(128, 128), channel_format=ti.f32)
+    # an RW texture names its format with ti.Format (Taichi's enum, same members and values)
+    assert ti.Format.r32f == 37 and ti.Format.unknown == 0 and ti.Format.depth32f.name == "depth32f"
+    with pytest.raises(ti.TaichiRuntimeError, match="shape argument for texture is deprecated"):
+        ti.graph.Arg(ti.graph.ArgKind.RWTEXTURE, "x", shape=(128, 128), fmt=ti.Format.r32f)
+    with pytest.raises(ti.TaichiRuntimeError, match="channel_format and num_channels arguments for texture are "
+                                                    "deprecated"):
+        ti.graph.Arg(ti.graph.ArgKind.RWTEXTURE, "x", ndim=2, channel_format=ti.f32, num_channels=1)
+    with pytest.raises(ti.SimgradNotSupportedError, match="textures"):
+        ti.graph.Arg(ti.graph.ArgKind.RWTEXTURE, "x", ndim=2, fmt=ti.Format.r32f)
+
+
+def test_prog_config_is_a_method_as_in_taichi():
+    """test_function.py's test_ref_atomic asks `ti.lang.impl.get_runtime().prog.config().arch`."""
+    ti.init(arch=ti.cpu, debug=True)
+    prog = ti.lang.impl.get_runtime().prog
+    assert prog.config().arch == ti.cpu and prog.config().debug is True
+    assert prog.get_total_compilation_time() >= 0.0  # the Program's own attributes still answer
 
 
 def test_experimental_real_func_is_real_func_with_a_deprecation_warning():

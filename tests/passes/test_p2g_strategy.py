@@ -5,6 +5,7 @@ state is owned. Golden: tests/passes/golden/p2g_strategies.txt."""
 from collections import Counter
 
 import numpy as np
+import pytest
 
 import simgrad as ti
 from simgrad.ir.nodes import walk
@@ -65,3 +66,36 @@ def test_p2g_and_its_adjoint_keep_their_strategies(golden):
                                  ("grid_m", "private|atomic"): 9})
     assert {form for (_name, form) in bwd_forms} == {"plain"}  # each particle gradient is owned by its p
     golden.check("p2g_strategies.txt", f"forward:\n{fwd}adjoint:\n{bwd}")
+
+
+def test_debug_mode_sums_into_a_field_element_atomically():
+    """ti.init(debug=True): `x[n % 8] += 1` in a parallel loop was a per-thread sum whose final add re-addressed
+    x[n % 8] after the loop, with the bounds-checked offset computed inside it (LLVM's verifier fired); in debug
+    mode a field element is updated atomically, a local is still summed per thread."""
+    ti.init(arch=ti.cpu, debug=True)
+    x = ti.field(ti.f32, shape=8)
+    t = ti.field(ti.f32, shape=())
+
+    @ti.kernel
+    def run(n: ti.i32) -> ti.f32:
+        s = 0.0
+        for _ in range(1000):
+            x[n % 8] += 1.0
+            x[2] += 2.0  # a constant index is checked in the loop too
+            t[None] += 1.0  # a 0-D field has no index: still summed per thread
+            s += 0.5
+        return s
+
+    assert run(13) == 500.0 and t[None] == 1000.0
+    np.testing.assert_array_equal(x.to_numpy(), [0, 0, 2000, 0, 0, 1000, 0, 0])
+    forms = [s.attrs["strategy"] for s in walk(run.instance((13,)).ir.body) if s.op is Op.ATOMIC]
+    assert forms[2:] == ["reduce", "reduce"] and "reduce" not in forms[0] + forms[1]
+    x_bad = ti.field(ti.f32, shape=4)
+
+    @ti.kernel
+    def bad(n: ti.i32):
+        for _ in range(10):
+            x_bad[n] += 1.0
+
+    with pytest.raises(Exception, match="index 7 is out of bounds"):  # still checked, in the loop
+        bad(7)
