@@ -61,8 +61,8 @@ class Launch:
 class GpuFunction(FunctionText):
     """A segment's function: the tape in this thread's local memory, no Ctrl-C polling on the device."""
 
-    def __init__(self, gen: GpuCodegen, name: str, params: str, in_task: bool):
-        super().__init__(gen, name, params, in_task, host_entry=True)  # each segment is launched
+    def __init__(self, gen: GpuCodegen, name: str, params: str, in_task: bool, host_entry: bool = False):
+        super().__init__(gen, name, params, in_task, host_entry)
         self.gpu = gen
         self._sregs: dict[str, str] = {}
 
@@ -247,11 +247,12 @@ class GpuCodegen(KernelCodegen):
         self.emit_functions()  # real functions: device functions the segments call (recursion uses the stack)
         self.module.globals.append("!0 = !{}")
         if self.fn_attrs and not self.sim:  # libdevice's __nvvm_reflect("__CUDA_FTZ") answers 1: its .ftz paths
-            self.module.globals += ["!llvm.module.flags = !{!2}", '!2 = !{i32 4, !"nvvm-reflect-ftz", i32 1}']
+            # (an id of its own: codegen numbers its branch weights from !1)
+            self.module.globals += ["!llvm.module.flags = !{!100}", '!100 = !{i32 4, !"nvvm-reflect-ftz", i32 1}']
         return self.module.text()
 
     def _serial_kernel(self, name: str, stmts: list[Stmt]) -> None:
-        f = GpuFunction(self, name, self._params(name), in_task=False)
+        f = GpuFunction(self, name, self._params(name), in_task=False, host_entry=True)  # launched
         self._inputs(f, stmts)
         for s in stmts:
             LOWERING[s.op](self, f, s)
@@ -271,7 +272,7 @@ class GpuCodegen(KernelCodegen):
 
     def _loop_kernel(self, name: str, s: Stmt) -> None:
         plan: LoopStrategy = s.attrs["strategy"]
-        f = GpuFunction(self, name, self._params(name), in_task=True)
+        f = GpuFunction(self, name, self._params(name), in_task=True, host_entry=True)  # launched
         f.loop = s
         self._inputs(f, [s])
         tid, ntid, ctaid, nctaid = (f.sreg(r) for r in SREGS)
