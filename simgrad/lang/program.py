@@ -178,7 +178,8 @@ class Program:
         self._pool = None
         self._device = None
         self.set_default_types(self.config.default_fp, self.config.default_ip)
-        self.memory = Memory(self.device.alloc_shared) if self.on_gpu else Memory()
+        self.memory = (Memory(self.device.alloc_shared, lambda a: self.device.free(a.ctypes.data)) if self.on_gpu
+                       else Memory())
         gb = kw.get("device_memory_GB")
         limit = int(gb * 2**30) if gb else MAX_RESERVE
         if self.on_gpu:  # a pool's body is device memory: at most a quarter of the GPU's unless asked for more

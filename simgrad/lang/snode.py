@@ -469,7 +469,8 @@ class SNodeTree:
 
     def destroy(self) -> None:
         """`tree.destroy()` (Taichi's SNodeTree.destroy): its fields refuse every further use (a located
-        TaichiRuntimeError), the tree's buffer is dropped, and every kernel compiles again (as Taichi clears
+        TaichiRuntimeError), the tree's buffer is dropped and its memory returned (runtime/memory.py release), and
+        every kernel compiles again (as Taichi clears
         its compiled functions), so none reaches the old memory. A second destroy is Taichi's error."""
         if self.destroyed:
             raise TaichiRuntimeError("SNode tree has been destroyed", caller_loc())
@@ -483,6 +484,7 @@ class SNodeTree:
                 node.field.view = None
                 node.field.gather = None
         self.buffer = None
+        self.program.memory.release(self.id)  # its pages go back to the system
         self.program.bump_generation()
 
     def materialize(self) -> None:

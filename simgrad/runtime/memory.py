@@ -42,8 +42,11 @@ class Memory:
     """`chunk(n)`: n zeroed bytes as a uint8 array; anonymous host mappings by default, a device's shared
     memory on arch=cuda (runtime/device.py alloc_shared), where the roots table lives too."""
 
-    def __init__(self, chunk: Callable[[int], np.ndarray] = _host_chunk) -> None:
+    def __init__(self, chunk: Callable[[int], np.ndarray] = _host_chunk,
+                 free: Callable[[np.ndarray], None] | None = None) -> None:
         self._new_chunk = chunk
+        self._free = free  # gives a chunk back (a device's memory); host chunks are unmapped when unreferenced
+        self._chunks: dict[int, list] = {}  # address -> [chunk, trees living in it]
         if chunk is _host_chunk:
             self.roots = np.zeros(MAX_TREES, dtype=np.uint64)
         else:
@@ -57,8 +60,16 @@ class Memory:
         size = -(-nbytes // 64) * 64
         if self._chunk is None or self._used + size + SLACK > len(self._chunk):
             n = max(CHUNK, -(-(size + SLACK) // mmap.PAGESIZE) * mmap.PAGESIZE)
+            left = self._chunk
+            old = self._chunks.get(left.ctypes.data) if left is not None else None
+            if left is not None and old is not None and old[1] == 0:  # every tree in it was destroyed
+                del self._chunks[left.ctypes.data]
+                if self._free is not None:
+                    self._free(left)
             self._chunk = self._new_chunk(n)
+            self._chunks[self._chunk.ctypes.data] = [self._chunk, 0]
             self._used = 0
+        self._chunks[self._chunk.ctypes.data][1] += 1
         buf = self._chunk[self._used : self._used + nbytes]
         self._used += size
         return buf
@@ -68,3 +79,34 @@ class Memory:
             raise RuntimeError(f"more than {MAX_TREES} SNode trees in one program")
         self._buffers[tree_id] = buffer
         self.roots[tree_id] = buffer.ctypes.data
+
+    def release(self, tree_id: int) -> None:
+        """A destroyed tree (SNodeTree.destroy): its root is cleared and its memory given back. A chunk no live
+        tree uses any more (and that is not the one being filled) is freed whole (unmapped; a device's chunk
+        freed on the device); otherwise the pages wholly inside the tree's buffer go back to the system
+        (host mappings: MADV_DONTNEED, they would read zero if touched; nothing reaches them, the tree's
+        fields refuse every use). Address ranges inside a live chunk are not reused: the allocator bumps."""
+        buf = self._buffers.pop(tree_id, None)
+        self.roots[tree_id] = 0
+        if buf is None:
+            return
+        addr = buf.ctypes.data
+        for base, entry in list(self._chunks.items()):
+            if base <= addr < base + len(entry[0]):
+                entry[1] -= 1
+                if entry[1] == 0 and entry[0] is not self._chunk:
+                    del self._chunks[base]  # (a host chunk is unmapped once nothing refers to it)
+                    if self._free is not None:
+                        self._free(entry[0])
+                        return
+                break
+        owner = buf.base
+        while owner is not None and not isinstance(owner, mmap.mmap):
+            owner = owner.base if isinstance(owner, np.ndarray) else getattr(owner, "obj", None)  # memoryview
+        if owner is None or not hasattr(mmap, "MADV_DONTNEED"):
+            return  # a device's chunk still in use: kept until the program is released
+        start = addr - np.frombuffer(owner, dtype=np.uint8).ctypes.data
+        lo = -(-start // mmap.PAGESIZE) * mmap.PAGESIZE
+        hi = (start + buf.nbytes) // mmap.PAGESIZE * mmap.PAGESIZE
+        if hi > lo:
+            owner.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
