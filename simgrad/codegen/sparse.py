@@ -153,9 +153,19 @@ def _dyn_element(g, f, s, container: str, cell: str, level, mode: str) -> str:
         f.emit(f"{rr} = sub i64 {cell}, {kc}")
         k, r = f.tmp("dkk"), rr
         f.emit(f"{k} = select i1 {inside}, i64 {kk}, i64 0")
-    blk = f.tmp("dch")
-    f.emit(f"{blk} = call ptr @sg_dyn_chunk(ptr %ctx, i64 {level.pool}, ptr {hdr}, i64 {k}, i1 {write}, "
-           f"i64 {code}, i32 {f.tid}, ptr {_cursor(f, level.pool)})")
+    firstp, f0, blk = f.tmp("dfp"), f.tmp("df0"), f.tmp("dch")
+    f.emit(f"{firstp} = getelementptr i8, ptr {hdr}, i64 8")
+    if mode == "write":  # the chunk's cells as the thread that linked it left them
+        f.emit(f"{f0} = load atomic ptr, ptr {firstp} acquire, align 8")
+    else:  # a plain load: a loop reading the list gets its first chunk hoisted (and may vectorise)
+        f.emit(f"{f0} = load ptr, ptr {firstp}, align 8")
+    if chunk >= level.ncells and mode != "write":  # one chunk: it, or the zero block while the list has none
+        null = f.tmp("dnull")
+        f.emit(f"{null} = icmp eq ptr {f0}, null")
+        f.emit(f"{blk} = select i1 {null}, ptr {_pool_word(f, level.pool, rt.POOL_ZERO)}, ptr {f0}")
+    else:
+        f.emit(f"{blk} = call ptr @sg_dyn_chunk(ptr %ctx, i64 {level.pool}, ptr {hdr}, ptr {f0}, i64 {k}, "
+               f"i1 {write}, i64 {code}, i32 {f.tid}, ptr {_cursor(f, level.pool)})")
     if chunk < level.ncells:  # past the node's size: the zero / discard block
         side = _pool_word(f, level.pool, rt.POOL_DISCARD if mode == "write" else rt.POOL_ZERO)
         sel = f.tmp("dsel")

@@ -25,6 +25,9 @@ if TYPE_CHECKING:
     from simgrad.lang.field import ScalarField
 
 
+WHOLE_LIST_BYTES = 64 << 10  # a dynamic list this small is one chunk (SNode.chunk); tests set 0 to test chains
+
+
 @dataclass(frozen=True)
 class Axis:
     index: int
@@ -130,8 +133,14 @@ class SNode:
 
     @property
     def chunk(self) -> int:
-        """A dynamic node's cells per chunk (Taichi's chunk_size, the whole list by default, as Taichi's)."""
-        return min(self.chunk_size or self.num_cells, self.num_cells)
+        """A dynamic node's cells per chunk: Taichi's chunk_size (the whole list by default, as Taichi's), except
+        that a list of at most WHOLE_LIST_BYTES is one chunk: its elements are then read by index from the
+        list's one block, with no walk along a chain (a loop over marching_squares' 1024 edges in chunks of 32
+        ran 1.5x slower walking); the memory a list may take stays that small."""
+        c = min(self.chunk_size or self.num_cells, self.num_cells)
+        if c < self.num_cells and 0 < self.cell_size * self.num_cells <= WHOLE_LIST_BYTES:
+            return self.num_cells
+        return c
 
     def quant_array(self, indices, dimensions, max_num_bits) -> SNode:
         """Cells of one quant field packed side by side into a single physical integer of max_num_bits bits

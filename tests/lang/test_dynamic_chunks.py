@@ -1,12 +1,21 @@
 """Dynamic SNodes grow chunk by chunk, as Taichi's: a list is a chain of `chunk_size`-cell chunks from the node's
 pool, allocated as appends and writes reach them. Memory (the pool's statistics), element access at any index,
 appends from many threads to few lists, emptying and refilling within a kernel, and gradients through chunked
-lists. Run also on the simulated GPU (SIMGRAD_GPU_SIM=1 TI_ARCH=cuda), whose allocator takes one block at a time."""
+lists. Run also on the simulated GPU (SIMGRAD_GPU_SIM=1 TI_ARCH=cuda), whose allocator takes one block at a time.
+Small lists are one chunk (lang/snode.py WHOLE_LIST_BYTES): these tests set that size to 0 so every list here is
+a chain, and the last test checks the small-list rule itself."""
 
 import numpy as np
 import pytest
 
 import simgrad as ti
+from simgrad.lang import snode
+
+
+@pytest.fixture(autouse=True)
+def chains_even_for_small_lists(monkeypatch, request):
+    if "whole_list" not in request.node.name:
+        monkeypatch.setattr(snode, "WHOLE_LIST_BYTES", 0)
 
 
 def test_a_list_takes_memory_chunk_by_chunk():
@@ -250,3 +259,45 @@ def test_running_out_of_chunks_is_a_located_error_and_the_program_goes_on():
     node.deactivate_all()
     push(64 * 30)
     np.testing.assert_array_equal(x.to_numpy()[:64 * 31], np.r_[np.arange(64 * 30), np.zeros(64)])
+
+
+def test_a_small_list_is_one_whole_list_chunk_with_the_same_values():
+    """A list of at most WHOLE_LIST_BYTES takes one block at its first append (no chain to walk when read), and
+    computes what a chain of small chunks computes."""
+    def run():
+        ti.init(arch=ti.cpu)
+        x = ti.field(ti.f32)
+        node = ti.root.dense(ti.i, 4).dynamic(ti.j, 1024, chunk_size=32)
+        node.place(x)
+        out = ti.field(ti.f32, shape=4)
+
+        @ti.kernel
+        def fill():
+            for i in range(4):
+                for j in range(100 * (i + 1)):
+                    ti.append(x.parent(), i, j * 0.5 + i)
+
+        @ti.kernel
+        def total():
+            for i in range(4):
+                s = 0.0
+                for j in range(ti.length(x.parent(), i)):
+                    s += x[i, j] * (j % 7)
+                out[i] = s
+
+        fill()
+        total()
+        return node.chunk, out.to_numpy()
+
+    chunk, whole = run()
+    assert chunk == 1024  # 1024 f32 = 4 KiB: one chunk
+    snode.WHOLE_LIST_BYTES, saved = 0, snode.WHOLE_LIST_BYTES
+    try:
+        chunk, chained = run()
+    finally:
+        snode.WHOLE_LIST_BYTES = saved
+    assert chunk == 32
+    j = np.arange(400)
+    want = [((j[:100 * (i + 1)] * 0.5 + i) * (j[:100 * (i + 1)] % 7)).sum() for i in range(4)]
+    np.testing.assert_allclose(whole, want, rtol=1e-5)
+    np.testing.assert_allclose(chained, want, rtol=1e-5)

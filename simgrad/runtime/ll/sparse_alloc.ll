@@ -224,12 +224,12 @@ done:
 ; for a write whose pool ran out. %cur is the calling function's cursor {hdr, first chunk, k, chunk} for this
 ; pool: a walk starts from the chunk found last when it is of the same list (same header and first chunk, so a
 ; list emptied and refilled meanwhile is walked afresh) and not past %k; a loop running along a list then follows
-; one link per chunk, not k per element.
-define internal ptr @sg_dyn_chunk(ptr %ctx, i64 %pool, ptr %hdr, i64 %k, i1 %write, i64 %code, i32 %tid,
+; one link per chunk, not k per element. %f0 is the list's first chunk as the caller loaded it (acquire for a
+; write; a plain load for a read, which LLVM may then hoist out of a loop reading the list).
+define internal ptr @sg_dyn_chunk(ptr %ctx, i64 %pool, ptr %hdr, ptr %f0, i64 %k, i1 %write, i64 %code, i32 %tid,
                                   ptr %cur) alwaysinline {
 entry:
   %first = getelementptr i8, ptr %hdr, i64 8
-  %f0 = load atomic ptr, ptr %first acquire, align 8
   %ch = load ptr, ptr %cur
   %cfp = getelementptr i64, ptr %cur, i64 1
   %cf = load ptr, ptr %cfp
