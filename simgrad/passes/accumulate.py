@@ -147,21 +147,32 @@ def _replace(loop: Stmt, parent: Block, ptr: Stmt, ptrs: list[Stmt], updates: li
 
 
 def _mark_local_sums(kernel: Kernel) -> bool:
-    """`a = a + x` and `a += x` (float, `a` a local) inside a serial loop: the sum may be reassociated."""
+    """`a = a + x` and `a += x` (float, `a` a local) inside a serial loop whose every write of `a` is such a
+    sum (a local the body also assigns afresh, such as a ti.func's parameter copy, carries no sum): the sum may
+    be reassociated."""
     changed = False
     for loop in walk(kernel.body):
         if loop.op not in _SERIAL or (loop.op is Op.RANGE_FOR and loop.attrs.get("parallel")):
             continue
+        sums: dict[int, list[Stmt]] = {}
+        other: set[int] = set()
         for s in _walk_loop(loop):
-            if s.op is Op.ATOMIC and s.operands[0].op is Op.ALLOCA and s.type.is_float and _plain_sum(s):
-                changed |= not s.attrs.get("reassoc")  # `acc += x` on a local of the iteration
-                s.attrs["reassoc"] = True
+            if s.op is Op.ATOMIC and s.operands[0].op is Op.ALLOCA:
+                if s.type.is_float and _plain_sum(s):
+                    sums.setdefault(id(s.operands[0]), []).append(s)
+                else:
+                    other.add(id(s.operands[0]))
+            elif s.op is Op.LOCAL_STORE:
+                var, v = s.operands
+                if v.op is Op.ADD and v.type.is_float and any(
+                        o.op is Op.LOCAL_LOAD and o.operands[0] is var for o in v.operands):
+                    sums.setdefault(id(var), []).append(v)
+                else:
+                    other.add(id(var))
+        for var, adds in sums.items():
+            if var in other:
                 continue
-            if s.op is not Op.LOCAL_STORE:
-                continue
-            var, v = s.operands
-            if v.op is Op.ADD and v.type.is_float and not v.attrs.get("reassoc") and any(
-                    o.op is Op.LOCAL_LOAD and o.operands[0] is var for o in v.operands):
-                v.attrs["reassoc"] = True
-                changed = True
+            for a in adds:
+                changed |= not a.attrs.get("reassoc")
+                a.attrs["reassoc"] = True
     return changed
