@@ -165,6 +165,18 @@ def test_a_copy_spanning_an_interleaved_field_leaves_that_field_as_the_loop_left
     np.testing.assert_array_equal(b.to_numpy(), np.arange(cells, dtype=np.float32) * 2 + 1)
 
 
+def _stencil_spread(h, src, n: int, lo: int):
+    """h[t, i +- 1, j +- 1] += w * src[i, j] where the target index lies in [lo, n) on both axes."""
+    @ti.kernel
+    def spread(t: ti.i32):
+        for i, j in src:
+            for di, dj in ti.static([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]):
+                if lo <= i + di < n and lo <= j + dj < n:
+                    h[t, i + di, j + dj] += (1.0 + di + 2 * dj) * src[i, j]
+
+    return spread
+
+
 @pytest.mark.parametrize("debug", [False, True])
 def test_stencil_scatter_into_one_time_slice_copies_only_that_slice(debug):
     """h[t, i +- 1, j +- 1] += ...: the leading index is the same loop-invariant t in every update, so the
@@ -180,13 +192,7 @@ def test_stencil_scatter_into_one_time_slice_copies_only_that_slice(debug):
     s = rng.standard_normal((n, n))
     src.from_numpy(s)
 
-    @ti.kernel
-    def spread(t: ti.i32):
-        for i, j in src:
-            for di, dj in ti.static([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]):
-                if 0 <= i + di < n and 0 <= j + dj < n:
-                    h[t, i + di, j + dj] += (1.0 + di + 2 * dj) * src[i, j]
-
+    spread = _stencil_spread(h, src, n, 0)
     spread(7)
     expect = start.copy()
     for di, dj in [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]:
@@ -331,13 +337,7 @@ def test_a_loop_run_on_one_thread_updates_the_fields_directly(threads, n):
     s = rng.standard_normal((n, n))
     src.from_numpy(s)
 
-    @ti.kernel
-    def spread(t: ti.i32):
-        for i, j in src:
-            for di, dj in ti.static([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]):
-                if 1 <= i + di < n and 1 <= j + dj < n:
-                    h[t, i + di, j + dj] += (1.0 + di + 2 * dj) * src[i, j]
-
+    spread = _stencil_spread(h, src, n, 1)
     spread(2)
     expect = start.copy()
     for di, dj in [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]:
