@@ -65,7 +65,22 @@ class CpuCodegen(KernelCodegen):
         pfor = f.ctx_slot(abi.CTX_PFOR, "ptr")
         grain = plan.grain  # decided before access lowering added its address arithmetic
         if not regions:
-            f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
+            if not _needs_atomics(s):
+                f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
+                return
+            # the pool runs the loop on this thread alone (one thread, or at most a grain of iterations:
+            # simgrad_parallel_for's serial path; launches never overlap): the variant with plain updates
+            sname = f"{tname}_serial"
+            self._emit_task(s, plan, sname, captured, slots, [], serial=True)
+            nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
+            iters, one, small, alone = f.tmp("sv"), f.tmp("sv"), f.tmp("sv"), f.tmp("sv")
+            f.emit(f"{iters} = sub i64 {e64}, {b64}")
+            f.emit(f"{one} = icmp sle i64 {nthreads}, 1")
+            f.emit(f"{small} = icmp sle i64 {iters}, {grain}")
+            f.emit(f"{alone} = or i1 {one}, {small}")
+            task = f.tmp("svtask")
+            f.emit(f"{task} = select i1 {alone}, ptr @{sname}, ptr @{tname}")
+            f.emit(f"call void {pfor}(ptr {task}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
             return
         pname = f"{tname}_private"
         self._emit_task(s, plan, pname, captured, slots, regions, first_slot=len(captured) + 1)
@@ -74,11 +89,12 @@ class CpuCodegen(KernelCodegen):
                             e64, grain)
 
     def _emit_task(self, s: Stmt, plan: LoopStrategy, tname: str, captured: list[Stmt], slots: list[Capture],
-                   regions: list[Region], first_slot: int = 0) -> None:
+                   regions: list[Region], first_slot: int = 0, serial: bool = False) -> None:
         """The outlined loop: `task(closure, lo, hi, tid)`; with `regions`, the variant that adds into this
         thread's private copies of those regions (closure slots from `first_slot` hold the copies)."""
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
         t.loop = s
+        t.serial = serial
         t.prologue.append("  %ctx = load ptr, ptr %clo")
         for v, (k, ty, by_value) in zip(captured, slots):
             q, val = t.tmp("cap"), t.tmp("capv")
@@ -159,6 +175,13 @@ class CpuCodegen(KernelCodegen):
         t.emit(f"{qn} = add nuw nsw {ty} {q}, 1")
         t.emit(f"br label %{ohead}")
         t.start_block(done)
+
+
+def _needs_atomics(loop: Stmt) -> bool:
+    """Whether some update of the loop is an atomic read-modify-write across threads (atomic or paired; not the
+    compare-and-swap loops of quant cells, which stay as they are)."""
+    return any(x.op is Op.ATOMIC and x.attrs.get("kind") != "cas"
+               and x.attrs.get("strategy", "").split("|")[-1] in ("atomic", "pair") for x in walk(loop.blocks[0]))
 
 
 def _row_split(loop: Stmt) -> tuple[Stmt, Stmt | None, Stmt] | None:

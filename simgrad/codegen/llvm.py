@@ -138,6 +138,7 @@ class FunctionText:
         self.is_function = False
         self.depth = "0"
         self.exit = "ret void"
+        self.serial = False  # a task variant run only on the calling thread alone: its atomics are plain
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -459,15 +460,18 @@ CANCEL_STRIDE = 1 << 16
 
 def atomic_form(f: FunctionText, s: Stmt) -> str:
     """How this function does an ATOMIC (passes/parallel_strategy.py): outside tasks always plain; a
-    `private|x` update is plain in the variant over per-thread copies and `x` in the others. A real function
-    may run on any thread: its updates are atomic."""
+    `private|x` update is plain in the variant over per-thread copies and `x` in the others; in a task's serial
+    variant (no other thread runs any of its iterations) every update is plain. A real function may run on
+    any thread: its updates are atomic."""
     if f.is_function:
         return ATOMIC
     if not f.in_task:
         return PLAIN
     form = s.attrs["strategy"]
     if form.startswith(PRIVATE):
-        return PLAIN if f.private_roots else form[len(PRIVATE):]
+        form = PLAIN if f.private_roots else form[len(PRIVATE):]
+    if f.serial and form in (ATOMIC, PAIR):  # the variant the pool runs on one thread alone (codegen/cpu.py)
+        return PLAIN
     return form
 
 

@@ -351,3 +351,37 @@ def test_a_loop_run_on_one_thread_updates_the_fields_directly(threads, n):
     np.testing.assert_array_equal(other.to_numpy(), start + 100)
     text = _text(spread, 2)
     assert "_private" in text and "direct" in text
+
+
+@pytest.mark.parametrize("threads,n", [(1, 20000), (4, 20000), (4, 100)])
+def test_atomic_updates_have_a_plain_variant_for_a_loop_on_one_thread(threads, n):
+    """A loop whose updates need atomics (an ndarray scatter: no per-thread copies) also gets a `_serial` task
+    whose updates are plain, run when the pool runs the loop on the calling thread alone (one thread, or at most
+    a grain of iterations); otherwise the atomic task runs. Every kind of update agrees with numpy either way."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=threads)
+    rng = np.random.default_rng(7)
+    idx = rng.integers(0, 37, n).astype(np.int32)
+    val = rng.standard_normal(n)
+
+    @ti.kernel
+    def scatter(ix: ti.types.ndarray(), v: ti.types.ndarray(), s: ti.types.ndarray(), lo: ti.types.ndarray(),
+                hi: ti.types.ndarray(), cnt: ti.types.ndarray(), prod: ti.types.ndarray()):
+        for p in ix:
+            k = ix[p]
+            s[k] += v[p]
+            ti.atomic_min(lo[k], v[p])
+            ti.atomic_max(hi[k], v[p])
+            cnt[k] += 1
+            ti.atomic_mul(prod[k], 1.0 + 1e-3 * v[p])  # (`*=` is a plain update, as in Taichi)
+
+    s, lo, hi = np.zeros(37), np.full(37, np.inf), np.full(37, -np.inf)
+    cnt, prod = np.zeros(37, np.int32), np.ones(37)
+    scatter(idx, val, s, lo, hi, cnt, prod)
+    np.testing.assert_allclose(s, np.bincount(idx, val, 37), rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(cnt, np.bincount(idx, minlength=37))
+    for k in range(37):
+        sel = val[idx == k]
+        assert lo[k] == (sel.min() if sel.size else np.inf) and hi[k] == (sel.max() if sel.size else -np.inf)
+        np.testing.assert_allclose(prod[k], np.prod(1.0 + 1e-3 * sel), rtol=1e-9)
+    text = scatter._instance_for((idx, val, s, lo, hi, cnt, prod), "").llvm_text
+    assert "_serial" in text
