@@ -82,9 +82,8 @@ def lower_elementwise(f, s) -> str:
     args = [f.v(o) for o in s.operands]
     if isinstance(how, Instr):
         r = f.tmp("v")
-        if t.is_float:  # a serial loop's sum may be reassociated (passes/accumulate.py, fast_math only)
-            fm = f.gen.fm + "reassoc " if f.gen.fm and s.attrs.get("reassoc") else f.gen.fm
-            f.emit(f"{r} = {how.name} {fm}{t.llvm} {', '.join(args)}")
+        if t.is_float:
+            f.emit(f"{r} = {how.name} {f.gen.float_flags(s)}{t.llvm} {', '.join(args)}")
         else:
             flags = " nuw nsw" if s.attrs.get("nowrap") else ""  # address arithmetic (passes/lower_access.py)
             f.emit(f"{r} = {how.name}{flags} {t.llvm} {', '.join(args)}")

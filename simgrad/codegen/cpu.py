@@ -10,7 +10,7 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
-from simgrad.codegen.privatize import emit_private_launch, slice_shift
+from simgrad.codegen.privatize import emit_private_launch, emit_runs_alone, slice_shift
 from simgrad.ir.nodes import Stmt, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import LoopStrategy
@@ -68,16 +68,10 @@ class CpuCodegen(KernelCodegen):
             if not _needs_atomics(s):
                 f.emit(f"call void {pfor}(ptr @{tname}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")
                 return
-            # the pool runs the loop on this thread alone (one thread, or at most a grain of iterations:
-            # simgrad_parallel_for's serial path; launches never overlap): the variant with plain updates
+            # the variant with plain updates, for when the pool runs the loop on this thread alone
             sname = f"{tname}_serial"
             self._emit_task(s, plan, sname, captured, slots, [], serial=True)
-            nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
-            iters, one, small, alone = f.tmp("sv"), f.tmp("sv"), f.tmp("sv"), f.tmp("sv")
-            f.emit(f"{iters} = sub i64 {e64}, {b64}")
-            f.emit(f"{one} = icmp sle i64 {nthreads}, 1")
-            f.emit(f"{small} = icmp sle i64 {iters}, {grain}")
-            f.emit(f"{alone} = or i1 {one}, {small}")
+            _, alone = emit_runs_alone(f, f.ctx_slot(abi.CTX_NTHREADS, "i64"), b64, e64, grain)
             task = f.tmp("svtask")
             f.emit(f"{task} = select i1 {alone}, ptr @{sname}, ptr @{tname}")
             f.emit(f"call void {pfor}(ptr {task}, ptr {clo}, i64 {b64}, i64 {e64}, i64 {grain})")

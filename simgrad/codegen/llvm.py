@@ -243,9 +243,10 @@ class FunctionText:
 
 # ti.init(fast_math=True), the default as in Taichi, lets LLVM ignore the sign of zero, which is what
 # turns an adjoint's `0.0 + g` into `g` (about 1.5x on MPM adjoints). The other fast-math flags are
-# left out on purpose: reassoc and arcp break the guarded formulas of the decompositions (small
-# denominators), nnan/ninf would break inf sentinels and isnan, and contract made LLVM 22 abort while
-# emitting a f64 matrix-inverse adjoint on this CPU.
+# left out on purpose (reassoc only on the sums serial loops carry: KernelCodegen.float_flags): reassoc and
+# arcp everywhere break the guarded formulas of the decompositions (small denominators), nnan/ninf would
+# break inf sentinels and isnan, and contract made LLVM 22 abort while emitting a f64 matrix-inverse adjoint
+# on this CPU.
 FAST_MATH_FLAGS = "nsz "
 
 
@@ -274,6 +275,11 @@ class KernelCodegen:
         # context slots after the returns that keep a privatised loop's per-thread copies between launches
         # (allocated zeroed on first use, zeroed again by the final sum; the launcher frees them)
         self.private_slots = 0
+
+    def float_flags(self, s: Stmt) -> str:
+        """The fast-math flags of `s`'s float instruction: FAST_MATH_FLAGS, and reassoc on a sum a serial loop
+        carries (passes/accumulate.py marks them; fast_math only)."""
+        return self.fm + "reassoc " if self.fm and s.attrs.get("reassoc") else self.fm
 
     def private_slot(self) -> int:
         """The context slot index of one more persistent private buffer."""
@@ -608,8 +614,7 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     elif form == PLAIN:  # serial code, a local of the iteration, an owned element or a private copy
         f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
         n = f.tmp("new")
-        fm = g.fm + "reassoc " if g.fm and s.attrs.get("reassoc") else g.fm  # a loop's sum (passes/accumulate.py)
-        f.emit(_combine_text(n, op, ty, r, f.v(v), fm))
+        f.emit(_combine_text(n, op, ty, r, f.v(v), g.float_flags(s)))
         f.emit(f"store {ty} {n}, ptr {f.v(p)}")
     elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
         r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))

@@ -32,6 +32,18 @@ def slice_shift(lines: list, tmp, value, region: Region) -> str:
     return total
 
 
+def emit_runs_alone(f, nthreads: str, begin: str, end: str, grain: int) -> tuple[str, str]:
+    """(iterations, i1 whether the pool runs the loop on the calling thread alone): one pool thread, or at most
+    a grain of iterations, simgrad_parallel_for's serial path (launches never overlap). Its tasks may then
+    update without atomics."""
+    iters, one, small, alone = (f.tmp("pv") for _ in range(4))
+    f.emit(f"{iters} = sub i64 {end}, {begin}")
+    f.emit(f"{one} = icmp sle i64 {nthreads}, 1")
+    f.emit(f"{small} = icmp sle i64 {iters}, {grain}")
+    f.emit(f"{alone} = or i1 {one}, {small}")
+    return iters, alone
+
+
 def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_slot: int, task: str,
                         private_task: str, pfor: str, nthreads: str, begin: str, end: str, grain: int) -> None:
     """Caller side: run `private_task` over per-thread zeroed copies of the regions and add them into the
@@ -40,14 +52,10 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     thread, or no more iterations than a grain: simgrad_parallel_for's serial path; launches never overlap),
     `private_task` runs with the fields themselves as thread 0's copies: plain updates, nothing to sum."""
     elems = sum(r.count for r in regions)
-    iters, work, need, big, multi, ok = (f.tmp("pv") for _ in range(6))
-    f.emit(f"{iters} = sub i64 {end}, {begin}")
-    one, small, serial = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
-    f.emit(f"{one} = icmp sle i64 {nthreads}, 1")
-    f.emit(f"{small} = icmp sle i64 {iters}, {grain}")
-    f.emit(f"{serial} = or i1 {one}, {small}")
+    work, need, big, ok = (f.tmp("pv") for _ in range(4))
+    iters, alone = emit_runs_alone(f, nthreads, begin, end, grain)
     direct, decide = f.label("direct"), f.label("decide")
-    f.emit(f"br i1 {serial}, label %{direct}, label %{decide}")
+    f.emit(f"br i1 {alone}, label %{direct}, label %{decide}")
     f.start_block(direct)
     for k, r in enumerate(regions):
         slot = f.tmp("pslot")
@@ -59,13 +67,11 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(decide)
     f.emit(f"{work} = mul i64 {iters}, {weight * ATOMIC_COST}")
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
-    f.emit(f"{big} = icmp sge i64 {work}, {need}")
-    f.emit(f"{multi} = icmp sgt i64 {nthreads}, 1")
-    nbytes, fits, worth = f.tmp("pv"), f.tmp("pv"), f.tmp("pv")
+    f.emit(f"{big} = icmp sge i64 {work}, {need}")  # (several threads here: one took the direct path)
+    nbytes, fits = f.tmp("pv"), f.tmp("pv")
     f.emit(f"{nbytes} = mul i64 {nthreads}, {sum(r.hi - r.lo for r in regions)}")
     f.emit(f"{fits} = icmp ule i64 {nbytes}, {MAX_COPY_BYTES}")
-    f.emit(f"{worth} = and i1 {big}, {multi}")
-    f.emit(f"{ok} = and i1 {worth}, {fits}")
+    f.emit(f"{ok} = and i1 {big}, {fits}")
     plain, alloc, run = f.label("atomic"), f.label("alloc"), f.label("private")
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)

@@ -172,11 +172,12 @@ def flush_bits(prog: Program) -> frozenset[int]:
 def _build(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
     """Frontend, passes and codegen: (IR, LLVM IR text, what the launcher needs), folding as the machine
     computes in the program's flush-to-zero mode."""
-    with numeric.flushing(flush_bits(prog)):
-        return _build_in_mode(kernel, prog, args, transform, name_suffix, guard)
+    bits = flush_bits(prog)
+    with numeric.flushing(bits):
+        return _build_in_mode(kernel, prog, args, transform, name_suffix, guard, flush=bool(bits))
 
 
-def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard=None):
+def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_suffix, guard, flush: bool):
     ir = IRKernel(kernel.name + name_suffix)
     comp = KernelLowering(ir, get_source(kernel.func), debug=prog.config.debug, parallel_listgen=prog.on_gpu)
     comp.guard = guard
@@ -198,12 +199,12 @@ def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_su
         from simgrad.codegen import nvptx
 
         cg = nvptx.GpuCodegen(ir, symbol, sim=prog.gpu_sim, tape_entries=tape_entries, debug=prog.config.debug,
-                              fast_math=prog.config.fast_math, flush=bool(flush_bits(prog)))
+                              fast_math=prog.config.fast_math, flush=flush)
     else:
         from simgrad.codegen.cpu import CpuCodegen  # loaded when first needed
 
         cg = CpuCodegen(ir, symbol, debug=prog.config.debug, fast_math=prog.config.fast_math,
-                        flush=bool(flush_bits(prog)))
+                        flush=flush)
     text = cg.generate()
     if ptx_check_enabled():
         _ptx_check(ir, symbol, tape_entries, prog)

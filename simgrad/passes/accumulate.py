@@ -22,29 +22,33 @@ from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import Op
 
-_SERIAL = (Op.RANGE_FOR, Op.WHILE)
-_OPAQUE = {getattr(Op, n) for n in ("CALL", "FUNC_CALL") if hasattr(Op, n)}  # calls could reach any field
-
 
 def accumulate(kernel: Kernel, cache_sums: bool = True) -> bool:
     changed = False
-    for loop in kernel.body.stmts:
-        if loop.op is Op.RANGE_FOR and loop.attrs.get("parallel"):
-            if cache_sums:
-                changed |= _cache_in(loop.blocks[0], kernel)
+    if cache_sums:
+        # statements whose value something uses (an update whose old value is read cannot become a local sum);
+        # the rewrites below only remove such updates or add unused ones, so one walk serves every loop
+        used = {id(o) for x in walk(kernel.body) for o in x.operands}
+        for loop in kernel.body.stmts:
+            if loop.op is Op.RANGE_FOR and loop.attrs.get("parallel"):
+                changed |= _cache_in(loop.blocks[0], used)
     changed |= _mark_local_sums(kernel)
     return changed
 
 
-def _cache_in(block: Block, kernel: Kernel) -> bool:
+def _serial_loop(s: Stmt) -> bool:
+    return s.op is Op.WHILE or (s.op is Op.RANGE_FOR and not s.attrs.get("parallel"))
+
+
+def _cache_in(block: Block, used: set[int]) -> bool:
     """Serial loops of `block` and below, outermost first (a sum cached at an outer loop is gone from the
     inner ones)."""
     changed = False
     for s in list(block.stmts):
-        if s.op in _SERIAL and not (s.op is Op.RANGE_FOR and s.attrs.get("parallel")):
-            changed |= _cache_loop(s, block, kernel)
+        if _serial_loop(s):
+            changed |= _cache_loop(s, block, used)
         for b in s.blocks:
-            changed |= _cache_in(b, kernel)
+            changed |= _cache_in(b, used)
     return changed
 
 
@@ -55,19 +59,15 @@ def _memory(ref) -> tuple | None:
     return ref.layout[0], ref.layout[1]
 
 
-def _cache_loop(loop: Stmt, parent: Block, kernel: Kernel) -> bool:
+def _cache_loop(loop: Stmt, parent: Block, used: set[int]) -> bool:
     inside = list(_walk_loop(loop))
     ids = {id(x) for x in inside}
-    used = {id(o) for x in walk(kernel.body) for o in x.operands}
-    ptrs: dict[tuple, list[Stmt]] = {}  # field memory -> its GLOBAL_PTRs in the loop
+    by_memory: dict[tuple | None, list[Stmt]] = {}  # field memory -> its GLOBAL_PTRs in the loop
     for x in inside:
         if x.op is Op.GLOBAL_PTR:
-            ptrs.setdefault((_memory(x.attrs.get("target")), id(x.attrs.get("target"))), []).append(x)
-        elif x.op in _OPAQUE:
-            return False  # a call could reach any field
-    by_memory: dict[tuple, list[Stmt]] = {}
-    for (mem, _), ps in ptrs.items():
-        by_memory.setdefault(mem, []).extend(ps)
+            by_memory.setdefault(_memory(x.attrs.get("target")), []).append(x)
+        elif x.op is Op.CALL:
+            return False  # a real function could reach any field
     users: dict[int, list[Stmt]] = {}
     for x in inside:
         for o in x.operands:
@@ -152,7 +152,7 @@ def _mark_local_sums(kernel: Kernel) -> bool:
     be reassociated."""
     changed = False
     for loop in walk(kernel.body):
-        if loop.op not in _SERIAL or (loop.op is Op.RANGE_FOR and loop.attrs.get("parallel")):
+        if not _serial_loop(loop):
             continue
         sums: dict[int, list[Stmt]] = {}
         other: set[int] = set()

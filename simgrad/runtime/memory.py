@@ -61,11 +61,8 @@ class Memory:
         if self._chunk is None or self._used + size + SLACK > len(self._chunk):
             n = max(CHUNK, -(-(size + SLACK) // mmap.PAGESIZE) * mmap.PAGESIZE)
             left = self._chunk
-            old = self._chunks.get(left.ctypes.data) if left is not None else None
-            if left is not None and old is not None and old[1] == 0:  # every tree in it was destroyed
-                del self._chunks[left.ctypes.data]
-                if self._free is not None:
-                    self._free(left)
+            if left is not None and self._chunks[left.ctypes.data][1] == 0:  # every tree in it was destroyed
+                self._retire(left)
             self._chunk = self._new_chunk(n)
             self._chunks[self._chunk.ctypes.data] = [self._chunk, 0]
             self._used = 0
@@ -79,6 +76,15 @@ class Memory:
             raise RuntimeError(f"more than {MAX_TREES} SNode trees in one program")
         self._buffers[tree_id] = buffer
         self.roots[tree_id] = buffer.ctypes.data
+
+    def _retire(self, chunk: np.ndarray) -> bool:
+        """Forget a chunk no live tree uses; a device's is freed now (True), a host mapping is unmapped once
+        nothing refers to it (False: release still returns the tree's pages)."""
+        del self._chunks[chunk.ctypes.data]
+        if self._free is None:
+            return False
+        self._free(chunk)
+        return True
 
     def release(self, tree_id: int) -> None:
         """A destroyed tree (SNodeTree.destroy): its root is cleared and its memory given back. A chunk no live
@@ -94,11 +100,8 @@ class Memory:
         for base, entry in list(self._chunks.items()):
             if base <= addr < base + len(entry[0]):
                 entry[1] -= 1
-                if entry[1] == 0 and entry[0] is not self._chunk:
-                    del self._chunks[base]  # (a host chunk is unmapped once nothing refers to it)
-                    if self._free is not None:
-                        self._free(entry[0])
-                        return
+                if entry[1] == 0 and entry[0] is not self._chunk and self._retire(entry[0]):
+                    return
                 break
         owner = buf.base
         while owner is not None and not isinstance(owner, mmap.mmap):

@@ -223,107 +223,105 @@ entry:
   %cv.7 = load ptr, ptr %cp.6
   %cp.8 = getelementptr i64, ptr %ctx, i64 7
   %cv.9 = load i64, ptr %cp.8
-  %cp.24 = getelementptr i64, ptr %ctx, i64 0
-  %cv.25 = load ptr, ptr %cp.24
-  %rp.26 = getelementptr ptr, ptr %cv.25, i64 0
-  %root.27 = load ptr, ptr %rp.26, !invariant.load !0
-  %cp.31 = getelementptr i64, ptr %ctx, i64 0
-  %cv.32 = load ptr, ptr %cp.31
-  %rp.33 = getelementptr ptr, ptr %cv.32, i64 1
-  %root.34 = load ptr, ptr %rp.33, !invariant.load !0
-  %sclo.64 = alloca [3 x i64], align 8
-  %sclo.70 = alloca [3 x i64], align 8
+  %cp.23 = getelementptr i64, ptr %ctx, i64 0
+  %cv.24 = load ptr, ptr %cp.23
+  %rp.25 = getelementptr ptr, ptr %cv.24, i64 0
+  %root.26 = load ptr, ptr %rp.25, !invariant.load !0
+  %cp.30 = getelementptr i64, ptr %ctx, i64 0
+  %cv.31 = load ptr, ptr %cp.30
+  %rp.32 = getelementptr ptr, ptr %cv.31, i64 1
+  %root.33 = load ptr, ptr %rp.32, !invariant.load !0
+  %sclo.62 = alloca [3 x i64], align 8
+  %sclo.68 = alloca [3 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
-  %pv.10 = sub i64 %e.5, %b.4
-  %pv.16 = icmp sle i64 %cv.9, 1
-  %pv.17 = icmp sle i64 %pv.10, 455
-  %pv.18 = or i1 %pv.16, %pv.17
-  br i1 %pv.18, label %direct.19, label %decide.20
-direct.19:
-  %pslot.21 = getelementptr i64, ptr %clo.3, i64 1
-  %real.23 = getelementptr i8, ptr %root.27, i64 0
-  %real.22 = getelementptr i8, ptr %real.23, i64 0
-  store ptr %real.22, ptr %pslot.21
-  %pslot.28 = getelementptr i64, ptr %clo.3, i64 2
-  %real.30 = getelementptr i8, ptr %root.34, i64 0
-  %real.29 = getelementptr i8, ptr %real.30, i64 0
-  store ptr %real.29, ptr %pslot.28
+  %pv.14 = sub i64 %e.5, %b.4
+  %pv.15 = icmp sle i64 %cv.9, 1
+  %pv.16 = icmp sle i64 %pv.14, 455
+  %pv.17 = or i1 %pv.15, %pv.16
+  br i1 %pv.17, label %direct.18, label %decide.19
+direct.18:
+  %pslot.20 = getelementptr i64, ptr %clo.3, i64 1
+  %real.22 = getelementptr i8, ptr %root.26, i64 0
+  %real.21 = getelementptr i8, ptr %real.22, i64 0
+  store ptr %real.21, ptr %pslot.20
+  %pslot.27 = getelementptr i64, ptr %clo.3, i64 2
+  %real.29 = getelementptr i8, ptr %root.33, i64 0
+  %real.28 = getelementptr i8, ptr %real.29, i64 0
+  store ptr %real.28, ptr %pslot.27
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.35
-decide.20:
-  %pv.11 = mul i64 %pv.10, 24
-  %pv.12 = mul i64 %cv.9, 24
-  %pv.13 = icmp sge i64 %pv.11, %pv.12
-  %pv.14 = icmp sgt i64 %cv.9, 1
-  %pv.36 = mul i64 %cv.9, 96
-  %pv.37 = icmp ule i64 %pv.36, 268435456
-  %pv.38 = and i1 %pv.13, %pv.14
-  %pv.15 = and i1 %pv.38, %pv.37
-  br i1 %pv.15, label %alloc.40, label %atomic.39
-alloc.40:
-  %pctx.42 = getelementptr i64, ptr %ctx, i64 11
-  %phave.43 = load ptr, ptr %pctx.42
-  %pnull.46 = icmp eq ptr %phave.43, null
-  br i1 %pnull.46, label %pfresh.44, label %pready.45
-pfresh.44:
-  %pnew.47 = call ptr @calloc(i64 %cv.9, i64 64)
-  store ptr %pnew.47, ptr %pctx.42
-  br label %pready.45
-pready.45:
-  %priv.48 = load ptr, ptr %pctx.42
-  %pslot.49 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.48, ptr %pslot.49
-  %pnn.50 = icmp ne ptr %priv.48, null
-  %pok.51 = and i1 true, %pnn.50
-  %pctx.52 = getelementptr i64, ptr %ctx, i64 12
-  %phave.53 = load ptr, ptr %pctx.52
-  %pnull.56 = icmp eq ptr %phave.53, null
-  br i1 %pnull.56, label %pfresh.54, label %pready.55
-pfresh.54:
-  %pnew.57 = call ptr @calloc(i64 %cv.9, i64 32)
-  store ptr %pnew.57, ptr %pctx.52
-  br label %pready.55
-pready.55:
-  %priv.58 = load ptr, ptr %pctx.52
-  %pslot.59 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.58, ptr %pslot.59
-  %pnn.60 = icmp ne ptr %priv.58, null
-  %pok.61 = and i1 %pok.51, %pnn.60
-  br i1 %pok.61, label %private.41, label %atomic.39
-private.41:
+  br label %scatterdone.34
+decide.19:
+  %pv.10 = mul i64 %pv.14, 24
+  %pv.11 = mul i64 %cv.9, 24
+  %pv.12 = icmp sge i64 %pv.10, %pv.11
+  %pv.35 = mul i64 %cv.9, 96
+  %pv.36 = icmp ule i64 %pv.35, 268435456
+  %pv.13 = and i1 %pv.12, %pv.36
+  br i1 %pv.13, label %alloc.38, label %atomic.37
+alloc.38:
+  %pctx.40 = getelementptr i64, ptr %ctx, i64 11
+  %phave.41 = load ptr, ptr %pctx.40
+  %pnull.44 = icmp eq ptr %phave.41, null
+  br i1 %pnull.44, label %pfresh.42, label %pready.43
+pfresh.42:
+  %pnew.45 = call ptr @calloc(i64 %cv.9, i64 64)
+  store ptr %pnew.45, ptr %pctx.40
+  br label %pready.43
+pready.43:
+  %priv.46 = load ptr, ptr %pctx.40
+  %pslot.47 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.46, ptr %pslot.47
+  %pnn.48 = icmp ne ptr %priv.46, null
+  %pok.49 = and i1 true, %pnn.48
+  %pctx.50 = getelementptr i64, ptr %ctx, i64 12
+  %phave.51 = load ptr, ptr %pctx.50
+  %pnull.54 = icmp eq ptr %phave.51, null
+  br i1 %pnull.54, label %pfresh.52, label %pready.53
+pfresh.52:
+  %pnew.55 = call ptr @calloc(i64 %cv.9, i64 32)
+  store ptr %pnew.55, ptr %pctx.50
+  br label %pready.53
+pready.53:
+  %priv.56 = load ptr, ptr %pctx.50
+  %pslot.57 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.56, ptr %pslot.57
+  %pnn.58 = icmp ne ptr %priv.56, null
+  %pok.59 = and i1 %pok.49, %pnn.58
+  br i1 %pok.59, label %private.39, label %atomic.37
+private.39:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.63 = getelementptr i8, ptr %root.27, i64 0
-  %real.62 = getelementptr i8, ptr %real.63, i64 0
-  %sslot.65 = getelementptr i64, ptr %sclo.64, i64 0
-  store ptr %priv.48, ptr %sslot.65
-  %sslot.66 = getelementptr i64, ptr %sclo.64, i64 1
-  store ptr %real.62, ptr %sslot.66
-  %sslot.67 = getelementptr i64, ptr %sclo.64, i64 2
-  store i64 %cv.9, ptr %sslot.67
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.64, i64 0, i64 16, i64 8192)
-  %real.69 = getelementptr i8, ptr %root.34, i64 0
-  %real.68 = getelementptr i8, ptr %real.69, i64 0
-  %sslot.71 = getelementptr i64, ptr %sclo.70, i64 0
-  store ptr %priv.58, ptr %sslot.71
-  %sslot.72 = getelementptr i64, ptr %sclo.70, i64 1
-  store ptr %real.68, ptr %sslot.72
-  %sslot.73 = getelementptr i64, ptr %sclo.70, i64 2
-  store i64 %cv.9, ptr %sslot.73
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.70, i64 0, i64 8, i64 8192)
-  br label %scatterdone.35
-atomic.39:
+  %real.61 = getelementptr i8, ptr %root.26, i64 0
+  %real.60 = getelementptr i8, ptr %real.61, i64 0
+  %sslot.63 = getelementptr i64, ptr %sclo.62, i64 0
+  store ptr %priv.46, ptr %sslot.63
+  %sslot.64 = getelementptr i64, ptr %sclo.62, i64 1
+  store ptr %real.60, ptr %sslot.64
+  %sslot.65 = getelementptr i64, ptr %sclo.62, i64 2
+  store i64 %cv.9, ptr %sslot.65
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.62, i64 0, i64 16, i64 8192)
+  %real.67 = getelementptr i8, ptr %root.33, i64 0
+  %real.66 = getelementptr i8, ptr %real.67, i64 0
+  %sslot.69 = getelementptr i64, ptr %sclo.68, i64 0
+  store ptr %priv.56, ptr %sslot.69
+  %sslot.70 = getelementptr i64, ptr %sclo.68, i64 1
+  store ptr %real.66, ptr %sslot.70
+  %sslot.71 = getelementptr i64, ptr %sclo.68, i64 2
+  store i64 %cv.9, ptr %sslot.71
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.68, i64 0, i64 8, i64 8192)
+  br label %scatterdone.34
+atomic.37:
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.35
-scatterdone.35:
-  %cancel.74 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.75 = icmp ne i32 %cancel.74, 0
-  br i1 %cancelled.75, label %stop.76, label %go.77
-stop.76:
+  br label %scatterdone.34
+scatterdone.34:
+  %cancel.72 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.73 = icmp ne i32 %cancel.72, 0
+  br i1 %cancelled.73, label %stop.74, label %go.75
+stop.74:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.77:
+go.75:
   ret void
 }
 
