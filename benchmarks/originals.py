@@ -49,6 +49,8 @@ README = os.path.join(ROOT, "examples", "README.md")
 BEGIN, END = "<!-- originals:begin -->", "<!-- originals:end -->"
 COMPARED = 3  # iterations whose losses are compared
 TOLERANCE = 1e-4  # relative, for deterministic programs
+# a framework name for simgrad with the Tape's captured backward pass off (lang/tape.py), to show what it buys
+NO_CAPTURE = "simgrad-nocapture"
 
 
 @dataclass
@@ -186,6 +188,10 @@ def child(framework, script, argv):
     else:
         import simgrad as ti
         sys.modules["taichi"] = ti
+        if framework == NO_CAPTURE:  # the before of the captured backward pass: every adjoint launched from Python
+            import simgrad.lang.tape
+
+            simgrad.lang.tape._backward_sequence = lambda entries: None
     print(f"@import {time.perf_counter() - out.t0:.6f}")
     extra = json.loads(os.environ.get("ORIGINALS_INIT", "{}")) if framework == "taichi" else {}
     _headless(ti, os.path.join(os.getcwd(), ".cache"), extra)
@@ -265,7 +271,7 @@ def run_one(python, framework, prog, args, pythonpath):
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as on a user's machine: our .py files are not recompiled
     env["ORIGINALS_INIT"] = json.dumps(args.taichi_init)
     env["ORIGINALS_ARCH"] = args.arch
-    env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path if framework == "simgrad" else "", *pythonpath,
+    env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path if framework != "taichi" else "", *pythonpath,
                                                      os.environ.get("PYTHONPATH", "")] if p)
     cmd = [python, os.path.abspath(__file__), "--child", framework, prog.script, "--", *argv]
     if args.nice:
@@ -389,7 +395,8 @@ def main():
     ap.add_argument("--difftaichi", required=True, help="checkout of taichi-dev/difftaichi")
     ap.add_argument("--only", nargs="*", help="program names (as in the table), e.g. billiards 'mass_spring 2'")
     ap.add_argument("--skip-slow", action="store_true", help="leave out the 3-D programs")
-    ap.add_argument("--frameworks", default="simgrad,taichi")
+    ap.add_argument("--frameworks", default="simgrad,taichi",
+                    help=f"comma-separated: simgrad, taichi, {NO_CAPTURE} (simgrad, the Tape's backward from Python)")
     ap.add_argument("--iters", type=int, default=5)
     ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda"],
                     help="the arch every program's ti.init gets, in both frameworks (cuda: on a GPU machine, with "
@@ -416,7 +423,7 @@ def main():
     if args.skip_slow:
         progs = [p for p in progs if not p.slow]
     progs.sort(key=lambda p: p.slow)
-    pythons = {"simgrad": args.simgrad_python, "taichi": args.taichi_python}
+    pythons = {"simgrad": args.simgrad_python, NO_CAPTURE: args.simgrad_python, "taichi": args.taichi_python}
     for prog in progs:
         entry = results.setdefault(prog.name, {})
         entry["iters"] = args.iters

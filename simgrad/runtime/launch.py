@@ -236,6 +236,8 @@ class Sequence:
         self.steps = np.array([w for ln, c in zip(launchers, contexts) for w in (ln.entry_address, c.ctypes.data)],
                               dtype=np.uint64)
         self.error = launchers[0].program.error if launchers else None
+        # the native call's arguments, taken once (numpy's .ctypes costs microseconds per use)
+        self._args = (self.steps.ctypes.data, len(launchers), self.error.ctypes.data if launchers else 0)
 
     def run(self) -> None:
         global _sequence_fn
@@ -247,10 +249,9 @@ class Sequence:
 
             _sequence_fn = _SEQUENCE(get_jit().load(ll.load("sequence"), ["simgrad_run_sequence"])[
                 "simgrad_run_sequence"])
-        assert self.error is not None
         with LAUNCH_LOCK:
             try:
-                k = _sequence_fn(self.steps.ctypes.data, len(self.launchers), self.error.ctypes.data)
+                k = _sequence_fn(*self._args)
             except KeyboardInterrupt:
                 self.launchers[0].clear_interrupt()
                 raise
@@ -259,6 +260,7 @@ class Sequence:
 
 
 _VOLATILE = itertools.count()
+_PLAIN = frozenset((float, int, bool))
 
 
 def replay_key(value):
@@ -267,7 +269,7 @@ def replay_key(value):
     stay valid while they live). A torch tensor or other DLPack object gets a key equal to nothing: its data and
     its `.grad` can be replaced under the same object (optimizer.zero_grad(set_to_none=True)), so it is packed
     anew every time."""
-    if isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
+    if type(value) in _PLAIN or isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
         return (type(value).__name__, value)
     if not isinstance(value, np.ndarray) and not hasattr(value, "_ndarray_data") and (
             hasattr(value, "__dlpack__") or hasattr(value, "data_ptr") or hasattr(value, "__cuda_array_interface__")):
