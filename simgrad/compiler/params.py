@@ -213,6 +213,10 @@ class BuilderParam(Param):
         return barg, BuilderPacking(self.name, barg.slot, barg.dtype)
 
 
+# numpy dtype -> its name, as keys hold it (str(dtype) costs microseconds per launch)
+_DTYPE_NAMES: dict = {}
+
+
 class NdarrayParam(Param):
     """`ti.types.ndarray(...)` (or np.ndarray): a numpy array or ti.ndarray by reference (TensorParam below
     takes torch tensors and DLPack arrays);
@@ -232,7 +236,10 @@ class NdarrayParam(Param):
             raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects an ndarray, got "
                                    f"{type(a).__name__} (Invalid type for argument {self.name}, got {a})")
         arr = getattr(a, "_ndarray_data", a)  # a ti.ndarray object: its numpy data
-        return (str(arr.dtype), len(arr.shape), self.element_shape(a), self.with_grad(a))
+        name = _DTYPE_NAMES.get(arr.dtype)
+        if name is None:
+            name = _DTYPE_NAMES[arr.dtype] = str(arr.dtype)
+        return (name, len(arr.shape), self.element_shape(a), self.with_grad(a))
 
     def with_grad(self, a) -> bool:
         """Whether kernels see the gradient of argument `a`: the annotation's needs_grad, else whether it has

@@ -46,6 +46,7 @@ class Ndarray:
         self.ncols = self.m  # what element views read (0: vectors)
         self.name = "ndarray"
         self._ndarray_data = get_program().zeros(self.shape + self.element_shape, self.dtype.np)
+        self._data_address = self._ndarray_data.ctypes.data  # what a launch packs (numpy's .ctypes costs us)
         self.comps = [_Component(self, e) for e in np.ndindex(*self.element_shape)] if self.element_shape else []
         self.grad: Ndarray | None = None
         if needs_grad:
