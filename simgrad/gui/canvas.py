@@ -10,6 +10,7 @@ so pictures match Taichi's; the vectorised sampling and order-exact blending liv
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -185,6 +186,8 @@ class ImageCanvas:
         """Segments with round caps; ``radius`` is the half-width in pixels (scalar or (n,)).
 
         ``vertex_colors`` (n, 2, 3) float RGB, if given, is interpolated along each segment.
+        Consecutive calls with one colour per segment are drawn as one batch (``gui.line`` in a Python
+        loop would otherwise pay numpy's per-call set-up, ~0.1 ms, for every segment).
         """
         A = _points(begin) * self._scale
         B = _points(end) * self._scale
@@ -194,8 +197,17 @@ class ImageCanvas:
         r = _per_item(radius, n, "radius")
         if vertex_colors is not None:
             vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
+            self.defer(lambda img: self._segments(img, A, B, r, None, vc))
+            return
+        rgb = as_rgb(color, n)
+        last = self._pending[-1] if self._pending else None
+        if isinstance(last, _SegmentBatch):
+            last.parts.append((A, B, r, rgb))
         else:
-            rgb = as_rgb(color, n)
+            self.defer(_SegmentBatch(self, [(A, B, r, rgb)]))
+
+    def _segments(self, img, A, B, r, rgb, vc) -> None:
+        """Rasterise segments A -> B: one colour each (``rgb`` (n, 3)) or interpolated (``vc`` (n, 2, 3))."""
         ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
         seg = raster.SegmentPieces(A, B, r, ok, self.res)
         owner, k, pieces, ta, span_all = seg.owner, seg.k, seg.pieces, seg.ta, seg.span
@@ -210,12 +222,12 @@ class ImageCanvas:
             # Piece boxes overlap; a pixel belongs to the piece holding its nearest point.
             p = pieces[o]
             alpha[np.minimum((t * p).astype(np.int64), p - 1) != k[b]] = 0.0
-            if vertex_colors is None:
+            if vc is None:
                 return alpha, (rgb, o)
             t = (ta[o] + t * span_all[o])[:, None]
             return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
 
-        self._draw(owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
+        raster.rasterize(img, owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
@@ -281,26 +293,16 @@ class ImageCanvas:
 
     def text(self, content, pos, font_size=15, color=0xFFFFFF):
         """Text whose top-left corner is at ``pos``, rendered with Pillow's default font."""
-        from PIL import Image, ImageDraw, ImageFont
-
         content = str(content)
         if not content:
             return
-        try:
-            font = ImageFont.load_default(size=max(1.0, float(font_size)))
-        except TypeError:  # Pillow < 10.1 has a single bitmap font
-            font = ImageFont.load_default()
-        left, top, right, bottom = ImageDraw.Draw(Image.new("L", (1, 1))).textbbox((0, 0), content, font=font)
-        mask = Image.new("L", (max(1, right), max(1, bottom)))
-        ImageDraw.Draw(mask).text((0, 0), content, fill=255, font=font)
-        m = np.asarray(mask, dtype=np.float64) / 255.0
-        rows, cols = np.nonzero(m)
+        rows, cols, coverage = _text_mask(content, max(1.0, float(font_size)))
         p = _points(pos)[0] * self._scale
         i = int(round(p[0])) + cols
         j = int(round(p[1])) - 1 - rows
         inside = (i >= 0) & (i < self.res[0]) & (j >= 0) & (j < self.res[1])
         rgb = np.broadcast_to(as_rgb(color), (int(inside.sum()), 3))
-        alpha = m[rows, cols][inside]
+        alpha = coverage[inside]
         i, j = i[inside], j[inside]
         self._pending.append(lambda img: raster.composite(img, i, j, alpha, rgb))
 
@@ -317,3 +319,37 @@ class ImageCanvas:
 
     def _draw(self, owner, x0, y0, x1, y1, shade):
         self.defer(lambda img: raster.rasterize(img, owner, x0, y0, x1, y1, shade))
+
+
+@functools.lru_cache(maxsize=1024)
+def _text_mask(content: str, size: float):
+    """(rows, columns, coverage in [0, 1]) of the pixels `content` covers at `size`: rendered once, as programs
+    draw the same labels every frame (Pillow's font set-up and rendering cost ~0.4 ms a call)."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    try:
+        font = ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1 has a single bitmap font
+        font = ImageFont.load_default()
+    left, top, right, bottom = ImageDraw.Draw(Image.new("L", (1, 1))).textbbox((0, 0), content, font=font)
+    mask = Image.new("L", (max(1, right), max(1, bottom)))
+    ImageDraw.Draw(mask).text((0, 0), content, fill=255, font=font)
+    m = np.asarray(mask, dtype=np.float64) / 255.0
+    rows, cols = np.nonzero(m)
+    for a in (rows, cols):
+        a.flags.writeable = False
+    coverage = m[rows, cols]
+    coverage.flags.writeable = False
+    return rows, cols, coverage
+
+
+class _SegmentBatch:
+    """Consecutive one-colour ``lines`` calls, drawn as one set of segments when the pixels are looked at
+    (compositing is order-exact, so one batch draws what the calls drew one after another)."""
+
+    def __init__(self, canvas: ImageCanvas, parts: list):
+        self.canvas, self.parts = canvas, parts
+
+    def __call__(self, img) -> None:
+        A, B, r, rgb = (np.concatenate(a) for a in zip(*self.parts))
+        self.canvas._segments(img, A, B, r, rgb, None)
