@@ -134,6 +134,12 @@ class ImageCanvas:
             raise ValueError(f"Image resolution {arr.shape[:2]} does not match canvas resolution {self.res}")
         self.replace(arr)
 
+    def replace_later(self, make_rgb) -> None:
+        """``replace(make_rgb())`` when the pixels are next looked at (fast_gui: the window shows packed words,
+        the float canvas is only made for reading)."""
+        self._fill = None
+        self._pending = [lambda img: self.replace(make_rgb())]
+
     def replace(self, rgb: np.ndarray) -> None:
         """Overwrite every pixel with float RGB of shape (W, H, 3); what was pending is dropped."""
         self._fill, self._pending = None, []
@@ -337,7 +343,7 @@ def _text_mask(content: str, size: float):
     except TypeError:  # Pillow < 10.1 has a single bitmap font
         font = ImageFont.load_default()
     left, top, right, bottom = ImageDraw.Draw(Image.new("L", (1, 1))).textbbox((0, 0), content, font=font)
-    mask = Image.new("L", (max(1, right), max(1, bottom)))
+    mask = Image.new("L", (max(1, int(right)), max(1, int(bottom))))
     ImageDraw.Draw(mask).text((0, 0), content, fill=255, font=font)
     m = np.asarray(mask, dtype=np.float64) / 255.0
     rows, cols = np.nonzero(m)

@@ -208,6 +208,15 @@ class GUI:
         ``clamp(int(c * 255), 0, 255)``, truncated, in the image's own precision), and ``img`` holds them packed.
         """
         if self._fast is not None:
+            from . import fastpack
+
+            if fastpack.packable(img):
+                if tuple(img.shape) != self.res:
+                    raise ValueError(f"Image resolution {tuple(img.shape)} does not match GUI resolution {self.res}")
+                fastpack.pack_words(img, self._fast)
+                words, res = self._fast, self.res  # the canvas follows the window's words when looked at
+                self.canvas.replace_later(lambda: fastpack.unpack_words(words, res))
+                return
             img = _fast_pixels(to_numpy(img))
         arr = cook_image(img)
         if arr.shape[:2] != self.res:

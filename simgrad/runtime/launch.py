@@ -237,7 +237,7 @@ class Sequence:
                               dtype=np.uint64)
         self.error = launchers[0].program.error if launchers else None
         # the native call's arguments, taken once (numpy's .ctypes costs microseconds per use)
-        self._args = (self.steps.ctypes.data, len(launchers), self.error.ctypes.data if launchers else 0)
+        self._args = (self.steps.ctypes.data, len(launchers), self.error.ctypes.data if self.error is not None else 0)
 
     def run(self) -> None:
         global _sequence_fn

@@ -130,6 +130,34 @@ def test_fast_gui_img_is_taichis_packed_words():
     np.testing.assert_array_equal(gui.canvas.to_uint8()[1, 0], [0x7F, 0xFF, 0])  # what show(file) saves
 
 
+@pytest.mark.parametrize("dtype,n", [("f32", 3), ("f64", 3), ("f32", 4)])
+def test_fast_gui_field_words_by_kernel(dtype, n, monkeypatch):
+    # a dense float vector field goes through simgrad.gui.fastpack's kernel; the words are Taichi's quantisation
+    # min(255, max(0, int(c * 255))) in the field's precision (NaN, -inf -> 0; +inf -> 255), computed here in numpy
+    import simgrad as ti
+    from simgrad.gui import gui as gui_module
+
+    ti.init(arch=ti.cpu)
+    np_t = np.float32 if dtype == "f32" else np.float64
+    w, h = 37, 23
+    a = np.random.default_rng(1).uniform(-0.2, 1.2, (w, h, n)).astype(np_t)
+    a[0, 0, :3] = [np.nan, np.inf, -np.inf]
+    a[1, 1, :3] = [1.0, 0.0, 254.99 / 255]
+    a[2, 2, :3] = [0.999, 1e-9, -0.0]
+    img = ti.Vector.field(n, getattr(ti, dtype), shape=(w, h))
+    img.from_numpy(a)
+    with np.errstate(invalid="ignore"):
+        s = a[..., :3] * np_t(255)
+        q = np.where(s >= 255, 255, np.where(s > 0, np.trunc(np.nan_to_num(s)), 0)).astype(np.uint32)
+    words = (q[..., 0] << 16) | (q[..., 1] << 8) | q[..., 2]
+    want = words[:, ::-1].T.reshape(-1)  # word j * W + i is pixel (i, H - 1 - j)
+    monkeypatch.setattr(gui_module, "_fast_pixels", lambda arr: pytest.fail("the numpy path ran"))
+    gui = tg.GUI("t", res=(w, h), show_gui=False, fast_gui=True)
+    gui.set_image(img)
+    np.testing.assert_array_equal(gui.img, want)
+    np.testing.assert_array_equal(gui.canvas.to_uint8(), q.astype(np.uint8))  # the canvas follows the words
+
+
 def test_gui_img_without_fast_gui_is_float_rgba():
     gui = tg.GUI(res=(4, 3), show_gui=False)
     gui.set_image(np.full((4, 3), 0.5, np.float32))
