@@ -182,16 +182,7 @@ class ImageCanvas:
         """
         c = _points(pos) * self._scale
         n = len(c)
-        r = _per_item(radius, n, "radius")
-        rgb = as_rgb(color, n)
-        ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
-        lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
-
-        def shade(o, i, j):
-            dist = np.hypot(c[o, 0] - i, c[o, 1] - j)
-            return np.clip(r[o] - dist, 0.0, 1.0), (rgb, o)
-
-        self._draw(np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
+        self._queue(_circles, c, _per_item(radius, n, "radius"), as_rgb(color, n))
 
     def lines(self, begin, end, radius=1.0, color=0xFFFFFF, vertex_colors=None):
         """Segments with round caps; ``radius`` is the half-width in pixels (scalar or (n,)).
@@ -207,38 +198,9 @@ class ImageCanvas:
         n = len(A)
         r = _per_item(radius, n, "radius")
         if vertex_colors is not None:
-            vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
-            self.defer(lambda img: self._segments(img, A, B, r, None, vc))
-            return
-        rgb = as_rgb(color, n)
-        last = self._pending[-1] if self._pending else None
-        if isinstance(last, _SegmentBatch):
-            last.parts.append((A, B, r, rgb))
+            self._queue(_lines, A, B, r, np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3))
         else:
-            self.defer(_SegmentBatch(self, [(A, B, r, rgb)]))
-
-    def _segments(self, img, A, B, r, rgb, vc) -> None:
-        """Rasterise segments A -> B: one colour each (``rgb`` (n, 3)) or interpolated (``vc`` (n, 2, 3))."""
-        ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
-        seg = raster.SegmentPieces(A, B, r, ok, self.res)
-        owner, k, pieces, ta, span_all = seg.owner, seg.k, seg.pieces, seg.ta, seg.span
-        A, D, L2 = seg.A, seg.D, seg.L2
-
-        def shade(b, i, j):
-            o = owner[b]
-            px, py = i + 0.5 - A[o, 0], j + 0.5 - A[o, 1]
-            dx, dy, l2 = D[o, 0], D[o, 1], L2[o]
-            t = np.where(l2 > 0, np.clip((px * dx + py * dy) / np.where(l2 > 0, l2, 1.0), 0.0, 1.0), 0.0)
-            alpha = np.clip(r[o] - np.hypot(px - t * dx, py - t * dy), 0.0, 1.0)
-            # Piece boxes overlap; a pixel belongs to the piece holding its nearest point.
-            p = pieces[o]
-            alpha[np.minimum((t * p).astype(np.int64), p - 1) != k[b]] = 0.0
-            if vc is None:
-                return alpha, (rgb, o)
-            t = (ta[o] + t * span_all[o])[:, None]
-            return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
-
-        raster.rasterize(img, owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
+            self._queue(_lines, A, B, r, as_rgb(color, n))
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
@@ -254,6 +216,9 @@ class ImageCanvas:
             vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 3, 3)
         else:
             rgb = as_rgb(color, n)
+        if not antialias:
+            self._queue(_triangles, P, vc if vertex_colors is not None else rgb)
+            return
         area2 = raster.triangle_area2(P)
         ok = np.isfinite(P).all(axis=(1, 2))
         if antialias:
@@ -331,6 +296,17 @@ class ImageCanvas:
     def _draw(self, owner, x0, y0, x1, y1, shade):
         self.defer(lambda img: raster.rasterize(img, owner, x0, y0, x1, y1, shade))
 
+    def _queue(self, draw, *arrays) -> None:
+        """Queue ``draw(pixels, *arrays)``; consecutive calls of one ``draw`` with arrays of one shape each
+        become one call on their concatenation (a program calling ``gui.line`` in a Python loop then costs one
+        draw, not one per segment; compositing is order-exact, so the picture is the same)."""
+        last = self._pending[-1] if self._pending else None
+        key = (draw, tuple(a.shape[1:] for a in arrays))
+        if isinstance(last, _Batch) and last.key == key:
+            last.parts.append(arrays)
+        else:
+            self.defer(_Batch(key, [arrays]))
+
 
 @functools.lru_cache(maxsize=1024)
 def _text_mask(content: str, size: float):
@@ -354,13 +330,88 @@ def _text_mask(content: str, size: float):
     return rows, cols, coverage
 
 
-class _SegmentBatch:
-    """Consecutive one-colour ``lines`` calls, drawn as one set of segments when the pixels are looked at
-    (compositing is order-exact, so one batch draws what the calls drew one after another)."""
+class _Batch:
+    """Primitives of one kind queued by consecutive calls, drawn together when the pixels are looked at."""
 
-    def __init__(self, canvas: ImageCanvas, parts: list):
-        self.canvas, self.parts = canvas, parts
+    def __init__(self, key, parts: list):
+        self.key, self.parts = key, parts
 
     def __call__(self, img) -> None:
-        A, B, r, rgb = (np.concatenate(a) for a in zip(*self.parts))
-        self.canvas._segments(img, A, B, r, rgb, None)
+        arrays = self.parts[0] if len(self.parts) == 1 else [np.concatenate(a) for a in zip(*self.parts)]
+        self.key[0](img, *arrays)
+
+
+# The primitives are drawn by simgrad kernels (render2d.py: tiles in parallel, the numpy rasteriser's coverage and
+# order) once a program exists; before ti.init() by the numpy rasteriser itself, so a GUI needs no program.
+def _kernels():
+    from simgrad.lang import program
+
+    if program._program is None:
+        return None
+    from . import render2d
+
+    return render2d
+
+
+def _circles(img, c, r, rgb) -> None:
+    k = _kernels()
+    if k is not None:
+        return k.circles(img, c, r, rgb)
+    ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
+    lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
+
+    def shade(o, i, j):
+        dist = np.hypot(c[o, 0] - i, c[o, 1] - j)
+        return np.clip(r[o] - dist, 0.0, 1.0), (rgb, o)
+
+    raster.rasterize(img, np.arange(len(c)), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
+
+
+def _lines(img, A, B, r, colors) -> None:
+    """Segments A -> B of half-width r: ``colors`` (n, 3) one each, or (n, 2, 3) interpolated along each."""
+    vc = colors if colors.ndim == 3 else None
+    k = _kernels()
+    if k is not None:
+        return k.lines(img, A, B, r, colors if vc is None else None, vertex_colors=vc)
+    ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
+    seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])
+    owner, k_, pieces, ta, span_all = seg.owner, seg.k, seg.pieces, seg.ta, seg.span
+    A, D, L2 = seg.A, seg.D, seg.L2
+
+    def shade(b, i, j):
+        o = owner[b]
+        px, py = i + 0.5 - A[o, 0], j + 0.5 - A[o, 1]
+        dx, dy, l2 = D[o, 0], D[o, 1], L2[o]
+        t = np.where(l2 > 0, np.clip((px * dx + py * dy) / np.where(l2 > 0, l2, 1.0), 0.0, 1.0), 0.0)
+        alpha = np.clip(r[o] - np.hypot(px - t * dx, py - t * dy), 0.0, 1.0)
+        # Piece boxes overlap; a pixel belongs to the piece holding its nearest point.
+        p = pieces[o]
+        alpha[np.minimum((t * p).astype(np.int64), p - 1) != k_[b]] = 0.0
+        if vc is None:
+            return alpha, (colors, o)
+        t = (ta[o] + t * span_all[o])[:, None]
+        return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
+
+    raster.rasterize(img, owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
+
+
+def _triangles(img, P, colors) -> None:
+    """Triangles covering the pixel centres inside them: ``colors`` (n, 3) one each or (n, 3, 3) per vertex."""
+    vc = colors if colors.ndim == 3 else None
+    k = _kernels()
+    if k is not None:
+        return k.triangles(img, P, colors if vc is None else None, vertex_colors=vc)
+    owner, x0, y0, x1 = raster.triangle_spans(P, np.isfinite(P).all(axis=(1, 2)), img.shape[:2])
+    area2 = raster.triangle_area2(P)
+
+    def shade(b, i, j):
+        o = owner[b]
+        if vc is None:
+            return np.ones(o.size), (colors, o)
+        e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
+        w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
+        w = np.clip(w, 0.0, 1.0)
+        w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+        return np.ones(o.size), np.einsum("sk,skc->sc", w, vc[o])
+
+    raster.rasterize(img, owner, x0, y0, x1, y0, shade)

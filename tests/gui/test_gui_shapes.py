@@ -25,6 +25,22 @@ def seg_dist(px, py, a, b):
     return np.hypot(px - a[0] - t * d[0], py - a[1] - t * d[1])
 
 
+@pytest.fixture(autouse=True, params=["numpy", "kernels"])
+def raster_path(request, monkeypatch):
+    """Every fact holds for both ways the canvas draws: simgrad kernels (render2d.py, once a program exists)
+    and the numpy rasteriser (before ti.init)."""
+    from simgrad.gui import canvas
+
+    if request.param == "numpy":
+        monkeypatch.setattr(canvas, "_kernels", lambda: None)
+    else:
+        import simgrad as ti
+
+        ti.init(arch=ti.cpu)
+        assert canvas._kernels() is not None
+    return request.param
+
+
 @pytest.fixture
 def gui():
     return tg.GUI("test", res=(W, H), background_color=0x000000, show_gui=False)
@@ -288,3 +304,4 @@ def test_deferred_drawing_snapshots_its_inputs_and_show_clears(gui, tmp_path):
     gui.circle((0.5, 0.5), radius=3, color=0xFFFFFF)
     gui.clear(0x0000FF)  # a clear drops what was drawn before it
     np.testing.assert_allclose(gui.get_image()[..., :3], np.broadcast_to(rgb(0x0000FF), (W, H, 3)), atol=1e-6)
+
