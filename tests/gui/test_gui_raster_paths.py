@@ -19,7 +19,7 @@ def test_kernel_and_numpy_drawing_agree(monkeypatch):
     def draw():
         g = tg.GUI("t", res=(W, H), background_color=0x102030, show_gui=False)
         g.circles(rng.random((40, 2)), radius=rng.uniform(0.5, 6, 40), color=rng.integers(0, 1 << 24, 40))
-        for k in range(12):
+        for _ in range(12):
             g.line(rng.random(2), rng.random(2), radius=rng.uniform(0.5, 3), color=int(rng.integers(0, 1 << 24)))
         g.triangles(rng.random((15, 2)), rng.random((15, 2)), rng.random((15, 2)), color=0xA0C0E0)
         g.canvas.triangles(rng.random((5, 2)), rng.random((5, 2)), rng.random((5, 2)),
