@@ -121,21 +121,24 @@ unlock_bump:
   call void @sg_pool_unlock(ptr %row)
   br label %bump
 reuse:
-  ; a lock-free bump elsewhere may install a block meanwhile: install by compare-and-swap here too
+  ; a lock-free bump elsewhere may install a block meanwhile: install by compare-and-swap here too. The
+  ; block's first word (its free-list link) is cleared BEFORE the block is published: once installed, other
+  ; threads add into its first cell at once, and a clear after the swap would wipe such an update
+  %next = load ptr, ptr %free
+  store i64 0, ptr %free
   %cas2 = cmpxchg ptr %slot, ptr null, ptr %free acq_rel monotonic
   %won2 = extractvalue { ptr, i1 } %cas2, 1
   br i1 %won2, label %popped, label %kept
 popped:
-  %next = load ptr, ptr %free
   store ptr %next, ptr %fp
-  store i64 0, ptr %free
   %cnp2 = getelementptr i64, ptr %row, i64 ${POOL_FREECOUNT}
   %d1 = load i64, ptr %cnp2
   %d2 = sub i64 %d1, 1
   store i64 %d2, ptr %cnp2
   call void @sg_pool_unlock(ptr %row)
   ret ptr %free
-kept:
+kept:                      ; still on the list (the lock is held): its link back
+  store ptr %next, ptr %free
   %other2 = extractvalue { ptr, i1 } %cas2, 0
   call void @sg_pool_unlock(ptr %row)
   ret ptr %other2
