@@ -207,8 +207,8 @@ def _headless(ti, cache_dir):
 
             def draw():
                 canvas = getattr(self, "canvas", None)  # simgrad's; a fast_gui window shows the packed words
-                if type(canvas).__module__.startswith("simgrad") and not _is_fast(self):
-                    _ = canvas.img
+                if type(canvas).__module__.startswith("simgrad") and getattr(self, "_fast", None) is None:
+                    _ = canvas.img  # (not _is_fast: simgrad's gui.img of a float canvas is a copy of it)
 
             _State.frames += 1
             _State.ticks = 0
