@@ -192,11 +192,17 @@ class ImageCanvas:
             raise ValueError(f"begin and end must have the same shape, got {A.shape} and {B.shape}")
         n = len(A)
         r = _per_item(radius, n, "radius")
+        rgb = vc = None
         if vertex_colors is not None:
             vc = np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3)
         else:
             rgb = as_rgb(color, n)
         ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
+        self.defer(lambda img: self._draw_segments(img, A, B, r, ok, rgb, vc))
+
+    def _draw_segments(self, img, A, B, r, ok, rgb, vc):
+        """Rasterise segments (deferred, like every primitive: the pieces are cut only when the pixels are
+        looked at, so a headless frame that is never looked at costs only the argument checks)."""
         seg = raster.SegmentPieces(A, B, r, ok, self.res)
         owner, k, pieces, ta, span_all = seg.owner, seg.k, seg.pieces, seg.ta, seg.span
         A, D, L2 = seg.A, seg.D, seg.L2
@@ -210,12 +216,12 @@ class ImageCanvas:
             # Piece boxes overlap; a pixel belongs to the piece holding its nearest point.
             p = pieces[o]
             alpha[np.minimum((t * p).astype(np.int64), p - 1) != k[b]] = 0.0
-            if vertex_colors is None:
+            if vc is None:
                 return alpha, (rgb, o)
             t = (ta[o] + t * span_all[o])[:, None]
             return alpha, vc[o, 0] * (1 - t) + vc[o, 1] * t
 
-        self._draw(owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
+        raster.rasterize(img, owner, seg.x0, seg.y0, seg.x1, seg.y1, shade)
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
@@ -233,33 +239,39 @@ class ImageCanvas:
             rgb = as_rgb(color, n)
         area2 = raster.triangle_area2(P)
         ok = np.isfinite(P).all(axis=(1, 2))
+
+        def shader(owner):
+            def shade(b, i, j):
+                o = owner[b]
+                if antialias or vertex_colors is not None:
+                    e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
+                if antialias:
+                    s = -np.sign(area2[o])
+                    dists = [s * e[k] / np.hypot(*(P[o, (k + 1) % 3] - P[o, k]).T) for k in range(3)]
+                    alpha = np.clip(0.5 + np.minimum(np.minimum(dists[0], dists[1]), dists[2]), 0.0, 1.0)
+                else:  # spans hold exactly the covered pixels
+                    alpha = np.ones(o.size)
+                if vertex_colors is None:
+                    return alpha, (rgb, o)
+                # Barycentric weight of a vertex is the edge function of the opposite edge over -area2.
+                w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
+                w = np.clip(w, 0.0, 1.0)
+                w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+                return alpha, np.einsum("sk,skc->sc", w, vc[o])
+            return shade
+
         if antialias:
             ok &= area2 != 0
             lo, hi = raster.empty_invalid(ok, np.floor(P.min(axis=1) - 1), np.ceil(P.max(axis=1) + 1))
-            owner, x0, y0, x1, y1 = np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]
-        else:
+            owner = np.arange(n)
+            self._draw(owner, lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shader(owner))
+            return
+
+        def draw(img):  # the covered spans are found when the pixels are looked at, as everything is drawn
             owner, x0, y0, x1 = raster.triangle_spans(P, ok, self.res)
-            y1 = y0
+            raster.rasterize(img, owner, x0, y0, x1, y0, shader(owner))
 
-        def shade(b, i, j):
-            o = owner[b]
-            if antialias or vertex_colors is not None:
-                e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
-            if antialias:
-                s = -np.sign(area2[o])
-                dists = [s * e[k] / np.hypot(*(P[o, (k + 1) % 3] - P[o, k]).T) for k in range(3)]
-                alpha = np.clip(0.5 + np.minimum(np.minimum(dists[0], dists[1]), dists[2]), 0.0, 1.0)
-            else:  # spans hold exactly the covered pixels
-                alpha = np.ones(o.size)
-            if vertex_colors is None:
-                return alpha, (rgb, o)
-            # Barycentric weight of a vertex is the edge function of the opposite edge over -area2.
-            w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
-            w = np.clip(w, 0.0, 1.0)
-            w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
-            return alpha, np.einsum("sk,skc->sc", w, vc[o])
-
-        self._draw(owner, x0, y0, x1, y1, shade)
+        self.defer(draw)
 
     def rect(self, topleft, bottomright, radius=1.0, color=0xFFFFFF):
         """Rectangle outline: the four sides drawn as segments, as Taichi does."""
