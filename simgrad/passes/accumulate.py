@@ -191,7 +191,7 @@ def _mark_local_sums(kernel: Kernel) -> bool:
 def _reduction_chain(v: Stmt, var: Stmt) -> list[Stmt]:
     """The statements of a float reduction step `v` of local `var`: `a + x` with `a` a load of `var`, or a
     tree of mins (maxes) with a load of `var` among its leaves (`ti.min(m, x, y)`); [] for anything else."""
-    if not v.type.is_float or v.op not in (Op.ADD, Op.MIN, Op.MAX):
+    if v.type is None or not v.type.is_float or v.op not in (Op.ADD, Op.MIN, Op.MAX):
         return []
     if v.op is Op.ADD:
         return [v] if any(o.op is Op.LOCAL_LOAD and o.operands[0] is var for o in v.operands) else []

@@ -83,7 +83,7 @@ def test_a_reduction_local_also_assigned_otherwise_is_left_alone():
 
     @ti.kernel
     def k():
-        for r in range(1):
+        for _r in range(1):
             m = 1e5
             s = 1e5
             for j in range(n):
