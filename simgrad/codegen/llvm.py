@@ -141,7 +141,6 @@ class FunctionText:
         self.depth = "0"
         self.exit = "ret void"
         self.serial = False  # a task variant run only on the calling thread alone: its atomics are plain
-        self.store_cond: str | None = None  # inside a speculated IF (passes/speculate.py): its i1 condition
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -491,11 +490,6 @@ def atomic_form(f: FunctionText, s: Stmt) -> str:
 def lower_if(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     c = f.tmp("c")
     f.emit(f"{c} = icmp ne i32 {f.v(s.operands[0])}, 0")
-    if s.attrs.get("speculate") and f.store_cond is None:  # owned, in-bounds stores (passes/speculate.py)
-        f.store_cond = c  # the body runs unconditionally; each store writes select(c, new, old)
-        g.lower_block(f, s.blocks[0])
-        f.store_cond = None
-        return
     then_l, else_l, end_l = f.label("then"), f.label("else"), f.label("endif")
     f.emit(f"br i1 {c}, label %{then_l}, label %{else_l}")
     f.start_block(then_l)
@@ -592,13 +586,7 @@ def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_global_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     p, v = s.operands
-    value = f.v(v)
-    if f.store_cond is not None:  # a speculated branch's store: the old value where the branch is not taken
-        old, sel = f.tmp("old"), f.tmp("sel")
-        f.emit(f"{old} = load {llvm_type(v.type)}, ptr {f.v(p)}")
-        f.emit(f"{sel} = select i1 {f.store_cond}, {llvm_type(v.type)} {value}, {llvm_type(v.type)} {old}")
-        value = sel
-    f.emit(f"store {llvm_type(v.type)} {value}, ptr {f.v(p)}")
+    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {f.v(p)}")
 
 
 def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

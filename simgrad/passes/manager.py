@@ -26,17 +26,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics);
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars)."""
-    from simgrad.passes import (
-        accumulate,
-        hoist,
-        lower_access,
-        parallel_strategy,
-        promote,
-        quant,
-        simplify,
-        speculate,
-        verify,
-    )
+    from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -50,8 +40,6 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     steps.append(("quant", quant.expand_quant))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))
-    if not debug:  # owned, in-bounds conditional stores of parallel loops become branch-free in codegen
-        steps.append(("speculate", speculate.speculate))
     if fast_math:  # sums in serial loops in locals, reassociable: LLVM vectorises them as reductions
         steps.append(("accumulate", partial(accumulate.accumulate, cache_sums=cache_sums and not debug)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)
