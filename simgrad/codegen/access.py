@@ -3,7 +3,10 @@ offset in the IR; what is left here is the base the offset applies to, and the d
 
 from __future__ import annotations
 
+from simgrad import dtypes as dt
 from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.nodes import Stmt
+from simgrad.ir.ops import Op
 
 
 def lower_check_index(gen, f, s) -> str:
@@ -33,7 +36,17 @@ def lower_global_ptr(gen, f, s) -> str:
     target = s.attrs["target"]
     p = f.tmp("ptr")
     if s.attrs.get("absolute"):  # a sparse field's element: the walk computed its address
-        f.emit(f"{p} = inttoptr i64 {off} to ptr")
+        based = pointer_and_offsets(f, s.operands[-1])
+        if based is None:
+            f.emit(f"{p} = inttoptr i64 {off} to ptr")
+        else:
+            base, terms = based
+            total = terms[0] if terms else "0"
+            for t in terms[1:]:
+                nxt = f.tmp("aoff")
+                f.emit(f"{nxt} = add i64 {total}, {t}")
+                total = nxt
+            f.emit(f"{p} = getelementptr i8, ptr {base}, i64 {total}")
     elif isinstance(target, FieldRef):
         private = f.private_root_of(s)
         if private is not None:  # its root points before the copy: no inbounds
@@ -43,3 +56,23 @@ def lower_global_ptr(gen, f, s) -> str:
     else:
         f.emit(f"{p} = getelementptr inbounds i8, ptr {f.array_base(target)}, i64 {off}")
     return p
+
+
+def pointer_and_offsets(f, x: Stmt, depth: int = 0) -> tuple[str, tuple[str, ...]] | None:
+    """A sparse element's u64 address as (pointer, i64 terms) of which it is the sum: its walk's last lookup
+    (a SPARSE_CELL's block, or the tree's root: f.addr_base, codegen/sparse.py) plus the u64 ADDs on top
+    (members, dense levels below). A getelementptr from that pointer keeps what LLVM knows of it: loads along a
+    dynamic list are then consecutive (LLVM vectorises a loop over the list with wide loads, not gathers),
+    where `inttoptr` of the sum hides the stride from SCEV. None when the address is not such a sum (a value
+    another GPU segment computed, a lookup emitted in another function)."""
+    hit = f.addr_base.get(x)
+    if hit is not None:
+        return hit
+    if x.op is not Op.ADD or x.type is not dt.u64 or depth > 32 or x not in f.names:
+        return None
+    a, b = x.operands
+    for one, other in ((a, b), (b, a)):
+        got = pointer_and_offsets(f, one, depth + 1)
+        if got is not None:
+            return got[0], (*got[1], f.v(other))
+    return None

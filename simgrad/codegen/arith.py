@@ -14,13 +14,19 @@ def _sfx(t: dt.DataType) -> str:
     return {"float": "f32", "double": "f64", "half": "f16"}.get(t.llvm, t.llvm)
 
 
-def _intrinsic(f, name: str, t: dt.DataType, args: list[str]) -> str:
+def _intrinsic(f, name: str, t: dt.DataType, args: list[str], flags: str = "") -> str:
     ty = t.llvm
     fn = f"@llvm.{name}.{_sfx(t)}"
     f.gen.module.declare(f"declare {ty} {fn}({', '.join([ty] * len(args))})")
     r = f.tmp(name.split(".")[0])
-    f.emit(f"{r} = call {ty} {fn}({', '.join(f'{ty} {a}' for a in args)})")
+    f.emit(f"{r} = call {flags}{ty} {fn}({', '.join(f'{ty} {a}' for a in args)})")
     return r
+
+
+#: a float min/max of a reduction a serial loop carries (passes/accumulate.py marks it `reassoc`, fast_math
+#: only): minimumnum/maximumnum give minnum/maxnum's value (the other operand for a NaN; equal zeros either
+#: way under nsz), and LLVM 22 vectorises any number of such reductions in one loop, minnum ones only alone
+_REDUCTION = {Op.MIN: "minimumnum", Op.MAX: "maximumnum"}
 
 
 def _libm(f, name: str, t: dt.DataType, args: list[str]) -> str:
@@ -89,6 +95,8 @@ def lower_elementwise(f, s) -> str:
             f.emit(f"{r} = {how.name}{flags} {t.llvm} {', '.join(args)}")
         return r
     if isinstance(how, Intrinsic):
+        if s.op in _REDUCTION and s.attrs.get("reassoc") and t in (dt.f32, dt.f64) and f.gen.minmax_reductions:
+            return _intrinsic(f, _REDUCTION[s.op], t, args, f.gen.float_flags(s).replace("reassoc ", ""))
         name = how.unsigned if how.unsigned and not t.is_signed else how.name
         return _intrinsic(f, name, t, args)
     if isinstance(how, Libm):

@@ -133,6 +133,8 @@ class FunctionText:
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
         self.bound: set[int] = set()  # statements whose value the enclosing loop gives (lower_block skips them)
         self.cursors: dict[int, str] = {}  # dynamic node's pool -> this function's chunk cursor (codegen/sparse.py)
+        # TREE_ROOT / SPARSE_CELL -> (pointer, i64 offsets) whose sum is its u64 address (codegen/access.py)
+        self.addr_base: dict[Stmt, tuple[str, tuple[str, ...]]] = {}
         # a real function (KernelCodegen.emit_functions): its thread and call depth are parameters, a Ctrl-C
         # leaves it by `exit` (the kernel's entry reports the interruption), its updates of shared places are atomic
         self.is_function = False
@@ -257,6 +259,9 @@ class KernelCodegen:
     #: sparse pools hand a thread BATCH fresh blocks at a time (runtime/sparse.py): the pool's threads, each with
     #: a slot of its own; a GPU's threads are far more than the slots, so its blocks are bumped one at a time
     batched_alloc = True
+
+    #: float min/max reductions of serial loops as llvm.minimumnum/maximumnum (codegen/arith.py `_REDUCTION`)
+    minmax_reductions = True
 
     #: the function attributes that tell LLVM results are flushed (runtime/fpenv.py), when they are
     flush_attrs = fpenv.CPU_ATTRS

@@ -6,6 +6,7 @@ how (read: an inactive cell is the zero block, write: activate it)."""
 
 from __future__ import annotations
 
+from simgrad.codegen.access import pointer_and_offsets
 from simgrad.runtime import abi, ll
 from simgrad.runtime import sparse as rt
 
@@ -36,6 +37,7 @@ def lower_tree_root(g, f, s) -> None:
     r = f.tmp("rootaddr")
     f.emit(f"{r} = ptrtoint ptr {f.root(s.attrs['tree'])} to i64")
     f.names[s] = r
+    f.addr_base[s] = (f.root(s.attrs["tree"]), ())
 
 
 def _as_ptr(f, v: str) -> str:
@@ -175,6 +177,7 @@ def _dyn_element(g, f, s, container: str, cell: str, level, mode: str) -> str:
     f.emit(f"{off} = mul i64 {r}, {level.cell_size}")
     f.emit(f"{off8} = add i64 {off}, 8")
     f.emit(f"{r_} = add i64 {_as_int(f, blk)}, {off8}")
+    f.addr_base[s] = (blk, (off8,))  # the element's address: its chunk plus an offset (codegen/access.py)
     return r_
 
 
@@ -183,7 +186,9 @@ def lower_sparse_cell(g, f, s) -> None:
     level, mode = s.attrs["level"], s.attrs["mode"]
     kind = level.kind
     if kind == "pointer":
-        f.names[s] = _as_int(f, _slot_block(g, f, s, _slot(f, container, cell), level, mode))
+        blk = _slot_block(g, f, s, _slot(f, container, cell), level, mode)
+        f.names[s] = _as_int(f, blk)
+        f.addr_base[s] = (blk, ())
         return
     if kind == "dynamic":
         addr = _dyn_element(g, f, s, container, cell, level, mode)
@@ -198,6 +203,9 @@ def lower_sparse_cell(g, f, s) -> None:
     off, addr = f.tmp("bo"), f.tmp("ba")
     f.emit(f"{off} = mul i64 {cell}, {level.cell_size}")
     f.emit(f"{addr} = add i64 {container}, {off}")
+    based = pointer_and_offsets(f, s.operands[0])
+    if based is not None:
+        f.addr_base[s] = (based[0], (*based[1], off))
     if mode == "write":
         word, bit = _mask_word(f, container, cell, level)
         is_set = _bit_set(f, word, bit)

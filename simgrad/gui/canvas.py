@@ -31,13 +31,22 @@ def to_numpy(x):
     return np.asarray(x)
 
 
+def _image_values(img) -> np.ndarray:
+    """The values of an image to read once: a vector field's memory itself when its components sit together
+    (lang/field.py `_packed_view`, no to_numpy copy: set_image of a 500x500 RGB field copied it three times),
+    else to_numpy."""
+    packed = getattr(img, "_packed_view", None)
+    view = packed() if callable(packed) and not getattr(img, "sparse", False) else None
+    return view if view is not None else to_numpy(img)
+
+
 def cook_image(img) -> np.ndarray:
     """Convert an image in Taichi's (W, H[, C]) layout to float32 RGB of shape (W, H, 3) (read-only).
 
     Follows ``ti.GUI.set_image``: unsigned integers are scaled by their maximum, floats are taken as
     [0, 1]; 1 channel is grey, 2 channels are RG (blue = 0), 4 channels drop alpha.
     """
-    arr = to_numpy(img)
+    arr = _image_values(img)
     if arr.dtype.kind == "u":
         arr = arr.astype(np.float32) * np.float32(1.0 / np.iinfo(arr.dtype).max)
     elif arr.dtype.kind in "fb":

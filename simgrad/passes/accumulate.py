@@ -12,6 +12,13 @@
    take) is marked `reassoc`: codegen emits that one fadd with LLVM's reassoc flag, which lets the loop
    vectoriser split the sum into partial sums (4-5x on an n-body force). Only the sum's order changes, as
    fast-math allows; fast_math=False keeps every sum in program order and skips both steps.
+3. Likewise a float min/max reduction into a local (`m = ti.min(m, x)`, `m = ti.min(m, x, y)`: every
+   min of the chain from the stored value down to the load of `m`) is marked `reassoc`; codegen/arith.py
+   lowers those as llvm.minimumnum/maximumnum (nsz) instead of minnum/maxnum. Both give the other operand
+   for a NaN, so the values are the same (a min/max is exact: only which of two equal zeros is picked may
+   change, as nsz allows), but LLVM 22 vectorises a minnum reduction without nnan only when it is the loop's
+   only reduction (with a NaN check), while minimumnum reductions vectorise in any number: marching_squares'
+   render loop carries two.
 """
 
 from __future__ import annotations
@@ -149,30 +156,52 @@ def _replace(loop: Stmt, parent: Block, ptr: Stmt, ptrs: list[Stmt], updates: li
 def _mark_local_sums(kernel: Kernel) -> bool:
     """`a = a + x` and `a += x` (float, `a` a local) inside a serial loop whose every write of `a` is such a
     sum (a local the body also assigns afresh, such as a ti.func's parameter copy, carries no sum): the sum may
-    be reassociated."""
+    be reassociated. The same for float min/max reductions, every write of the local one kind of them."""
     changed = False
     for loop in walk(kernel.body):
         if not _serial_loop(loop):
             continue
-        sums: dict[int, list[Stmt]] = {}
+        sums: dict[int, list[Stmt]] = {}  # local -> the reassociable statements of its reduction
+        kinds: dict[int, set] = {}  # local -> the kinds of reduction its writes are (one, or not marked)
         other: set[int] = set()
         for s in _walk_loop(loop):
             if s.op is Op.ATOMIC and s.operands[0].op is Op.ALLOCA:
                 if s.type.is_float and _plain_sum(s):
                     sums.setdefault(id(s.operands[0]), []).append(s)
+                    kinds.setdefault(id(s.operands[0]), set()).add(Op.ADD)
                 else:
                     other.add(id(s.operands[0]))
             elif s.op is Op.LOCAL_STORE:
                 var, v = s.operands
-                if v.op is Op.ADD and v.type.is_float and any(
-                        o.op is Op.LOCAL_LOAD and o.operands[0] is var for o in v.operands):
-                    sums.setdefault(id(var), []).append(v)
+                chain = _reduction_chain(v, var)
+                if chain:
+                    sums.setdefault(id(var), []).extend(chain)
+                    kinds.setdefault(id(var), set()).add(v.op)
                 else:
                     other.add(id(var))
-        for var, adds in sums.items():
-            if var in other:
+        for var, stmts in sums.items():
+            if var in other or len(kinds[var]) > 1:
                 continue
-            for a in adds:
+            for a in stmts:
                 changed |= not a.attrs.get("reassoc")
                 a.attrs["reassoc"] = True
     return changed
+
+
+def _reduction_chain(v: Stmt, var: Stmt) -> list[Stmt]:
+    """The statements of a float reduction step `v` of local `var`: `a + x` with `a` a load of `var`, or a
+    tree of mins (maxes) with a load of `var` among its leaves (`ti.min(m, x, y)`); [] for anything else."""
+    if v.type is None or not v.type.is_float or v.op not in (Op.ADD, Op.MIN, Op.MAX):
+        return []
+    if v.op is Op.ADD:
+        return [v] if any(o.op is Op.LOCAL_LOAD and o.operands[0] is var for o in v.operands) else []
+    chain, todo, found = [], [v], False
+    while todo:
+        x = todo.pop()
+        chain.append(x)
+        for o in x.operands:
+            if o.op is Op.LOCAL_LOAD and o.operands[0] is var:
+                found = True
+            elif o.op is v.op and o.type is v.type and all(o is not c for c in chain):
+                todo.append(o)
+    return chain if found else []

@@ -179,3 +179,21 @@ def test_imwrite_scales_wider_unsigned_ints_by_their_bound(tmp_path):
         path = str(tmp_path / f"u{np.dtype(t).itemsize}.png")
         tg.imwrite(px, path)
         np.testing.assert_array_equal(tg.imread(path).astype(np.int64), (px // step).astype(np.int64))
+
+
+def test_set_image_of_a_vector_field_reads_its_memory_once(monkeypatch):
+    """A packed vector field (pixels = ti.Vector.field(3, ...)) is read through its memory view, without the
+    to_numpy copy (rasterizer's frame copied 3 MB three times), and the picture is the field's current values."""
+    import simgrad as ti
+
+    ti.init(arch=ti.cpu)
+    pixels = ti.Vector.field(3, ti.f32, (40, 30))
+    vals = np.random.default_rng(0).random((40, 30, 3), dtype=np.float32)
+    pixels.from_numpy(vals)
+    gui = tg.GUI("set_image", res=(40, 30), show_gui=False)
+    monkeypatch.setattr(type(pixels), "to_numpy", lambda *a, **k: pytest.fail("copied through to_numpy"))
+    gui.set_image(pixels)
+    np.testing.assert_array_equal(gui.get_image()[..., :3], vals)
+    pixels[3, 4] = (0.25, 0.5, 0.75)
+    gui.set_image(pixels)
+    np.testing.assert_array_equal(gui.get_image()[3, 4, :3], np.float32([0.25, 0.5, 0.75]))

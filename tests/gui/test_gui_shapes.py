@@ -305,3 +305,26 @@ def test_deferred_drawing_snapshots_its_inputs_and_show_clears(gui, tmp_path):
     gui.clear(0x0000FF)  # a clear drops what was drawn before it
     np.testing.assert_allclose(gui.get_image()[..., :3], np.broadcast_to(rgb(0x0000FF), (W, H, 3)), atol=1e-6)
 
+
+def test_triangles_and_lines_are_prepared_only_when_the_pixels_are_looked_at(gui, monkeypatch):
+    """A headless frame that nobody looks at costs only the argument checks: the spans of triangles and the
+    pieces of segments are computed when the pixels are read (mciso_advanced draws 2500 triangles and 7500
+    lines a frame; preparing them took longer than its kernels). The picture is the one drawn eagerly."""
+    calls = []
+    spans, pieces = raster.triangle_spans, raster.SegmentPieces
+    monkeypatch.setattr(raster, "triangle_spans", lambda *a: calls.append("spans") or spans(*a))
+    monkeypatch.setattr(raster, "SegmentPieces", lambda *a: calls.append("pieces") or pieces(*a))
+    a = np.array([[0.1, 0.1], [0.5, 0.5]])
+    b = np.array([[0.9, 0.2], [0.7, 0.9]])
+    c = np.array([[0.4, 0.8], [0.2, 0.6]])
+    gui.triangles(a, b, c, color=0x336699)
+    gui.lines(a, b, radius=2, color=0xFF0000)
+    a[:] = 0.0  # the call's inputs were copied
+    assert calls == []
+    img = gui.get_image()[..., :3].copy()
+    assert calls in (["spans", "pieces"], ["pieces"])  # the kernels' triangles need no spans
+    gui.clear(0)
+    gui.triangles(np.array([[0.1, 0.1], [0.5, 0.5]]), b, c, color=0x336699)
+    gui.lines(np.array([[0.1, 0.1], [0.5, 0.5]]), b, radius=2, color=0xFF0000)
+    np.testing.assert_array_equal(gui.get_image()[..., :3], img)
+    assert img.max() > 0
