@@ -45,26 +45,38 @@ else:
     _I32 = ti.i32
 
 
+#: at most this many primitives, or any number in a one-thread program, are drawn as one tile covering the
+#: image (``tiles_y`` 0): one thread draws them in call order, with no binning, whose numpy work and kernel cost
+#: more than drawing a few primitives (a GUI frame's one circle) and buy nothing without other threads
+SERIAL_MAX = 256
+
+
 def bin_boxes(x0, y0, x1, y1, res):
     """Tile lists of pixel boxes (inclusive, in drawing order; clipped here): returns ``start`` (one more
     than the tile count) and ``items`` (box indices), tile ``t`` holding ``items[start[t]:start[t + 1]]`` in
-    ascending order, plus the clipped boxes as int32 (n, 4).  Tiles are numbered x-major.  The lists are
-    filled by a serial kernel (a counting sort: cheaper than numpy's repeat/sort chain)."""
+    ascending order, the clipped boxes as int32 (n, 4), and ``tiles_y`` (0: one tile, the whole image).
+    Tiles are numbered x-major.  The lists are filled by a serial kernel (a counting sort: cheaper than numpy's
+    repeat/sort chain)."""
+    from simgrad.lang.program import get_program
+
     W, H = res
-    tiles_y = -(-H // TILE)
-    n_tiles = -(-W // TILE) * tiles_y
     x0 = np.clip(x0, 0, W).astype(np.int32)
     y0 = np.clip(y0, 0, H).astype(np.int32)
     x1 = np.clip(x1, -1, W - 1).astype(np.int32)
     y1 = np.clip(y1, -1, H - 1).astype(np.int32)
     boxes = np.stack([x0, y0, x1, y1], axis=1)
+    prog = get_program()
+    if len(boxes) <= SERIAL_MAX or (prog.config.num_threads == 1 and not prog.on_gpu):
+        return np.array([0, len(boxes)], np.int32), np.arange(len(boxes), dtype=np.int32), boxes, 0
+    tiles_y = -(-H // TILE)
+    n_tiles = -(-W // TILE) * tiles_y
     count = (x1 // TILE - x0 // TILE + 1) * (y1 // TILE - y0 // TILE + 1)
     total = int(count[(x1 >= x0) & (y1 >= y0)].sum(dtype=np.int64))
     start = np.zeros(n_tiles + 1, np.int32)
     items = np.empty(max(total, 1), np.int32)
     if total:
         _bin(boxes, start, np.empty(n_tiles, np.int32), items, tiles_y)
-    return start, items[:total], boxes
+    return start, items[:total], boxes, tiles_y
 
 
 @ti.kernel
@@ -93,10 +105,13 @@ def _bin(boxes: _B1, start: _I1, cursor: _I1, items: _I1, tiles_y: _I32):
 
 @ti.func
 def _tile(t, tiles_y, W, H):
-    """Pixel range [x0, x1] x [y0, y1] of tile ``t``."""
-    tx = t // tiles_y
-    ty = t - tx * tiles_y
-    return tx * TILE, ti.min(tx * TILE + TILE, W) - 1, ty * TILE, ti.min(ty * TILE + TILE, H) - 1
+    """Pixel range [x0, x1] x [y0, y1] of tile ``t`` (the whole image when ``tiles_y`` is 0)."""
+    x0, x1, y0, y1 = 0, W - 1, 0, H - 1
+    if tiles_y > 0:
+        tx = t // tiles_y
+        ty = t - tx * tiles_y
+        x0, x1, y0, y1 = tx * TILE, ti.min(tx * TILE + TILE, W) - 1, ty * TILE, ti.min(ty * TILE + TILE, H) - 1
+    return x0, x1, y0, y1
 
 
 @ti.func
@@ -218,10 +233,6 @@ def _triangles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: 
                         _blend(img, i, j, 1.0, c)
 
 
-def _tiles_y(img):
-    return -(-img.shape[1] // TILE)
-
-
 def circles(img, centers, radii, colors):
     """Draw circles into ``img`` (float32 (W, H, 3), C-contiguous): ``centers`` (n, 2) and ``radii`` (n,) in
     pixels, ``colors`` (n, 3) float RGB."""
@@ -229,10 +240,10 @@ def circles(img, centers, radii, colors):
     r = np.asarray(radii, np.float64)
     ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
     lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
-    start, items, boxes = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], img.shape[:2])
+    start, items, boxes, tiles_y = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], img.shape[:2])
     if items.size:
         geo = np.ascontiguousarray(np.column_stack([c, r]))
-        _circles(img, start, items, boxes, geo, np.ascontiguousarray(colors, np.float64), _tiles_y(img))
+        _circles(img, start, items, boxes, geo, np.ascontiguousarray(colors, np.float64), tiles_y)
 
 
 def lines(img, A, B, radius, colors, vertex_colors=None):
@@ -243,7 +254,7 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
     r = np.asarray(radius, np.float64)
     ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
     seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])
-    start, items, boxes = bin_boxes(seg.x0, seg.y0, seg.x1, seg.y1, img.shape[:2])
+    start, items, boxes, tiles_y = bin_boxes(seg.x0, seg.y0, seg.x1, seg.y1, img.shape[:2])
     if not items.size:
         return
     geo = np.ascontiguousarray(np.column_stack([seg.A, seg.D, seg.L2, r, seg.pieces, seg.ta, seg.span]))
@@ -253,7 +264,7 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
     else:
         c0 = c1 = np.ascontiguousarray(colors, np.float64)
     _lines(img, start, items, boxes, seg.owner.astype(np.int32), seg.k.astype(np.int32), geo, c0, c1,
-           int(vertex_colors is not None), _tiles_y(img))
+           int(vertex_colors is not None), tiles_y)
 
 
 def triangles(img, P, colors, vertex_colors=None):
@@ -265,7 +276,7 @@ def triangles(img, P, colors, vertex_colors=None):
     ok = np.isfinite(P).all(axis=(1, 2)) & (area2 != 0)
     lo = np.where(ok[:, None], np.floor(np.where(ok[:, None, None], P, 0.0).min(axis=1)), 0.0)
     hi = np.where(ok[:, None], np.ceil(np.where(ok[:, None, None], P, 0.0).max(axis=1)) - 1, -1.0)
-    start, items, boxes = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], (W, H))
+    start, items, boxes, tiles_y = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], (W, H))
     if not items.size:
         return
     geo = np.ascontiguousarray(np.column_stack([P.reshape(-1, 6), area2]))
@@ -274,4 +285,4 @@ def triangles(img, P, colors, vertex_colors=None):
     else:
         col = np.asarray(colors, np.float64).reshape(-1, 3)
     _triangles(img, start, items, boxes, geo, np.ascontiguousarray(col), int(vertex_colors is not None),
-               _tiles_y(img))
+               tiles_y)

@@ -35,3 +35,28 @@ def test_kernel_and_numpy_drawing_agree(monkeypatch):
     by_numpy = draw()
     assert np.abs(by_kernels - by_numpy).max() < 1e-5
     assert np.abs(by_numpy - by_numpy[0, 0]).max() > 0.1  # something was drawn
+
+
+def test_tiled_and_one_tile_kernel_drawing_agree(monkeypatch):
+    # render2d draws many primitives tile by tile in parallel and few (or any number on one thread) as one tile in
+    # call order: a pixel sees the same primitives in the same order either way, so the pictures are bit-identical
+    import simgrad as ti
+    from simgrad.gui import render2d
+
+    ti.init(arch=ti.cpu, cpu_max_num_threads=2)
+    rng = np.random.default_rng(4)
+    n = 600
+    c = rng.random((n, 2)) * [W, H]
+    a, b = rng.random((n, 2)) * [W, H], rng.random((n, 2)) * [W, H]
+    P = rng.random((n, 3, 2)) * [W, H]
+    colors = rng.random((n, 3))
+    pictures = []
+    for serial_max in (0, 10**9):
+        monkeypatch.setattr(render2d, "SERIAL_MAX", serial_max)
+        img = np.zeros((W, H, 3), np.float32)
+        render2d.circles(img, c, np.full(n, 2.5), colors)
+        render2d.lines(img, a, b, np.full(n, 1.5), colors)
+        render2d.triangles(img, P, colors)
+        pictures.append(img)
+    assert np.array_equal(pictures[0], pictures[1])
+    assert np.abs(pictures[0]).max() > 0.1
