@@ -15,6 +15,11 @@ in a SPARSE_ACTION.
   address and vectorises the loop.
 - An offset whose indices are all loop-invariant is computed before the parallel loop, so the task
   captures it (the per-thread sums of a `total[None] += v` add into that place after the loop).
+- A struct-for over a pointer (or bitmasked) node with a dense block below (`pointer(ti.ijk, n).dense(ti.ijk,
+  4)`, mgpcg's grids) runs a loop over each listed block's cells: an access to the loop's own cell of a field
+  under that node starts from the block's cell, looked up once per block before the cell loop (`OwnBlock`),
+  and a neighbour read `z[i + 1, j, k]` uses it too when the neighbour falls inside the block (a run-time
+  test; else the full walk), so most accesses of a stencil skip the pointer table.
 - Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
   index 0 instead of a wild access).
 Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LLVM gets nuw/nsw.
@@ -35,27 +40,35 @@ _NOWRAP = {"nowrap": True}
 def lower_access(kernel: Kernel, debug: bool = False) -> bool:
     written = {id(s.operands[0]) for s in walk(kernel.body)
                if s.op in (Op.GLOBAL_STORE, Op.ATOMIC) and s.operands[0].op is Op.GLOBAL_PTR}
-    return _lower_block(kernel.body, None, set(), None, debug, written)
+    # a block looked up once must stay put while its cells run: not where the kernel may free one
+    frees = debug or any(s.op is Op.SNODE_OP and s.attrs["op"] == "deactivate" for s in walk(kernel.body))
+    return _lower_block(kernel.body, None, set(), None, debug, written, None if frees else False)
 
 
 def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt] | None, debug: bool,
-                 written: set) -> bool:
+                 written: set, own) -> bool:
     """Lower the accesses of `block`; `loop` is the parallel loop the block is in (None outside one),
     `inside` the ids of its statements, `before` what goes ahead of it; `written`: ids of the GLOBAL_PTRs
-    stored or atomically updated through (a sparse element is activated there)."""
+    stored or atomically updated through (a sparse element is activated there); `own`: the OwnBlock of the
+    struct-for the block is in, None where there is none or it may not be used, False outside loops."""
     changed = False
     out: list[Stmt] = []
     for s in block.stmts:
         if loop is None and s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
             ahead: list[Stmt] = []
+            mine = OwnBlock.of(s) if own is False else None
             changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug,
-                                    written)
+                                    written, mine)
             for x in ahead:
                 x.block = block
             out += ahead
         else:
             for b in s.blocks:
-                changed |= _lower_block(b, loop, inside, before, debug, written)
+                changed |= _lower_block(b, loop, inside, before, debug, written, own)
+        if own and s is own.cell_loop:  # the block's lookup, once, ahead of its cells
+            for x in own.prelude:
+                x.block = block
+            out += own.prelude
         if s.op is Op.SNODE_OP:  # becomes the SPARSE_ACTION at the end of its walk
             out += _lower_snode_op(s)
             changed = True
@@ -63,7 +76,9 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
         if s.op is Op.GLOBAL_PTR and not s.attrs.get("lowered"):
             target = s.attrs["target"]
             if isinstance(target, FieldRef) and target.sparse:
-                out += _lower_sparse(s, target, "write" if id(s) in written else "read", debug)
+                mode = "write" if id(s) in written else "read"
+                lowered = own.lower(s, target, mode, block) if own else None
+                out += lowered if lowered is not None else _lower_sparse(s, target, mode, debug)
                 changed = True
                 out.append(s)
                 continue
@@ -81,7 +96,11 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
 def _walk_levels(b: Builder, tree_id: int, levels: tuple, idx: list, mode: str) -> Stmt:
     """The u64 address of a cell of the last of `levels` (the tree's root when there are none), from the
     root down: a dense level adds its cell's offset, a sparse one looks the cell up (SPARSE_CELL, `mode`)."""
-    addr = b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": tree_id})
+    return _walk_from(b, b.emit(Op.TREE_ROOT, dt.u64, (), {"tree": tree_id}), levels, idx, mode)
+
+
+def _walk_from(b: Builder, addr: Stmt, levels, idx: list, mode: str) -> Stmt:
+    """_walk_levels from `addr`, the address of a cell of the level above `levels`."""
     for level in levels:
         container = _add(b, addr, b.const(level.offset, dt.u64))
         cell = _cell_number(b, level, idx)
@@ -131,6 +150,116 @@ def _lower_sparse(s: Stmt, target: FieldRef, mode: str, debug: bool) -> list[Stm
     s.attrs["lowered"] = True
     s.attrs["absolute"] = True
     return scratch.stmts
+
+
+class OwnBlock:
+    """A top-level struct-for whose listed node (a pointer or bitmasked node, the first sparse one) has a loop
+    over each block's cells nested in it, the cell indices `X * c + v` (X: the block's index along the axis,
+    in the listed loop; v: the cell loop's digit, 0 <= v < c). Every cell of a block has the same cell at the
+    listed node, since each layout term down to it divides the index by a multiple of c: that cell is looked
+    up (SPARSE_CELL, read: the block is listed, so active) once per block, ahead of the cell loop, from the
+    indices `X * c`. An access of a field under that node whose index on every axis is the cell's own index
+    plus a constant d (|d| < c) starts from it: the own cell always, a neighbour (reads only) when every
+    `v + d` stays in [0, c), tested at run time, the full walk otherwise."""
+
+    def __init__(self, node, cell_loop: Stmt, cells: list):
+        self.node = node  # the listed node (its SNodeRef: tree_id, levels)
+        self.cell_loop = cell_loop
+        self.cells = cells  # per axis: (cell index statement, X, c, v)
+        self.prelude: list[Stmt] = []
+        self.base: dict = {}  # a field's levels down to the listed node -> the block's cell there
+
+    @staticmethod
+    def of(loop: Stmt) -> OwnBlock | None:
+        n = loop.attrs.get("cells")
+        body = loop.blocks[0].stmts
+        get = next((x for x in body if x.op is Op.SNODE_OP and x.attrs["op"] == "list_get"), None)
+        inner = [x for x in body if x.op is Op.RANGE_FOR]
+        if not n or get is None or len(inner) != 1:
+            return None
+        cell_loop = inner[0]
+        in_cells = {id(x) for x in walk(cell_loop.blocks[0])}
+        found: dict = {}
+        for x in walk(cell_loop.blocks[0]):
+            axis = x.attrs.get("cell_index")
+            if axis is None or x.op is not Op.ADD or axis in found:
+                continue
+            m, v = x.operands
+            if m.op is not Op.MUL or m.operands[1].op is not Op.CONST or id(m.operands[0]) in in_cells:
+                return None
+            found[axis] = (x, m.operands[0], m.operands[1].attrs["value"], v)
+        if sorted(found) != list(range(n)) or any(c < 1 for _x, _X, c, _v in found.values()):
+            return None
+        return OwnBlock(get.attrs["snode"], cell_loop, [found[k] for k in range(n)])
+
+    def _block_cell(self, levels: tuple) -> Stmt:
+        """The address of the block's cell at the last of `levels` (a field's levels down to the listed
+        node: the node's own levels count in its index space, a field's in the field's), walked once."""
+        if levels not in self.base:
+            scratch = Block()
+            b = Builder(scratch)
+            b.loc = self.cell_loop.loc
+            idx = [_mul(b, _u64(b, X), c) for _x, X, c, _v in self.cells]
+            self.base[levels] = _walk_levels(b, self.node.tree_id, levels, idx, "read")
+            self.prelude += scratch.stmts
+        return self.base[levels]
+
+    def lower(self, s: Stmt, target: FieldRef, mode: str, block: Block) -> list[Stmt] | None:
+        """The statements computing `s`'s address from the block's cell, or None when it is not one of the
+        accesses described above."""
+        n = len(self.node.levels)
+        levels = tuple(target.levels[:n])
+        if target.layout[0] != self.node.tree_id or len(levels) != n or len(s.operands) != len(self.cells):
+            return None
+        if any(_node_of(a) != _node_of(b) for a, b in zip(levels, self.node.levels)):
+            return None  # a field under another node
+        if any(t.divisor % self.cells[t.axis][2] for level in levels for t in level.terms):
+            return None  # the cell at the listed node would depend on v
+        shifts = []
+        for o, (cell, _X, c, v) in zip(s.operands, self.cells):
+            base, d = offset_form(o)
+            if base is not cell or abs(d) >= c:
+                return None
+            shifts.append((v, c, d))
+        near = [(v, c, d) for v, c, d in shifts if d]
+        if near and mode != "read":
+            return None
+        own = self._block_cell(levels)
+        scratch = Block()
+        b = Builder(scratch)
+        b.loc = s.loc
+        idx = [_u64(b, o) for o in s.operands]
+        if near:  # the neighbour's block is this one when every v + d stays in [0, c)
+            inside = None
+            for v, c, d in near:
+                if d > 0:
+                    test = b.binary(Op.LT, v, b.const(c - d, v.vtype))
+                else:
+                    test = b.binary(Op.GE, v, b.const(-d, v.vtype))
+                inside = test if inside is None else b.binary(Op.BIT_AND, inside, test)
+            assert inside is not None
+            slot = b.emit(Op.ALLOCA, dt.u64)
+            branch = b.emit(Op.IF, None, (inside,), nblocks=2)
+            with b.inside(branch.blocks[0]):
+                b.emit(Op.LOCAL_STORE, None, (slot, own))
+            with b.inside(branch.blocks[1]):
+                b.emit(Op.LOCAL_STORE, None, (slot, _walk_levels(b, target.layout[0], levels, idx, "read")))
+            cell = b.emit(Op.LOCAL_LOAD, dt.u64, (slot,))
+        else:
+            cell = own
+        addr = _walk_from(b, cell, target.levels[len(levels):], idx, mode)
+        addr = _add(b, addr, b.const(target.value_offset, dt.u64))
+        s.operands = (*s.operands, addr)
+        s.attrs["lowered"] = True
+        s.attrs["absolute"] = True
+        for x in scratch.stmts:
+            x.block = block
+        return scratch.stmts
+
+
+def _node_of(level) -> tuple:
+    """What names a level's node on a path, whatever index space its terms count in."""
+    return level.kind, level.offset, level.cell_size, level.ncells, level.pool
 
 
 def _lower_snode_op(s: Stmt) -> list[Stmt]:
