@@ -17,9 +17,11 @@ in a SPARSE_ACTION.
   captures it (the per-thread sums of a `total[None] += v` add into that place after the loop).
 - A struct-for over a pointer (or bitmasked) node with a dense block below (`pointer(ti.ijk, n).dense(ti.ijk,
   4)`, mgpcg's grids) runs a loop over each listed block's cells: an access to the loop's own cell of a field
-  under that node starts from the block's cell, looked up once per block before the cell loop (`OwnBlock`),
-  and a neighbour read `z[i + 1, j, k]` uses it too when the neighbour falls inside the block (a run-time
-  test; else the full walk), so most accesses of a stencil skip the pointer table.
+  under that node starts from the block's cell, looked up once per block before the cell loop (`OwnBlock`).
+  A neighbour read `z[i + 1, j, k]` (one axis off) selects between that cell and the cell of the block beside,
+  looked up once too, so a stencil's cell loop reads no pointer table at all; a block whose side is off the
+  grid runs a copy of the cell loop that branches instead (inside the block: its cell, else the full walk from
+  the root, as before). Diagonal neighbours branch that way in both.
 - Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
   index 0 instead of a wild access).
 Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LLVM gets nuw/nsw.
@@ -57,6 +59,8 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
         if loop is None and s.op is Op.RANGE_FOR and s.attrs.get("parallel"):
             ahead: list[Stmt] = []
             mine = OwnBlock.of(s) if own is False else None
+            if mine is not None:
+                mine.copy_cell_loop(written)
             changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug,
                                     written, mine)
             for x in ahead:
@@ -65,9 +69,12 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
         else:
             for b in s.blocks:
                 changed |= _lower_block(b, loop, inside, before, debug, written, own)
-        if own and s is own.cell_loop:  # the block's lookup, once, ahead of its cells
+        if own and s is own.cell_loop:  # the block's lookups, once, ahead of its cells
+            s = own.finish(s, lambda b, o: _lower_block(b, loop, inside | {id(x) for x in walk(b)} | {id(b.parent)},
+                                                        before, debug, written, o))
             for x in own.prelude:
                 x.block = block
+            s.block = block
             out += own.prelude
         if s.op is Op.SNODE_OP:  # becomes the SPARSE_ACTION at the end of its walk
             out += _lower_snode_op(s)
@@ -168,6 +175,9 @@ class OwnBlock:
         self.cells = cells  # per axis: (cell index statement, X, c, v)
         self.prelude: list[Stmt] = []
         self.base: dict = {}  # a field's levels down to the listed node -> the block's cell there
+        self.sides = True  # neighbours off the block by a select of the block beside (else a branch)
+        self.on_grid: list[Stmt] = []  # the tests of the blocks beside used, all true in the fast loop
+        self.slow: Stmt | None = None  # the cell loop's copy for blocks at the grid's edge
 
     @staticmethod
     def of(loop: Stmt) -> OwnBlock | None:
@@ -204,6 +214,70 @@ class OwnBlock:
             self.prelude += scratch.stmts
         return self.base[levels]
 
+    def finish(self, fast: Stmt, lower) -> Stmt:
+        """The cell loop to place after the prelude: `fast` (already lowered) when it took no block beside this
+        one, else `if every block beside is on the grid: fast else: the slow copy` (lowered by `lower` with
+        branches instead of selects, so an index off the grid walks from the root exactly as before)."""
+        if not self.on_grid or self.slow is None:
+            return fast
+        slow_own = OwnBlock(self.node, self.slow, self.slow_cells)
+        slow_own.base, slow_own.prelude, slow_own.sides = self.base, self.prelude, False
+        lower(self.slow.blocks[0], slow_own)
+        scratch = Block()
+        b = Builder(scratch)
+        b.loc = fast.loc
+        ok = self.on_grid[0]
+        for flag in self.on_grid[1:]:
+            ok = b.binary(Op.BIT_AND, ok, flag)
+        self.prelude += scratch.stmts
+        branch = Builder.detached(Op.IF, None, (ok,), loc=fast.loc, nblocks=2)
+        for part, loop in zip(branch.blocks, (fast, self.slow)):
+            part.stmts = [loop]
+            loop.block = part
+        return branch
+
+    def copy_cell_loop(self, written: set) -> None:
+        """Keep an unlowered copy of the cell loop (its GLOBAL_PTRs written where the original's are)."""
+        if any(x.op is Op.ATOMIC and x.attrs.get("strategy") not in ("plain", "atomic")
+               for x in walk(self.cell_loop.blocks[0])):
+            self.sides = False  # per-thread sums and copies name their statements: keep one loop, branches
+            return
+        mapping: dict = {}
+        self.slow = _clone(self.cell_loop, mapping, None)
+        for old in list(mapping):
+            if old in written:
+                written.add(id(mapping[old]))
+        self.slow_cells = [(mapping[id(x)], X, c, mapping[id(v)]) for x, X, c, v in self.cells]
+
+    def _side_cell(self, levels: tuple, target: FieldRef, shifts: list) -> tuple[Stmt, Stmt] | None:
+        """For a neighbour off the block along one axis: (whether the block beside this one on that side is on
+        the grid, its cell there, looked up ahead of the cell loop when it is), once per block and side."""
+        axis = next(k for k, (_v, _c, d) in enumerate(shifts) if d)
+        _cell, X, c, _v = self.cells[axis]
+        sign = 1 if shifts[axis][2] > 0 else -1
+        blocks = target.shape[axis] // c if axis < len(target.shape) else 0
+        if blocks < 2:
+            return None
+        key = (levels, axis, sign)
+        if key not in self.base:
+            scratch = Block()
+            b = Builder(scratch)
+            b.loc = self.cell_loop.loc
+            if sign > 0:
+                on_grid = b.binary(Op.LT, X, b.const(blocks - 1, X.vtype))
+            else:
+                on_grid = b.binary(Op.GE, X, b.const(1, X.vtype))
+            slot = b.emit(Op.ALLOCA, dt.u64)
+            b.emit(Op.LOCAL_STORE, None, (slot, b.const(0, dt.u64)))
+            branch = b.emit(Op.IF, None, (on_grid,), nblocks=2)
+            with b.inside(branch.blocks[0]):
+                corner = [_mul(b, _u64(b, Y), k) for _x, Y, k, _w in self.cells]
+                corner[axis] = _mul(b, _u64(b, b.binary(Op.ADD, X, b.const(sign, X.vtype))), c)
+                b.emit(Op.LOCAL_STORE, None, (slot, _walk_levels(b, self.node.tree_id, levels, corner, "read")))
+            self.base[key] = (on_grid, b.emit(Op.LOCAL_LOAD, dt.u64, (slot,)))
+            self.prelude += scratch.stmts
+        return self.base[key]
+
     def lower(self, s: Stmt, target: FieldRef, mode: str, block: Block) -> list[Stmt] | None:
         """The statements computing `s`'s address from the block's cell, or None when it is not one of the
         accesses described above."""
@@ -238,13 +312,20 @@ class OwnBlock:
                     test = b.binary(Op.GE, v, b.const(-d, v.vtype))
                 inside = test if inside is None else b.binary(Op.BIT_AND, inside, test)
             assert inside is not None
-            slot = b.emit(Op.ALLOCA, dt.u64)
-            branch = b.emit(Op.IF, None, (inside,), nblocks=2)
-            with b.inside(branch.blocks[0]):
-                b.emit(Op.LOCAL_STORE, None, (slot, own))
-            with b.inside(branch.blocks[1]):
-                b.emit(Op.LOCAL_STORE, None, (slot, _walk_levels(b, target.layout[0], levels, idx, "read")))
-            cell = b.emit(Op.LOCAL_LOAD, dt.u64, (slot,))
+            side = self._side_cell(levels, target, shifts) if len(near) == 1 and self.sides else None
+            if side is not None:  # in the fast loop the block beside is on the grid: a select, no branch
+                on_grid, beside = side
+                if all(flag is not on_grid for flag in self.on_grid):
+                    self.on_grid.append(on_grid)
+                cell = b.select(inside, own, beside)
+            else:
+                slot = b.emit(Op.ALLOCA, dt.u64)
+                branch = b.emit(Op.IF, None, (inside,), nblocks=2)
+                with b.inside(branch.blocks[0]):
+                    b.emit(Op.LOCAL_STORE, None, (slot, own))
+                with b.inside(branch.blocks[1]):
+                    b.emit(Op.LOCAL_STORE, None, (slot, _walk_levels(b, target.layout[0], levels, idx, "read")))
+                cell = b.emit(Op.LOCAL_LOAD, dt.u64, (slot,))
         else:
             cell = own
         addr = _walk_from(b, cell, target.levels[len(levels):], idx, mode)
@@ -255,6 +336,17 @@ class OwnBlock:
         for x in scratch.stmts:
             x.block = block
         return scratch.stmts
+
+
+def _clone(s: Stmt, mapping: dict, block: Block | None) -> Stmt:
+    """A copy of `s` and everything nested in it; operands defined inside are the copies' (`mapping`: id of
+    an original -> its copy)."""
+    new = Builder.detached(s.op, s.type, tuple(mapping.get(id(o), o) for o in s.operands), dict(s.attrs), s.loc,
+                           block, len(s.blocks))
+    mapping[id(s)] = new
+    for old_b, new_b in zip(s.blocks, new.blocks):
+        new_b.stmts = [_clone(x, mapping, new_b) for x in old_b.stmts]
+    return new
 
 
 def _node_of(level) -> tuple:

@@ -143,15 +143,24 @@ def _direct(block):
     return out
 
 
-def _cell_loop(kernel):
-    loops = [s for s in kernel.instance(()).ir.body.stmts if s.op is Op.RANGE_FOR and s.attrs.get("cells")]
-    return loops, [next(s for s in x.blocks[0].stmts if s.op is Op.RANGE_FOR) for x in loops]
+def _cell_loops(kernel):
+    """(parallel loop, [its cell loops]): one, or the fast and the slow copy under an IF."""
+    out = []
+    for x in kernel.instance(()).ir.body.stmts:
+        if x.op is Op.RANGE_FOR and x.attrs.get("cells"):
+            inner = [s for s in x.blocks[0].stmts if s.op is Op.RANGE_FOR]
+            for s in x.blocks[0].stmts:
+                if s.op is Op.IF and all(len(b.stmts) == 1 and b.stmts[0].op is Op.RANGE_FOR for b in s.blocks):
+                    inner = [b.stmts[0] for b in s.blocks]
+            out.append((x, inner))
+    return out
 
 
 def test_only_block_crossings_walk_the_pointer_table():
-    """The optimisation's trace in the IR: one lookup of the block ahead of the cell loop; inside it the own
-    cells look nothing up, and each neighbour's lookup sits in the branch taken when it leaves the block. Without
-    OwnBlock every access has a SPARSE_CELL directly in the cell loop's body."""
+    """The optimisation's trace in the IR: the block's cell, and the cells of the blocks beside it that the
+    neighbours need, looked up ahead of the cell loop; the cell loop of a block whose neighbours are on the grid
+    looks nothing up (a select per neighbour); at the grid's edge a copy whose neighbours off the block walk
+    from the root in a branch. Without OwnBlock every access has a SPARSE_CELL directly in the cell loop."""
     ti.init(arch=ti.cpu, default_fp=ti.f32)
     r, z, w = _grid()
 
@@ -161,11 +170,12 @@ def test_only_block_crossings_walk_the_pointer_table():
             z[i, j, k] = (r[i, j, k] + z[i + 1, j, k] + z[i, j, k - 1]) / 3.0
 
     smooth()
-    [body], [cell_loop] = _cell_loop(smooth)
-    ahead = [s for s in body.blocks[0].stmts if s.op is Op.SPARSE_CELL]
-    assert len(ahead) == 1  # r and z share the node: one lookup per block
-    assert _direct(cell_loop.blocks[0]) == []
-    assert sum(s.op is Op.SPARSE_CELL for s in walk(cell_loop.blocks[0])) == 2  # the two neighbours' crossings
+    [(body, [fast, slow])] = _cell_loops(smooth)
+    ahead = [s for s in walk(body.blocks[0]) if s.op is Op.SPARSE_CELL]
+    assert len(ahead) - sum(s.op is Op.SPARSE_CELL for loop in (fast, slow) for s in walk(loop.blocks[0])) == 3
+    assert not any(s.op is Op.SPARSE_CELL for s in walk(fast.blocks[0]))
+    assert _direct(slow.blocks[0]) == []
+    assert sum(s.op is Op.SPARSE_CELL for s in walk(slow.blocks[0])) == 2  # the two neighbours' crossings
 
 
 def test_a_kernel_that_deactivates_keeps_the_full_walk():
@@ -184,8 +194,8 @@ def test_a_kernel_that_deactivates_keeps_the_full_walk():
             z[i, j, k] = r[i, j, k] + 1.0
 
     drop_and_read()
-    _loops, cell_loops = _cell_loop(drop_and_read)
-    assert len(_direct(cell_loops[1].blocks[0])) == 2  # r's read and z's write walk from the root
+    [_first, (_body, [cells])] = _cell_loops(drop_and_read)
+    assert len(_direct(cells.blocks[0])) == 2  # r's read and z's write walk from the root
     keep = mask.copy()
     keep[BS:2 * BS, BS:2 * BS, BS:2 * BS] = False
     np.testing.assert_array_equal(z.to_numpy(), np.where(keep, r0 + np.float32(1.0), 0).astype(np.float32))
@@ -236,3 +246,34 @@ def test_stencil_gradient_matches_finite_differences():
         down = run()
         x[c] = v
         assert abs((up - down) / (2 * eps) - g[c]) < 1e-5 * max(1.0, abs(g[c])), c
+
+
+def test_blocks_at_the_grid_edge_take_the_branching_copy():
+    """Active blocks on every face: their neighbours off the grid are guarded by the kernel, as mgpcg's
+    boundaries are; those blocks run the copy of the cell loop with branches, the others the selects."""
+    ti.init(arch=ti.cpu, default_fp=ti.f32)
+    r, z, w = _grid()
+    out = ti.field(ti.f32)
+    ti.root.pointer(ti.ijk, NB).dense(ti.ijk, BS).place(out)
+    act = np.random.default_rng(10).random((NB, NB, NB)) < 0.6
+    act[0, :, 0] = act[-1, :, -1] = True
+    r0, z0, _w0, mask = _activate(r, z, w, act, seed=11)
+
+    @ti.kernel
+    def edge():
+        for i, j, k in r:
+            acc = r[i, j, k]
+            if i + 1 < N:
+                acc += z[i + 1, j, k]
+            if k >= 1:
+                acc += 2.0 * z[i, j, k - 1]
+            if j >= 2:
+                acc += 3.0 * r[i, j - 2, k]
+            out[i, j, k] = acc
+
+    edge()
+    ref = (r0 + np.pad(z0, 1)[2:, 1:-1, 1:-1] + np.float32(2.0) * np.pad(z0, 1)[1:-1, 1:-1, :-2]
+           + np.float32(3.0) * np.pad(r0, 2)[2:-2, :-4, 2:-2])
+    np.testing.assert_array_equal(out.to_numpy(), np.where(mask, ref, 0).astype(np.float32))
+    [(_body, loops)] = _cell_loops(edge)
+    assert len(loops) == 2  # the fast loop and the copy
