@@ -238,6 +238,13 @@ class OwnBlock:
 
     def copy_cell_loop(self, written: set) -> None:
         """Keep an unlowered copy of the cell loop (its GLOBAL_PTRs written where the original's are)."""
+        own = [x for x, _X, _c, _v in self.cells]
+        for x in walk(self.cell_loop.blocks[0]):  # a block beside may be activated in the loop: look it up then
+            target = x.attrs.get("target") if x.op is Op.GLOBAL_PTR else None
+            if x.op is Op.SNODE_OP or (id(x) in written and isinstance(target, FieldRef) and self.under(target)
+                                       and list(x.operands) != own):
+                self.sides = False
+                return
         if any(x.op is Op.ATOMIC and x.attrs.get("strategy") not in ("plain", "atomic")
                for x in walk(self.cell_loop.blocks[0])):
             self.sides = False  # per-thread sums and copies name their statements: keep one loop, branches
@@ -278,14 +285,18 @@ class OwnBlock:
             self.prelude += scratch.stmts
         return self.base[key]
 
+    def under(self, target: FieldRef) -> bool:
+        """Whether `target` is a field under the listed node."""
+        n = len(self.node.levels)
+        levels = tuple(target.levels[:n])
+        return (target.sparse and target.layout[0] == self.node.tree_id and len(levels) == n
+                and all(_node_of(a) == _node_of(b) for a, b in zip(levels, self.node.levels)))
+
     def lower(self, s: Stmt, target: FieldRef, mode: str, block: Block) -> list[Stmt] | None:
         """The statements computing `s`'s address from the block's cell, or None when it is not one of the
         accesses described above."""
-        n = len(self.node.levels)
-        levels = tuple(target.levels[:n])
-        if target.layout[0] != self.node.tree_id or len(levels) != n or len(s.operands) != len(self.cells):
-            return None
-        if any(_node_of(a) != _node_of(b) for a, b in zip(levels, self.node.levels)):
+        levels = tuple(target.levels[:len(self.node.levels)])
+        if not self.under(target) or len(s.operands) != len(self.cells):
             return None  # a field under another node
         if any(t.divisor % self.cells[t.axis][2] for level in levels for t in level.terms):
             return None  # the cell at the listed node would depend on v

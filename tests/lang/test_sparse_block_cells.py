@@ -277,3 +277,24 @@ def test_blocks_at_the_grid_edge_take_the_branching_copy():
     np.testing.assert_array_equal(out.to_numpy(), np.where(mask, ref, 0).astype(np.float32))
     [(_body, loops)] = _cell_loops(edge)
     assert len(loops) == 2  # the fast loop and the copy
+
+
+def test_a_neighbour_written_in_the_loop_is_read_back():
+    """An iteration that activates the block beside (a write) and reads the neighbour it wrote gets the value: the
+    blocks beside are not taken from before the cell loop then."""
+    ti.init(arch=ti.cpu, default_fp=ti.f32)
+    r, z, w = _grid()
+    act = np.zeros((NB, NB, NB), bool)
+    act[2, 2, 2] = True  # alone: every block beside is inactive when the loop starts
+    r0, z0, _w0, mask = _activate(r, z, w, act, seed=12)
+    out = ti.field(ti.f32)
+    ti.root.pointer(ti.ijk, NB).dense(ti.ijk, BS).place(out)
+
+    @ti.kernel
+    def spill():
+        for i, j, k in r:
+            z[i + 1, j, k] = r[i, j, k] + 1.0
+            out[i, j, k] = z[i + 1, j, k]
+
+    spill()
+    np.testing.assert_array_equal(out.to_numpy(), np.where(mask, r0 + np.float32(1.0), 0))
