@@ -21,7 +21,8 @@ in a SPARSE_ACTION.
   A neighbour read `z[i + 1, j, k]` (one axis off) selects between that cell and the cell of the block beside,
   looked up once too, so a stencil's cell loop reads no pointer table at all; a block whose side is off the
   grid runs a copy of the cell loop that branches instead (inside the block: its cell, else the full walk from
-  the root, as before). Diagonal neighbours branch that way in both.
+  the root, as before). Diagonal neighbours branch that way in both. A short cell loop (UNROLL_CELLS,
+  UNROLL_STMTS) is marked `unroll`: LLVM unrolls it whole and every cell's digits fold.
 - Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
   index 0 instead of a wild access).
 Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LLVM gets nuw/nsw.
@@ -37,6 +38,10 @@ from simgrad.ir.ops import Op
 from simgrad.passes.digits import digit_chain
 
 _NOWRAP = {"nowrap": True}
+#: a block's cell loop of at most so many cells and statements is unrolled whole (OwnBlock.finish): each copy's
+#: cell digits are constants, so the in-block tests, selects and offsets fold (mgpcg's 4^3 blocks: smooth 7x)
+UNROLL_CELLS = 64
+UNROLL_STMTS = 400
 
 
 def lower_access(kernel: Kernel, debug: bool = False) -> bool:
@@ -218,6 +223,10 @@ class OwnBlock:
         """The cell loop to place after the prelude: `fast` (already lowered) when it took no block beside this
         one, else `if every block beside is on the grid: fast else: the slow copy` (lowered by `lower` with
         branches instead of selects, so an index off the grid walks from the root exactly as before)."""
+        lo, hi = fast.operands
+        if lo.op is Op.CONST and hi.op is Op.CONST and hi.attrs["value"] - lo.attrs["value"] <= UNROLL_CELLS \
+                and sum(1 for _ in walk(fast.blocks[0])) <= UNROLL_STMTS:
+            fast.attrs["unroll"] = True  # the cell's digits become constants: tests and offsets fold away
         if not self.on_grid or self.slow is None:
             return fast
         slow_own = OwnBlock(self.node, self.slow, self.slow_cells)

@@ -174,6 +174,8 @@ def test_only_block_crossings_walk_the_pointer_table():
     ahead = [s for s in walk(body.blocks[0]) if s.op is Op.SPARSE_CELL]
     assert len(ahead) - sum(s.op is Op.SPARSE_CELL for loop in (fast, slow) for s in walk(loop.blocks[0])) == 3
     assert not any(s.op is Op.SPARSE_CELL for s in walk(fast.blocks[0]))
+    assert fast.attrs.get("unroll") and not slow.attrs.get("unroll")  # 64 cells: unrolled, the digits fold
+    assert "llvm.loop.unroll.full" in smooth.instance(()).llvm_text
     assert _direct(slow.blocks[0]) == []
     assert sum(s.op is Op.SPARSE_CELL for s in walk(slow.blocks[0])) == 2  # the two neighbours' crossings
 
