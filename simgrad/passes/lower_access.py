@@ -41,7 +41,7 @@ _NOWRAP = {"nowrap": True}
 #: a block's cell loop of at most so many cells and statements is unrolled whole (OwnBlock.finish): each copy's
 #: cell digits are constants, so the in-block tests, selects and offsets fold (mgpcg's 4^3 blocks: smooth 7x)
 UNROLL_CELLS = 64
-UNROLL_STMTS = 400
+UNROLL_STMTS = 200
 
 
 def lower_access(kernel: Kernel, debug: bool = False) -> bool:
