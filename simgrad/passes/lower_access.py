@@ -183,6 +183,7 @@ class OwnBlock:
         self.sides = True  # neighbours off the block by a select of the block beside (else a branch)
         self.on_grid: list[Stmt] = []  # the tests of the blocks beside used, all true in the fast loop
         self.slow: Stmt | None = None  # the cell loop's copy for blocks at the grid's edge
+        self.ahead: list[Stmt] = []  # the lookups of the blocks beside, ahead of the fast loop
 
     @staticmethod
     def of(loop: Stmt) -> OwnBlock | None:
@@ -240,9 +241,11 @@ class OwnBlock:
             ok = b.binary(Op.BIT_AND, ok, flag)
         self.prelude += scratch.stmts
         branch = Builder.detached(Op.IF, None, (ok,), loc=fast.loc, nblocks=2)
-        for part, loop in zip(branch.blocks, (fast, self.slow)):
-            part.stmts = [loop]
-            loop.block = part
+        branch.blocks[0].stmts = [*self.ahead, fast]
+        branch.blocks[1].stmts = [self.slow]
+        for part in branch.blocks:
+            for x in part.stmts:
+                x.block = part
         return branch
 
     def copy_cell_loop(self, written: set) -> None:
@@ -267,7 +270,8 @@ class OwnBlock:
 
     def _side_cell(self, levels: tuple, target: FieldRef, shifts: list) -> tuple[Stmt, Stmt] | None:
         """For a neighbour off the block along one axis: (whether the block beside this one on that side is on
-        the grid, its cell there, looked up ahead of the cell loop when it is), once per block and side."""
+        the grid, its cell there), once per block and side; the cell is looked up in the branch that runs the
+        fast loop, taken only when every block beside that the loop uses is on the grid."""
         axis = next(k for k, (_v, _c, d) in enumerate(shifts) if d)
         _cell, X, c, _v = self.cells[axis]
         sign = 1 if shifts[axis][2] > 0 else -1
@@ -283,15 +287,14 @@ class OwnBlock:
                 on_grid = b.binary(Op.LT, X, b.const(blocks - 1, X.vtype))
             else:
                 on_grid = b.binary(Op.GE, X, b.const(1, X.vtype))
-            slot = b.emit(Op.ALLOCA, dt.u64)
-            b.emit(Op.LOCAL_STORE, None, (slot, b.const(0, dt.u64)))
-            branch = b.emit(Op.IF, None, (on_grid,), nblocks=2)
-            with b.inside(branch.blocks[0]):
-                corner = [_mul(b, _u64(b, Y), k) for _x, Y, k, _w in self.cells]
-                corner[axis] = _mul(b, _u64(b, b.binary(Op.ADD, X, b.const(sign, X.vtype))), c)
-                b.emit(Op.LOCAL_STORE, None, (slot, _walk_levels(b, self.node.tree_id, levels, corner, "read")))
-            self.base[key] = (on_grid, b.emit(Op.LOCAL_LOAD, dt.u64, (slot,)))
             self.prelude += scratch.stmts
+            scratch = Block()  # looked up in the fast branch only, where every block beside is on the grid
+            b = Builder(scratch)
+            b.loc = self.cell_loop.loc
+            corner = [_mul(b, _u64(b, Y), k) for _x, Y, k, _w in self.cells]
+            corner[axis] = _mul(b, _u64(b, b.binary(Op.ADD, X, b.const(sign, X.vtype))), c)
+            self.base[key] = (on_grid, _walk_levels(b, self.node.tree_id, levels, corner, "read"))
+            self.ahead += scratch.stmts
         return self.base[key]
 
     def under(self, target: FieldRef) -> bool:

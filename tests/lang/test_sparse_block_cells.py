@@ -150,8 +150,8 @@ def _cell_loops(kernel):
         if x.op is Op.RANGE_FOR and x.attrs.get("cells"):
             inner = [s for s in x.blocks[0].stmts if s.op is Op.RANGE_FOR]
             for s in x.blocks[0].stmts:
-                if s.op is Op.IF and all(len(b.stmts) == 1 and b.stmts[0].op is Op.RANGE_FOR for b in s.blocks):
-                    inner = [b.stmts[0] for b in s.blocks]
+                if s.op is Op.IF and all(b.stmts and b.stmts[-1].op is Op.RANGE_FOR for b in s.blocks):
+                    inner = [b.stmts[-1] for b in s.blocks]
             out.append((x, inner))
     return out
 
