@@ -440,7 +440,12 @@ class KernelCodegen:
         f.names[s] = i
         self.loop_body(f, s, exit_to, latch)  # a break leaves the strips too
         f.emit(f"{nxt} = add {ty} {i}, 1")
-        f.emit(f"br label %{head}")
+        if s.attrs.get("unroll"):  # lower_access asks for a short loop whose copies fold (OwnBlock)
+            k = 1000 + 2 * len(self.module.globals)
+            self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}", f'!{k + 1} = !{{!"llvm.loop.unroll.full"}}']
+            f.emit(f"br label %{head}, !llvm.loop !{k}")
+        else:
+            f.emit(f"br label %{head}")
         f.start_block(done)
         if cancel:
             f.emit(f"br label %{shead}")
