@@ -51,22 +51,27 @@ else:
 SERIAL_MAX = 256
 
 
+def _one_tile(n: int) -> bool:
+    """Whether n primitives are drawn as one tile (see SERIAL_MAX)."""
+    from simgrad.lang.program import get_program
+
+    prog = get_program()
+    return n <= SERIAL_MAX or (prog.config.num_threads == 1 and not prog.on_gpu)
+
+
 def bin_boxes(x0, y0, x1, y1, res):
     """Tile lists of pixel boxes (inclusive, in drawing order; clipped here): returns ``start`` (one more
     than the tile count) and ``items`` (box indices), tile ``t`` holding ``items[start[t]:start[t + 1]]`` in
     ascending order, the clipped boxes as int32 (n, 4), and ``tiles_y`` (0: one tile, the whole image).
     Tiles are numbered x-major.  The lists are filled by a serial kernel (a counting sort: cheaper than numpy's
     repeat/sort chain)."""
-    from simgrad.lang.program import get_program
-
     W, H = res
     x0 = np.clip(x0, 0, W).astype(np.int32)
     y0 = np.clip(y0, 0, H).astype(np.int32)
     x1 = np.clip(x1, -1, W - 1).astype(np.int32)
     y1 = np.clip(y1, -1, H - 1).astype(np.int32)
     boxes = np.stack([x0, y0, x1, y1], axis=1)
-    prog = get_program()
-    if len(boxes) <= SERIAL_MAX or (prog.config.num_threads == 1 and not prog.on_gpu):
+    if _one_tile(len(boxes)):
         return np.array([0, len(boxes)], np.int32), np.arange(len(boxes), dtype=np.int32), boxes, 0
     tiles_y = -(-H // TILE)
     n_tiles = -(-W // TILE) * tiles_y
@@ -116,11 +121,45 @@ def _tile(t, tiles_y, W, H):
 
 @ti.func
 def _blend(img, i, j, a, c):
-    """``lerp(a, dest, c)`` in float64; an opaque sample replaces the pixel (even a NaN one)."""
-    if a >= 1.0:
-        img[i, j] = ti.cast(c, ti.f32)
-    elif a > 0.0:
-        img[i, j] = ti.cast(ti.cast(img[i, j], ti.f64) * (1.0 - a) + c * a, ti.f32)
+    """``lerp(a, dest, c)`` in float64; an opaque sample replaces the pixel (even a NaN one), one with no
+    coverage keeps it. Without branches (the pixel is written back as it was when a <= 0), so the loops over a
+    primitive's pixels vectorise."""
+    old = img[i, j]
+    mixed = ti.cast(ti.cast(old, ti.f64) * (1.0 - a) + c * a, ti.f32)
+    img[i, j] = ti.select(a >= 1.0, ti.cast(c, ti.f32), ti.select(a > 0.0, mixed, old))
+
+
+@ti.func
+def _circle(img, i0, i1, j0, j1, cx, cy, r, c):
+    for i in range(i0, i1 + 1):
+        dx = cx - i
+        for j in range(j0, j1 + 1):
+            dy = cy - j
+            _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
+
+
+@ti.func
+def _finite(x):
+    return ti.abs(x) <= 1.7976931348623157e308  # false for NaN and +-inf
+
+
+@ti.kernel
+def _circles_in_order(img: _IMG, geo: _G2, colors: _C1):
+    """Every circle in call order on one thread, its pixel box computed here as numpy computes it for the
+    tiles (the one-tile case needs no numpy boxes: at 200k circles a frame they cost as much as drawing)."""
+    w = ti.cast(img.shape[0], ti.f64)
+    h = ti.cast(img.shape[1], ti.f64)
+    ti.loop_config(serialize=True)
+    for p in range(geo.shape[0]):
+        cx = geo[p, 0]
+        cy = geo[p, 1]
+        r = geo[p, 2]
+        if _finite(cx) and _finite(cy) and _finite(r) and r > 0.0:
+            i0 = ti.cast(ti.min(ti.max(ti.ceil(cx - r), 0.0), w), ti.i32)
+            i1 = ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32)
+            j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
+            j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
+            _circle(img, i0, i1, j0, j1, cx, cy, r, colors[p])
 
 
 @ti.kernel
@@ -134,12 +173,8 @@ def _circles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: _C
             cx = geo[p, 0]
             cy = geo[p, 1]
             r = geo[p, 2]
-            c = colors[p]
-            for i in range(ti.max(b[0], tx0), ti.min(b[2], tx1) + 1):
-                dx = cx - i
-                for j in range(ti.max(b[1], ty0), ti.min(b[3], ty1) + 1):
-                    dy = cy - j
-                    _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
+            _circle(img, ti.max(b[0], tx0), ti.min(b[2], tx1), ti.max(b[1], ty0), ti.min(b[3], ty1), cx, cy, r,
+                    colors[p])
 
 
 @ti.kernel
@@ -238,6 +273,11 @@ def circles(img, centers, radii, colors):
     pixels, ``colors`` (n, 3) float RGB."""
     c = np.asarray(centers, np.float64)
     r = np.asarray(radii, np.float64)
+    if _one_tile(len(c)):
+        if len(c):
+            _circles_in_order(img, np.ascontiguousarray(np.column_stack([c, r])),
+                              np.ascontiguousarray(colors, np.float64))
+        return
     ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
     lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
     start, items, boxes, tiles_y = bin_boxes(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], img.shape[:2])
