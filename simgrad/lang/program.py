@@ -50,7 +50,7 @@ SPECIAL_CONFIG: dict = {"log_level": "info", "gdb_trigger": False, "short_circui
                         "print_full_traceback": False, "unrolling_limit": 32}
 # simgrad's own options: flush_denormals (runtime/fpenv.py; Taichi always flushes, this is its way out);
 # simt_lanes: iterations of a parallel loop whose while loops run in lock step on the CPU (passes/lanes.py; 0 off)
-SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": 8}
+SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": 32}
 # accepted for older programs, without effect (not in Taichi 1.7.4's list)
 LEGACY_OPTIONS = {"packed", "dynamic_index", "excepthook", "debug_info"}
 

@@ -279,8 +279,8 @@ class _Rewrite:
         """ceil(max(end - begin, 0) / W), without overflow near the index type's maximum."""
         w = self.width
         if begin.op is Op.CONST and end.op is Op.CONST:
-            count = max(int(end.attrs["value"]) - int(begin.attrs["value"]), 0)
-            return b.const(-(-count // w), self.ity)
+            known = max(int(end.attrs["value"]) - int(begin.attrs["value"]), 0)
+            return b.const(-(-known // w), self.ity)
         zero = b.const(0, self.ity)
         count = b.select(b.gt(end, begin), b.sub(end, begin), zero)
         whole = b.shr(count, b.const(w.bit_length() - 1, self.ity))
@@ -425,11 +425,15 @@ class _Rewrite:
                 then = self._predicated(s.blocks[0].stmts, pt, into)
                 else_ = self._predicated(s.blocks[1].stmts, pe, into)
                 if then is pt and else_ is pe:
-                    continue  # no lane left: p holds as it was
-                if then is None and else_ is None:
-                    return None
-                p = then if else_ is None else else_ if then is None else \
-                    self._emit(Op.BIT_OR, dt.i32, (then, else_), into)
+                    continue  # neither block jumps: p holds as it was
+                if then is None:
+                    if else_ is None:
+                        return None
+                    p = else_
+                elif else_ is None:
+                    p = then
+                else:
+                    p = self._emit(Op.BIT_OR, dt.i32, (then, else_), into)
                 continue
             if s.op is Op.LOCAL_LOAD:
                 if id(s.operands[0]) in self.lane_local:

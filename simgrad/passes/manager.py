@@ -27,8 +27,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars); `lanes` > 1: parallel loops of while loops run that many iterations in lock
     step (passes/lanes.py; the CPU's forward kernels)."""
-    from simgrad.passes import (accumulate, hoist, lanes as simt, lower_access, parallel_strategy, promote, quant,
-                                simplify, verify)
+    from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
+    from simgrad.passes import lanes as simt
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
