@@ -317,3 +317,17 @@ def test_gradients_of_a_kernel_with_a_while_are_unchanged():
 def test_width_is_checked():
     with pytest.raises(ValueError, match="simt_lanes"):
         ti.init(arch=ti.cpu, simt_lanes=3)
+
+
+def test_not_on_the_simulated_gpu_nor_in_debug_mode(monkeypatch):
+    """A GPU runs its threads in lock step already; debug mode keeps every check where the user's code has it."""
+    ti.init(arch=ti.cpu, debug=True)
+    pixels, _, paint = _julia(16, 16)
+    assert not _simt_loops(paint, (0.156,))
+    k_debug = pixels.to_numpy()
+    monkeypatch.setenv("SIMGRAD_GPU_SIM", "1")
+    ti.init(arch=ti.cuda)
+    assert ti.lang.impl.current_cfg().arch is ti.cuda
+    pixels, _, paint = _julia(16, 16)
+    assert not _simt_loops(paint, (0.156,))
+    np.testing.assert_array_equal(pixels.to_numpy(), k_debug)
