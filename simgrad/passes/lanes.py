@@ -417,8 +417,8 @@ class _Rewrite:
             s.operands = tuple(self._operand(o) for o in s.operands)
             if s.op is Op.IF:
                 c = s.operands[0]
-                if c.op not in COMPARE:
-                    c = self._emit(Op.NE, dt.i32, (c, Builder.constant(0, dt.i32)), into)
+                if c.op not in COMPARE:  # any nonzero value takes the branch: a 0/1 predicate of it
+                    c = self._emit(Op.NE, dt.i32, (c, Builder.constant(0, c.vtype)), into)
                 pt = self._emit(Op.BIT_AND, dt.i32, (p, c), into)
                 pe = self._emit(Op.BIT_AND, dt.i32,
                                 (p, self._emit(Op.EQ, dt.i32, (c, Builder.constant(0, dt.i32)), into)), into)
