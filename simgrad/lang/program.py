@@ -49,8 +49,9 @@ TAICHI_CONFIG: dict = {
 SPECIAL_CONFIG: dict = {"log_level": "info", "gdb_trigger": False, "short_circuit_operators": True,
                         "print_full_traceback": False, "unrolling_limit": 32}
 # simgrad's own options: flush_denormals (runtime/fpenv.py; Taichi always flushes, this is its way out);
-# simt_lanes: iterations of a parallel loop whose while loops run in lock step on the CPU (passes/lanes.py; 0 off)
-SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": 32}
+# simt_lanes: iterations of a parallel loop whose while loops run in lock step on the CPU (passes/lanes.py; 0 off,
+# -1 four vector registers' worth of the loop's widest values)
+SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": -1}
 # accepted for older programs, without effect (not in Taichi 1.7.4's list)
 LEGACY_OPTIONS = {"packed", "dynamic_index", "excepthook", "debug_info"}
 
@@ -122,8 +123,9 @@ class Config:
 
 def _lanes(value) -> int:
     lanes = int(value)
-    if lanes < 0 or lanes & (lanes - 1) or lanes == 1 or lanes > 64:
-        raise ValueError(f"simt_lanes must be 0 (off) or a power of two from 2 to 64, got {value!r}")
+    if lanes != -1 and (lanes < 0 or lanes & (lanes - 1) or lanes == 1 or lanes > 64):
+        raise ValueError(f"simt_lanes must be -1 (by the host's vector registers), 0 (off) or a power of two from 2 "
+                         f"to 64, got {value!r}")
     return lanes
 
 

@@ -314,6 +314,14 @@ def test_gradients_of_a_kernel_with_a_while_are_unchanged():
     np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
+def test_default_width_is_four_vector_registers_of_the_widest_lane_value(dtype):
+    ti.init(arch=ti.cpu, default_fp=dtype)
+    _, _, paint = _julia(8, 8, dtype)
+    (loop,) = _simt_loops(paint, (0.156,))
+    assert loop.attrs["simt"] == min(64, 4 * get_jit().vector_bits() // dtype.bits)
+
+
 def test_width_is_checked():
     with pytest.raises(ValueError, match="simt_lanes"):
         ti.init(arch=ti.cpu, simt_lanes=3)
