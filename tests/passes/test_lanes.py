@@ -128,6 +128,28 @@ def test_integers_collatz_against_python_with_run_time_range():
     assert not steps[:3].any() and not steps[997:].any()
 
 
+def test_constant_range_not_starting_at_zero():
+    def build():
+        out = ti.field(ti.f32, shape=210)
+
+        @ti.kernel
+        def k():
+            for i in range(5, 203):  # 198 iterations: 24 full groups of 8 and one of 6
+                v = i * 0.01
+                n = 0
+                while v < 1.5 and n < i % 11:
+                    v = v * v + 0.3
+                    n += 1
+                out[i] = v + n
+
+        k()
+        return [out.to_numpy()], k, ()
+
+    (out,), kernel, args = _both(build)
+    assert len(_simt_loops(kernel, args)) == 1
+    assert not out[:5].any() and not out[203:].any() and out[5:203].all()
+
+
 def test_branches_breaks_continues_and_values_across_the_while():
     def build():
         x = ti.field(ti.f32, shape=333)
