@@ -169,7 +169,11 @@ def _jumps_out(stmts: list[Stmt]) -> bool:
 
 
 def _pure_while(w: Stmt, inside: set, written: set) -> bool:
-    """A while whose body is local arithmetic, branches, breaks and continues only."""
+    """A while whose body is local arithmetic, branches, breaks and continues only, with at most one float sum that
+    passes/accumulate.py let LLVM reassociate (fast_math): two of them, `x += a; x += b`, LLVM may reassociate in
+    the scalar loop and not between the masked stores of the lanes' (or the other way round)."""
+    if sum(1 for x in walk(w.blocks[0]) if x.attrs.get("reassoc")) > 1:
+        return False
     for x in walk(w.blocks[0]):
         op = x.op
         if op in (Op.IF, Op.BREAK, Op.CONTINUE, Op.ALLOCA):
