@@ -23,7 +23,9 @@ slots, which LLVM vectorises into <W x T> operations.
 Results keep every bit: each lane executes exactly the scalar operations in the scalar order; a lane whose
 while has ended computes on values nothing keeps. Hence the while's body may hold only operations that can
 neither trap nor give LLVM poison (elementwise arithmetic, which codegen keeps from trapping, selects, casts
-other than float -> int), locals and branches: no memory, atomics, prints, random numbers, nested loops.
+other than float -> int), locals and branches: no memory, atomics, prints, random numbers, nested loops; and
+at most one float sum that fast_math lets LLVM reassociate (passes/accumulate.py), which could pair two of them
+in one version and not the other.
 The parts of the body around the whiles run lane by lane, in iteration order within each part; so that
 no other order can be observed, at most one part may have effects (stores, atomics, prints, asserts, random
 numbers), the others may not read what the loop writes, and the loop's per-thread float sums and private
