@@ -172,8 +172,10 @@ def _jumps_out(stmts: list[Stmt]) -> bool:
 
 def _pure_while(w: Stmt, inside: set, written: set) -> bool:
     """A while whose body is local arithmetic, branches, breaks and continues only, with at most one float sum that
-    passes/accumulate.py let LLVM reassociate (fast_math): two of them, `x += a; x += b`, LLVM may reassociate in
-    the scalar loop and not between the masked stores of the lanes' (or the other way round)."""
+    passes/accumulate.py let LLVM reassociate (fast_math). The lanes compute such sums in program order (the
+    rewrite drops the flag); the scalar loop may not: LLVM paired `x += a; x += b` there (4 of 300 random programs
+    of tests/passes/test_lanes_fuzz.py differed in an f32's last bit), so whiles with two are left as they are.
+    (With one, LLVM still folded `x0 + 2 * x0` into `x0 * 3` in a scalar loop's peeled first step: 1 of 800.)"""
     if sum(1 for x in walk(w.blocks[0]) if x.attrs.get("reassoc")) > 1:
         return False
     for x in walk(w.blocks[0]):
@@ -378,15 +380,16 @@ class _Rewrite:
                 blk.stmts = []
                 self._plain(moved, blk)
 
-    def _update(self, s: Stmt, into: Block) -> tuple[Stmt, Stmt]:
-        """`x op= v` on a lane local, as (the old value, the new value) loaded and computed in `into`."""
+    def _update(self, s: Stmt, into: Block, exact: bool = False) -> tuple[Stmt, Stmt]:
+        """`x op= v` on a lane local, as (the old value, the new value) loaded and computed in `into`; `exact`: without
+        the reassoc passes/accumulate.py may have allowed (a step computes in program order)."""
         var, v = s.operands[0], s.operands[1]
         old = Builder.detached(Op.LOCAL_LOAD, s.vtype, (var, self.lane), None, s.loc, into)
         into.stmts.append(old)
         kind = s.attrs["kind"]
         if kind == "xchg":
             return old, v
-        attrs = {"reassoc": True} if s.attrs.get("reassoc") else None
+        attrs = {"reassoc": True} if s.attrs.get("reassoc") and not exact else None
         new = Builder.detached(_UPDATE_OPS[kind], s.vtype, (old, v), attrs, s.loc, into)
         into.stmts.append(new)
         return old, new
@@ -432,6 +435,7 @@ class _Rewrite:
             if id(s) in self.lane_local:
                 continue
             s.operands = tuple(self._operand(o) for o in s.operands)
+            s.attrs.pop("reassoc", None)  # every lane in program order (see _pure_while)
             if s.op is Op.IF:
                 c = s.operands[0]
                 if c.op not in COMPARE:  # any nonzero value takes the branch: a 0/1 predicate of it
@@ -458,7 +462,7 @@ class _Rewrite:
             elif s.op in (Op.LOCAL_STORE, Op.ATOMIC):
                 var = s.operands[0]
                 if s.op is Op.ATOMIC:
-                    old, new = self._update(s, into)
+                    old, new = self._update(s, into, exact=True)
                     self.local[id(s)] = old
                 else:
                     new = s.operands[1]
