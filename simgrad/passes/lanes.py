@@ -435,7 +435,8 @@ class _Rewrite:
             if id(s) in self.lane_local:
                 continue
             s.operands = tuple(self._operand(o) for o in s.operands)
-            s.attrs.pop("reassoc", None)  # every lane in program order (see _pure_while)
+            if s.op is Op.ADD:  # every lane sums in program order (see _pure_while)
+                s.attrs.pop("reassoc", None)
             if s.op is Op.IF:
                 c = s.operands[0]
                 if c.op not in COMPARE:  # any nonzero value takes the branch: a 0/1 predicate of it
