@@ -25,7 +25,8 @@ while has ended computes on values nothing keeps. Hence the while's body may hol
 neither trap nor give LLVM poison (elementwise arithmetic, which codegen keeps from trapping, selects, casts
 other than float -> int), locals and branches: no memory, atomics, prints, random numbers, nested loops; and
 at most one float sum that fast_math lets LLVM reassociate (passes/accumulate.py), which could pair two of them
-in one version and not the other.
+in one version and not the other (fast_math's reassociation is LLVM's to use: see _pure_while for what random
+programs showed).
 The parts of the body around the whiles run lane by lane, in iteration order within each part; so that
 no other order can be observed, at most one part may have effects (stores, atomics, prints, asserts, random
 numbers), the others may not read what the loop writes, and the loop's per-thread float sums and private
@@ -172,10 +173,12 @@ def _jumps_out(stmts: list[Stmt]) -> bool:
 
 def _pure_while(w: Stmt, inside: set, written: set) -> bool:
     """A while whose body is local arithmetic, branches, breaks and continues only, with at most one float sum that
-    passes/accumulate.py let LLVM reassociate (fast_math). The lanes compute such sums in program order (the
-    rewrite drops the flag); the scalar loop may not: LLVM paired `x += a; x += b` there (4 of 300 random programs
-    of tests/passes/test_lanes_fuzz.py differed in an f32's last bit), so whiles with two are left as they are.
-    (With one, LLVM still folded `x0 + 2 * x0` into `x0 * 3` in a scalar loop's peeled first step: 1 of 800.)"""
+    passes/accumulate.py let LLVM reassociate (fast_math). The lanes keep the flag, so LLVM folds such a sum within
+    a step as in the scalar loop (`x += 0.261 * x` into `x * 1.261`: dropping the flag made 2 of 300 random programs
+    of tests/passes/test_lanes_fuzz.py differ); but two of them, `x += a; x += b`, LLVM paired in the scalar loop
+    and not between the lanes' masked stores (4 of 300 differed in an f32's last bit), so such whiles are left as
+    they are. (With one, LLVM still folded `x0 + 2 * x0` into `x0 * 3` in a scalar loop's peeled first step, which
+    the lanes have not: 1 of 1100 random programs with fast_math, none of 600 without.)"""
     if sum(1 for x in walk(w.blocks[0]) if x.attrs.get("reassoc")) > 1:
         return False
     for x in walk(w.blocks[0]):
@@ -380,16 +383,16 @@ class _Rewrite:
                 blk.stmts = []
                 self._plain(moved, blk)
 
-    def _update(self, s: Stmt, into: Block, exact: bool = False) -> tuple[Stmt, Stmt]:
-        """`x op= v` on a lane local, as (the old value, the new value) loaded and computed in `into`; `exact`: without
-        the reassoc passes/accumulate.py may have allowed (a step computes in program order)."""
+    def _update(self, s: Stmt, into: Block) -> tuple[Stmt, Stmt]:
+        """`x op= v` on a lane local, as (the old value, the new value) loaded and computed in `into` (a sum keeps
+        the reassoc passes/accumulate.py gave it: LLVM then folds it in a step as in the scalar loop)."""
         var, v = s.operands[0], s.operands[1]
         old = Builder.detached(Op.LOCAL_LOAD, s.vtype, (var, self.lane), None, s.loc, into)
         into.stmts.append(old)
         kind = s.attrs["kind"]
         if kind == "xchg":
             return old, v
-        attrs = {"reassoc": True} if s.attrs.get("reassoc") and not exact else None
+        attrs = {"reassoc": True} if s.attrs.get("reassoc") else None
         new = Builder.detached(_UPDATE_OPS[kind], s.vtype, (old, v), attrs, s.loc, into)
         into.stmts.append(new)
         return old, new
@@ -435,8 +438,6 @@ class _Rewrite:
             if id(s) in self.lane_local:
                 continue
             s.operands = tuple(self._operand(o) for o in s.operands)
-            if s.op is Op.ADD:  # every lane sums in program order (see _pure_while)
-                s.attrs.pop("reassoc", None)
             if s.op is Op.IF:
                 c = s.operands[0]
                 if c.op not in COMPARE:  # any nonzero value takes the branch: a 0/1 predicate of it
@@ -463,7 +464,7 @@ class _Rewrite:
             elif s.op in (Op.LOCAL_STORE, Op.ATOMIC):
                 var = s.operands[0]
                 if s.op is Op.ATOMIC:
-                    old, new = self._update(s, into, exact=True)
+                    old, new = self._update(s, into)
                     self.local[id(s)] = old
                 else:
                     new = s.operands[1]

@@ -2,7 +2,8 @@
 local arithmetic (i32, f32 and f64 locals, nested if/else, breaks and continues under random conditions, updates
 with `+=`), with values and locals from before the while used in it and after it. Run with the rewrite off and on
 (ti.init(simt_lanes=0 / 8)), every output must agree bit for bit; most programs must be rewritten. (Before the
-rewrite refused whiles holding two reassociable sums, 4 of 300 such programs differed in the last bits of an f32.)"""
+rewrite refused whiles holding two reassociable sums, 4 of 300 such programs differed in the last bits of an f32;
+seeds 0-299 with fast_math and 0-599 without agree, 898 with fast_math does not: LLVM reassociated the scalar loop.)"""
 
 from __future__ import annotations
 
@@ -116,9 +117,9 @@ def _run(text: str, path, lanes: int, fast_math: bool = True):
     return mod.out_i.to_numpy(), mod.out_f.to_numpy(), rewritten
 
 
-@pytest.mark.parametrize("chunk", range(4))
+@pytest.mark.parametrize("chunk", range(6))
 def test_random_whiles_agree_bit_for_bit(tmp_path, chunk):
-    fast_math = chunk % 2 == 0  # fast_math: float sums marked reassoc (passes/accumulate.py) in the while too
+    fast_math = chunk < 4  # fast_math: float sums marked reassoc (passes/accumulate.py) in the while too
     rewritten = 0
     for seed in range(chunk * 10, chunk * 10 + 10):
         text = _Gen(seed).program()
