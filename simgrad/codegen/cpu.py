@@ -30,10 +30,13 @@ class CpuCodegen(KernelCodegen):
 
     def parallel_loop(self, f: FunctionText, s: Stmt) -> None:
         plan: LoopStrategy = s.attrs["strategy"]
-        if any(x.op is Op.WHILE for x in walk(s.blocks[0])) and NO_SLP not in self.module.globals:
+        if any(x.op is Op.WHILE for x in walk(s.blocks[0])) and NO_SLP not in self.module.globals \
+                and not any(x.attrs.get("simt") for x in self.kernel.body.stmts):
             # LLVM's SLP vectoriser packs the values a data-dependent loop carries (a complex number z) into
             # <2 x float> and unpacks them every iteration: the shuffles lengthen the carried chain (Julia and
-            # Mandelbrot sets: 1.3-1.4x slower than scalar code); runtime/jit.py reads the marker
+            # Mandelbrot sets: 1.3-1.4x slower than scalar code); runtime/jit.py reads the marker. A kernel with
+            # lanes in lock step (passes/lanes.py) keeps it: the lane loop of a step, fully unrolled, is what SLP
+            # makes <W x T> code of, its lane slots kept in vector registers across steps
             self.module.globals.append(NO_SLP)
         captured = _free_values(s)
         regions = plan.regions

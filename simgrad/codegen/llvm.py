@@ -534,6 +534,7 @@ def lower_range_for(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     else:
         b, e = s.operands
         short = b.op is Op.CONST and e.op is Op.CONST and e.attrs["value"] - b.attrs["value"] <= CANCEL_STRIDE
+        short = short or bool(s.attrs.get("lanes"))  # a lane loop (passes/lanes.py): at most its group's width
         g.serial_loop(f, s, f.v(b), f.v(e), cancel=not short)  # a long or unknown one watches Ctrl-C
 
 
@@ -555,20 +556,33 @@ def lower_array_shape(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_alloca(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     a = f.tmp("var")
-    f.prologue.append(f"  {a} = alloca {llvm_type(s.vtype)}")
-    f.prologue.append(f"  store {llvm_type(s.vtype)} {const_text(0, s.vtype)}, ptr {a}")
+    lanes = s.attrs.get("lanes")
+    ty = f"[{lanes} x {llvm_type(s.vtype)}]" if lanes else llvm_type(s.vtype)  # one slot per lane (passes/lanes.py)
+    f.prologue.append(f"  {a} = alloca {ty}{', align 64' if lanes else ''}")
+    f.prologue.append(f"  store {ty} {'zeroinitializer' if lanes else const_text(0, s.vtype)}, ptr {a}")
     f.names[s] = a
+
+
+def _local_address(f: FunctionText, a: Stmt, lane: Stmt | None) -> str:
+    """A local's address; a lane local's slot of `lane` (LOCAL_LOAD / LOCAL_STORE's last operand)."""
+    if lane is None:
+        return f.v(a)
+    p = f.tmp("lane")
+    f.emit(f"{p} = getelementptr inbounds {llvm_type(a.vtype)}, ptr {f.v(a)}, {llvm_type(lane.vtype)} {f.v(lane)}")
+    return p
 
 
 def lower_local_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("l")
-    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {f.v(s.operands[0])}")
+    p = _local_address(f, s.operands[0], s.operands[1] if len(s.operands) > 1 else None)
+    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {p}")
     f.names[s] = r
 
 
 def lower_local_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
-    a, v = s.operands
-    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {f.v(a)}")
+    a, v = s.operands[:2]
+    p = _local_address(f, a, s.operands[2] if len(s.operands) > 2 else None)
+    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}")
 
 
 def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

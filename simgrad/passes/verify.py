@@ -51,6 +51,16 @@ def _stmt(s, visible: set) -> None:
                 raise IRVerifyError(f"internal: {s!r} uses constant {o!r} placed in a block", s.loc)
         elif id(o) not in visible:
             raise IRVerifyError(f"internal: {s!r} uses {o!r} outside its scope", s.loc)
+    if s.op in (Op.LOCAL_LOAD, Op.LOCAL_STORE):  # a lane local (passes/lanes.py) takes its lane's index last
+        var = s.operands[0]
+        laned = var.op is Op.ALLOCA and bool(var.attrs.get("lanes"))
+        if len(s.operands) != (1 if s.op is Op.LOCAL_LOAD else 2) + laned:
+            raise IRVerifyError(f"internal: {s!r} on {var!r} {'needs' if laned else 'takes no'} lane index", s.loc)
+        if laned and not s.operands[-1].vtype.is_int:
+            raise IRVerifyError(f"internal: {s!r} has a lane index of type {s.operands[-1].type}", s.loc)
+    elif s.op is Op.ATOMIC and s.operands[0].op is Op.ALLOCA and s.operands[0].attrs.get("lanes"):
+        raise IRVerifyError(f"internal: {s!r} updates lane local {s.operands[0]!r} (passes/lanes.py rewrites those)",
+                            s.loc)
     if s.op in O.BINARY_ARITH or s.op in O.COMPARE:
         a, b = s.operands
         if a.type is not b.type and s.op not in (Op.SHL, Op.SHR):

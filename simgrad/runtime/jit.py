@@ -57,6 +57,11 @@ class Jit:
         builder = llvm.create_pass_builder(self.target_machine, pto)
         builder.getModulePassManager().run(module, builder)
 
+    def vector_bits(self) -> int:
+        """The width of the host's widest vector registers (what passes/lanes.py sizes its lanes by)."""
+        features = self.features.split(",")
+        return 512 if "+avx512f" in features else 256 if "+avx" in features else 128
+
     def target_id(self) -> tuple:
         """What native code depends on besides its LLVM IR."""
         return (_COMPILER_VERSION, llvmlite.__version__, self.triple, self.cpu, self.features)
