@@ -45,9 +45,10 @@ else:
     _I32 = ti.i32
 
 
-#: at most this many primitives, or any number in a one-thread program, are drawn as one tile covering the
-#: image (``tiles_y`` 0): one thread draws them in call order, with no binning, whose numpy work and kernel cost
-#: more than drawing a few primitives (a GUI frame's one circle) and buy nothing without other threads
+#: on a GPU, at most this many primitives are drawn as one tile covering the image (``tiles_y`` 0): one thread
+#: draws them in call order, with no binning. On the CPU every call is one tile: binning (numpy boxes and a
+#: counting sort) costs more than drawing small primitives, so tiles lost even on two threads (200k circles of
+#: radius 1.5: 42 ms tiled on two threads, 16 ms as one tile)
 SERIAL_MAX = 256
 
 
@@ -55,8 +56,7 @@ def _one_tile(n: int) -> bool:
     """Whether n primitives are drawn as one tile (see SERIAL_MAX)."""
     from simgrad.lang.program import get_program
 
-    prog = get_program()
-    return n <= SERIAL_MAX or (prog.config.num_threads == 1 and not prog.on_gpu)
+    return n <= SERIAL_MAX or not get_program().on_gpu
 
 
 def bin_boxes(x0, y0, x1, y1, res):

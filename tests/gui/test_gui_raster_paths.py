@@ -38,8 +38,8 @@ def test_kernel_and_numpy_drawing_agree(monkeypatch):
 
 
 def test_tiled_and_one_tile_kernel_drawing_agree(monkeypatch):
-    # render2d draws many primitives tile by tile in parallel and few (or any number on one thread) as one tile in
-    # call order: a pixel sees the same primitives in the same order either way, so the pictures are bit-identical
+    # render2d draws many primitives tile by tile in parallel on a GPU and every call as one tile in call order on
+    # the CPU: a pixel sees the same primitives in the same order either way, so the pictures are bit-identical
     import simgrad as ti
     from simgrad.gui import render2d
 
@@ -51,8 +51,8 @@ def test_tiled_and_one_tile_kernel_drawing_agree(monkeypatch):
     P = rng.random((n, 3, 2)) * [W, H]
     colors = rng.random((n, 3))
     pictures = []
-    for serial_max in (0, 10**9):
-        monkeypatch.setattr(render2d, "SERIAL_MAX", serial_max)
+    for one_tile in (False, True):  # tiles (the GPU's way for many primitives), then the CPU's one tile
+        monkeypatch.setattr(render2d, "_one_tile", lambda n, one_tile=one_tile: one_tile)
         img = np.zeros((W, H, 3), np.float32)
         render2d.circles(img, c, np.full(n, 2.5), colors)
         render2d.lines(img, a, b, np.full(n, 1.5), colors)
