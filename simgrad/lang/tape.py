@@ -199,14 +199,16 @@ def _backward_sequence(entries: list):
         return None
     key = tuple((id(fn), tuple(replay_key(a) for a in args)) for fn, args in entries)
     if _backward is not None and _backward[:2] == (prog.generation, key):
-        return _backward[3]
+        return _backward[3]  # None too: these launches were found not capturable, don't try again
     steps = []
     for fn, args in reversed(entries):
         make = getattr(getattr(fn, "grad", None), "launcher", None)
-        steps.append((make(args) if make is not None else None, args))
-    sequence = Sequence.packed(steps)
-    if sequence is not None:
-        _backward = (prog.generation, key, list(entries), sequence)
+        launcher = make(args) if make is not None else None
+        if launcher is None or launcher.pack is None:  # a custom gradient, or Python after the launch
+            break
+        steps.append((launcher, args))
+    sequence = Sequence.packed(steps) if len(steps) == len(entries) else None
+    _backward = (prog.generation, key, list(entries), sequence)
     return sequence
 
 
