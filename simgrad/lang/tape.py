@@ -10,6 +10,7 @@ from __future__ import annotations
 import enum
 import functools
 import hashlib
+import math
 from typing import Any
 
 import numpy as np
@@ -181,8 +182,31 @@ class Tape:
         self.gradient_evaluated = True
 
 
-# the last captured backward pass: (program generation, key of the recorded launches, their entries, Sequence)
+# the last captured backward pass: (program generation, the recorded launches, their Sequence or None)
 _backward: tuple | None = None
+
+
+def _same_launches(entries: list, recorded: list) -> bool:
+    """Whether `entries` launch what `recorded` launched: the same kernels with arguments of equal replay keys
+    (runtime/launch.py replay_key). Compared in place: building a key per backward pass allocated two tuples per
+    launch, and for mass_spring's 3406 launches the garbage collector's pauses cost more than the replay saved."""
+    if len(entries) != len(recorded):
+        return False
+    for (fn, args), (rfn, rargs) in zip(entries, recorded):
+        if fn is not rfn or len(args) != len(rargs):
+            return False
+        for a, b in zip(args, rargs):
+            if type(a) is not type(b):
+                return False
+            if type(a) in _PLAIN_ARGS:
+                if a != b or (a == 0 and math.copysign(1.0, a) != math.copysign(1.0, b)):  # -0.0 is not 0.0
+                    return False
+            elif replay_key(a) != replay_key(b):
+                return False
+    return True
+
+
+_PLAIN_ARGS = frozenset((int, float, bool))
 
 
 def _backward_sequence(entries: list):
@@ -197,9 +221,8 @@ def _backward_sequence(entries: list):
     if ad_hooks.forward_mode is not None or prog.config.kernel_profiler or \
             prog.on_gpu:
         return None
-    key = tuple((id(fn), tuple(replay_key(a) for a in args)) for fn, args in entries)
-    if _backward is not None and _backward[:2] == (prog.generation, key):
-        return _backward[3]  # None too: these launches were found not capturable, don't try again
+    if _backward is not None and _backward[0] == prog.generation and _same_launches(entries, _backward[1]):
+        return _backward[2]  # None too: these launches were found not capturable, don't try again
     steps = []
     for fn, args in reversed(entries):
         make = getattr(getattr(fn, "grad", None), "launcher", None)
@@ -208,7 +231,7 @@ def _backward_sequence(entries: list):
             break
         steps.append((launcher, args))
     sequence = Sequence.packed(steps) if len(steps) == len(entries) else None
-    _backward = (prog.generation, key, list(entries), sequence)
+    _backward = (prog.generation, list(entries), sequence)  # the entries keep their arguments' identities valid
     return sequence
 
 

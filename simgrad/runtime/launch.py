@@ -270,7 +270,8 @@ def replay_key(value):
     its `.grad` can be replaced under the same object (optimizer.zero_grad(set_to_none=True)), so it is packed
     anew every time."""
     if type(value) in _PLAIN or isinstance(value, (bool, int, float, str, type(None))) or np.isscalar(value):
-        return (type(value).__name__, value)
+        # -0.0 == 0.0, but a context packed with one must not stand for the other (1 / x, atan2)
+        return (type(value).__name__, value, value == 0 and bool(np.signbit(value)))
     if not isinstance(value, np.ndarray) and not hasattr(value, "_ndarray_data") and (
             hasattr(value, "__dlpack__") or hasattr(value, "data_ptr") or hasattr(value, "__cuda_array_interface__")):
         return ("volatile", next(_VOLATILE))

@@ -56,9 +56,9 @@ def test_captured_backward_equals_python_backward_and_finite_differences(monkeyp
     captured = [_grads(x, w, loss, run, wv) for _ in range(3)]
     assert replays == [STEPS + 1] * 3  # every backward pass: one native call over the 7 adjoints
     assert tape_module._backward is not None
-    first = tape_module._backward[3]
+    first = tape_module._backward[2]
     _grads(x, w, loss, run, wv * 1.1)  # new field values, same launches: the same capture
-    assert tape_module._backward[3] is first
+    assert tape_module._backward[2] is first
     monkeypatch.setattr(tape_module, "_backward_sequence", lambda entries: None)
     eager = _grads(x, w, loss, run, wv)
     for c in captured:
@@ -77,9 +77,9 @@ def test_another_argument_or_a_custom_gradient_is_not_replayed_stale():
     x, w, loss, run = _sim()
     wv = np.array([0.5, -1.0, 2.0, 0.25])
     a = _grads(x, w, loss, run, wv)
-    key = tape_module._backward[1]
+    first = tape_module._backward[2]
     b = _grads(x, w, loss, lambda: run(0.2), wv)  # another scalar argument: captured anew
-    assert tape_module._backward[1] != key and not np.array_equal(a[1], b[1])
+    assert tape_module._backward[2] is not first and not np.array_equal(a[1], b[1])
     calls = []
 
     @ti.ad.grad_replaced
@@ -126,6 +126,46 @@ def test_launches_found_not_capturable_are_not_tried_again(monkeypatch):
     wv = np.array([0.5, -1.0, 2.0, 0.25])
     results = [_grads(x, w, loss, run_custom, wv) for _ in range(3)]
     assert len(made) == 1  # the last launch's adjoint is made first; the custom gradient stops the capture
-    assert tape_module._backward is not None and tape_module._backward[3] is None
+    assert tape_module._backward is not None and tape_module._backward[2] is None
     for r in results[1:]:
         np.testing.assert_array_equal(r[1], results[0][1])
+
+
+def test_a_negative_zero_argument_is_not_replayed_as_zero():
+    # the replayed contexts hold the scalars they were packed with: -0.0 after 0.0 is another argument
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    x = ti.field(ti.f64, shape=(), needs_grad=True)
+    loss = ti.field(ti.f64, shape=(), needs_grad=True)
+
+    @ti.kernel
+    def f(s: ti.f64):
+        loss[None] = ti.atan2(s, -1.0) * x[None]
+
+    grads = []
+    for s in (0.0, 0.0, -0.0):
+        x[None] = 1.0
+        with ti.ad.Tape(loss=loss):
+            f(s)
+        grads.append(x.grad[None])
+    assert grads[0] == grads[1] == np.arctan2(0.0, -1.0)
+    assert grads[2] == np.arctan2(-0.0, -1.0)  # -pi: replaying the 0.0 capture would give pi
+
+
+def test_a_graph_replays_negative_zero_as_itself():
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+
+    @ti.kernel
+    def f(x: ti.types.ndarray(ndim=1), s: ti.f64):
+        x[0] = ti.atan2(s, -1.0)
+
+    sym_x = ti.graph.Arg(ti.graph.ArgKind.NDARRAY, "x", ti.f64, ndim=1)
+    sym_s = ti.graph.Arg(ti.graph.ArgKind.SCALAR, "s", ti.f64)
+    gb = ti.graph.GraphBuilder()
+    gb.dispatch(f, sym_x, sym_s)
+    g = gb.compile()
+    x = ti.ndarray(ti.f64, shape=1)
+    got = []
+    for s in (0.0, 0.0, -0.0):  # the second run replays the first's capture; the third must not
+        g.run({"x": x, "s": s})
+        got.append(x.to_numpy()[0])
+    assert got == [np.pi, np.pi, -np.pi]
