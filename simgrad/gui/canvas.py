@@ -228,35 +228,21 @@ class ImageCanvas:
         if not antialias:
             self._queue(_triangles, P, vc if vertex_colors is not None else rgb)
             return
+        # antialiased: edge-distance coverage over each triangle's box, by numpy only
         area2 = raster.triangle_area2(P)
-        ok = np.isfinite(P).all(axis=(1, 2))
-        if antialias:
-            ok &= area2 != 0
-            lo, hi = raster.empty_invalid(ok, np.floor(P.min(axis=1) - 1), np.ceil(P.max(axis=1) + 1))
-            owner, x0, y0, x1, y1 = np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]
-        else:
-            owner, x0, y0, x1 = raster.triangle_spans(P, ok, self.res)
-            y1 = y0
+        ok = np.isfinite(P).all(axis=(1, 2)) & (area2 != 0)
+        lo, hi = raster.empty_invalid(ok, np.floor(P.min(axis=1) - 1), np.ceil(P.max(axis=1) + 1))
 
-        def shade(b, i, j):
-            o = owner[b]
-            if antialias or vertex_colors is not None:
-                e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
-            if antialias:
-                s = -np.sign(area2[o])
-                dists = [s * e[k] / np.hypot(*(P[o, (k + 1) % 3] - P[o, k]).T) for k in range(3)]
-                alpha = np.clip(0.5 + np.minimum(np.minimum(dists[0], dists[1]), dists[2]), 0.0, 1.0)
-            else:  # spans hold exactly the covered pixels
-                alpha = np.ones(o.size)
+        def shade(o, i, j):
+            e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
+            s = -np.sign(area2[o])
+            dists = [s * e[k] / np.hypot(*(P[o, (k + 1) % 3] - P[o, k]).T) for k in range(3)]
+            alpha = np.clip(0.5 + np.minimum(np.minimum(dists[0], dists[1]), dists[2]), 0.0, 1.0)
             if vertex_colors is None:
                 return alpha, (rgb, o)
-            # Barycentric weight of a vertex is the edge function of the opposite edge over -area2.
-            w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
-            w = np.clip(w, 0.0, 1.0)
-            w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
-            return alpha, np.einsum("sk,skc->sc", w, vc[o])
+            return alpha, _barycentric_colors(P, area2, o, e, vc)
 
-        self._draw(owner, x0, y0, x1, y1, shade)
+        self._draw(np.arange(n), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
 
     def rect(self, topleft, bottomright, radius=1.0, color=0xFFFFFF):
         """Rectangle outline: the four sides drawn as segments, as Taichi does."""
@@ -413,14 +399,19 @@ def _triangles(img, P, colors) -> None:
     owner, x0, y0, x1 = raster.triangle_spans(P, np.isfinite(P).all(axis=(1, 2)), img.shape[:2])
     area2 = raster.triangle_area2(P)
 
-    def shade(b, i, j):
+    def shade(b, i, j):  # spans hold exactly the covered pixels
         o = owner[b]
         if vc is None:
             return np.ones(o.size), (colors, o)
-        e = raster.edge_functions(P, o, i + 0.5, j + 0.5)
-        w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
-        w = np.clip(w, 0.0, 1.0)
-        w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
-        return np.ones(o.size), np.einsum("sk,skc->sc", w, vc[o])
+        return np.ones(o.size), _barycentric_colors(P, area2, o, raster.edge_functions(P, o, i + 0.5, j + 0.5), vc)
 
     raster.rasterize(img, owner, x0, y0, x1, y0, shade)
+
+
+def _barycentric_colors(P, area2, o, e, vc):
+    """Per-vertex colours ``vc`` of triangles ``o`` at samples with edge functions ``e``: the weight of a vertex is
+    the edge function of the opposite edge over -area2."""
+    w = np.stack([e[1], e[2], e[0]], axis=1) / -area2[o][:, None]
+    w = np.clip(w, 0.0, 1.0)
+    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+    return np.einsum("sk,skc->sc", w, vc[o])

@@ -122,8 +122,7 @@ def _tile(t, tiles_y, W, H):
 @ti.func
 def _blend(img, i, j, a, c):
     """``lerp(a, dest, c)`` in float64; an opaque sample replaces the pixel (even a NaN one), one with no
-    coverage keeps it. Without branches (the pixel is written back as it was when a <= 0), so the loops over a
-    primitive's pixels vectorise."""
+    coverage keeps it (written back as it was: selects, no branch per pixel)."""
     old = img[i, j]
     mixed = ti.cast(ti.cast(old, ti.f64) * (1.0 - a) + c * a, ti.f32)
     img[i, j] = ti.select(a >= 1.0, ti.cast(c, ti.f32), ti.select(a > 0.0, mixed, old))
