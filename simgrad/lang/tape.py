@@ -10,7 +10,6 @@ from __future__ import annotations
 import enum
 import functools
 import hashlib
-import math
 from typing import Any
 
 import numpy as np
@@ -22,7 +21,7 @@ from simgrad.ir.nodes import Kernel, indices_of, walk
 from simgrad.ir.ops import Op
 from simgrad.lang import ad_hooks
 from simgrad.lang.field import Field, ScalarField
-from simgrad.runtime.launch import Sequence, replay_key
+from simgrad.runtime.launch import Sequence, same_replay_key
 
 
 class Tape:
@@ -188,25 +187,17 @@ _backward: tuple | None = None
 
 def _same_launches(entries: list, recorded: list) -> bool:
     """Whether `entries` launch what `recorded` launched: the same kernels with arguments of equal replay keys
-    (runtime/launch.py replay_key). Compared in place: building a key per backward pass allocated two tuples per
-    launch, and for mass_spring's 3406 launches the garbage collector's pauses cost more than the replay saved."""
+    (runtime/launch.py same_replay_key). Compared in place: building a key per backward pass allocated two tuples
+    per launch, and for mass_spring's 3406 launches the garbage collector's pauses cost more than the replay
+    saved."""
     if len(entries) != len(recorded):
         return False
     for (fn, args), (rfn, rargs) in zip(entries, recorded):
         if fn is not rfn or len(args) != len(rargs):
             return False
-        for a, b in zip(args, rargs):
-            if type(a) is not type(b):
-                return False
-            if type(a) in _PLAIN_ARGS:
-                if a != b or (a == 0 and math.copysign(1.0, a) != math.copysign(1.0, b)):  # -0.0 is not 0.0
-                    return False
-            elif replay_key(a) != replay_key(b):
-                return False
+        if not all(map(same_replay_key, args, rargs)):
+            return False
     return True
-
-
-_PLAIN_ARGS = frozenset((int, float, bool))
 
 
 def _backward_sequence(entries: list):

@@ -291,10 +291,7 @@ def array_info(a, kernel, param, ndim, stage=None):
                                      "before passing it into the kernel", caller_loc())
         return (a.ctypes.data if stage is None else stage(a)), a.shape
     if hasattr(a, "_ndarray_data"):  # device memory already: no staging, and no synchronization
-        address = getattr(a, "_data_address", None)
-        if address is not None:
-            return address, a._ndarray_data.shape
-        return array_info(a._ndarray_data, kernel, param, ndim)
+        return a._data_address, a._ndarray_data.shape  # a ti.ndarray (lang/ndarray.py) keeps its data's address
     raise SimgradTypeError(f"kernel {kernel}: argument '{param}' expects an ndarray, got {type(a).__name__} "
                            f"(Invalid type for argument {param}, got {a})")
 

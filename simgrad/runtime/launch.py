@@ -263,6 +263,14 @@ _VOLATILE = itertools.count()
 _PLAIN = frozenset((float, int, bool))
 
 
+def same_replay_key(a, b) -> bool:
+    """``replay_key(a) == replay_key(b)`` without building the keys for plain Python numbers (a Tape compares
+    thousands of recorded launch arguments per backward pass: lang/tape.py)."""
+    if type(a) in _PLAIN and type(b) is type(a):
+        return a == b and (a != 0 or bool(np.signbit(a)) == bool(np.signbit(b)))
+    return replay_key(a) == replay_key(b)
+
+
 def replay_key(value):
     """What must not change for a captured Sequence to be replayed with `value` as an argument: a scalar's type
     and value; the identity of a numpy array, a ti.ndarray, a field or a template object (their context words
