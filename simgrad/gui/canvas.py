@@ -106,24 +106,61 @@ class ImageCanvas:
         # (show() clears) then costs nothing, as Taichi's C++ canvas nearly does.
         self._fill: tuple | None = None
         self._pending: list = []
+        # What the buffer holds: ``_clean`` everywhere outside the boxes ``_dirty`` (x0, x1, y0, y1, half-open), or
+        # unknown (``_dirty`` None). A clear then refills only what was drawn since the last one: a frame that
+        # draws one small circle on a 400 x 400 canvas would otherwise spend most of its time filling.
+        self._clean: tuple | None = None
+        self._dirty: list | None = None
+        self._column: tuple | None = None  # (fill, one column of it)
         self.clear(background)
 
     @property
     def img(self) -> np.ndarray:
-        """The pixels, float32 RGB of shape (W, H, 3), with every pending primitive drawn."""
+        """The pixels, float32 RGB of shape (W, H, 3), with every pending primitive drawn (read-only: write
+        through :meth:`pixels`)."""
         if self._fill is not None:
-            row = np.tile(np.asarray(self._fill, np.float32), (self.res[1], 1))
-            self._img[:] = row
-            self._fill = None
+            self._refill(self._fill)
         pending, self._pending = self._pending, []
         for draw in pending:
+            self._note_drawn(draw)
             draw(self._pixels())
-        return self._img
+        view = self._img.view()
+        view.flags.writeable = False
+        return view
 
     @img.setter
     def img(self, value) -> None:
-        self._fill, self._pending = None, []
+        self._fill, self._pending, self._dirty = None, [], None
         self._img = value
+
+    #: dirty boxes kept apart; more become their union (bounded bookkeeping)
+    MAX_BOXES = 16
+
+    def _refill(self, fill) -> None:
+        """Every pixel to ``fill``: only the drawn boxes when the rest already holds it. A box is filled with
+        one column copied into each of its columns (broadcasting a 3-vector over pixels is ~20x slower)."""
+        pixels = self._pixels()
+        if self._column is None or self._column[0] != fill:
+            self._column = (fill, np.tile(np.asarray(fill, np.float32), (self.res[1], 1)))
+        column = self._column[1]
+        boxes = [(0, self.res[0], 0, self.res[1])] if self._dirty is None or self._clean != fill else self._dirty
+        for x0, x1, y0, y1 in boxes:
+            pixels[x0:x1, y0:y1] = column[y0:y1]
+        self._fill, self._clean, self._dirty = None, fill, []
+
+    def _note_drawn(self, draw) -> None:
+        """Add the boxes ``draw`` may change to the dirty boxes (everything, when it cannot say)."""
+        if self._dirty is None:
+            return
+        bounds = getattr(draw, "bounds", None)
+        boxes = bounds(self.res) if bounds is not None else None
+        if boxes is None:
+            self._dirty = None
+            return
+        self._dirty += [b for b in boxes if b[0] < b[1] and b[2] < b[3]]
+        if len(self._dirty) > self.MAX_BOXES:
+            d = np.array(self._dirty)
+            self._dirty = [(int(d[:, 0].min()), int(d[:, 1].max()), int(d[:, 2].min()), int(d[:, 3].max()))]
 
     @property
     def _scale(self):
@@ -151,7 +188,7 @@ class ImageCanvas:
 
     def replace(self, rgb: np.ndarray) -> None:
         """Overwrite every pixel with float RGB of shape (W, H, 3); what was pending is dropped."""
-        self._fill, self._pending = None, []
+        self._fill, self._pending, self._dirty = None, [], None
         pixels = self._pixels()
         if rgb.strides[-1] == 0:  # a grey image broadcast: a channel at a time is 4x faster in numpy
             for c in range(3):
@@ -163,6 +200,7 @@ class ImageCanvas:
         """The pixel buffer itself (float32 RGB, C-contiguous) with everything pending drawn, for renderers
         that draw into it in place."""
         self.img  # noqa: B018 (draws what is pending)
+        self._dirty = None  # the caller may draw anywhere
         return self._pixels()
 
     def to_uint8(self) -> np.ndarray:
@@ -210,6 +248,16 @@ class ImageCanvas:
             self._queue(_lines, A, B, r, np.array(vertex_colors, dtype=np.float64).reshape(n, 2, 3))
         else:
             self._queue(_lines, A, B, r, as_rgb(color, n))
+
+    def circle1(self, x, y, radius, rgb) -> None:
+        """One circle at normalised (x, y) from Python floats, ``rgb`` a float 3-tuple: what ``circles`` does with
+        one row, queued as a tuple (``gui.circle`` in a Python loop pays no numpy per call)."""
+        self._queue_row(_circles, (x * self.res[0], y * self.res[1], radius) + rgb)
+
+    def line1(self, ax, ay, bx, by, radius, rgb) -> None:
+        """One segment from Python floats (see :meth:`circle1`)."""
+        W, H = self.res
+        self._queue_row(_lines, (ax * W, ay * H, bx * W, by * H, radius) + rgb)
 
     def triangles(self, a, b, c, color=0xFFFFFF, vertex_colors=None, antialias=False):
         """Filled triangles.
@@ -275,7 +323,11 @@ class ImageCanvas:
         rgb = np.broadcast_to(as_rgb(color), (int(inside.sum()), 3))
         alpha = coverage[inside]
         i, j = i[inside], j[inside]
-        self._pending.append(lambda img: raster.composite(img, i, j, alpha, rgb))
+        if not i.size:
+            return
+        draw = functools.partial(raster.composite, i=i, j=j, alpha=alpha, rgb=rgb)
+        box = (int(i.min()), int(i.max()) + 1, int(j.min()), int(j.max()) + 1)
+        self._pending.append(_Bounded(draw, [box]))
 
     # -- rasterisation ----------------------------------------------------------------------
     def _pixels(self):
@@ -297,10 +349,18 @@ class ImageCanvas:
         draw, not one per segment; compositing is order-exact, so the picture is the same)."""
         last = self._pending[-1] if self._pending else None
         key = (draw, tuple(a.shape[1:] for a in arrays))
-        if isinstance(last, _Batch) and last.key == key:
+        if type(last) is _Batch and last.key == key:
             last.parts.append(arrays)
         else:
             self.defer(_Batch(key, [arrays]))
+
+    def _queue_row(self, draw, row: tuple) -> None:
+        """Queue one primitive as a row of floats (see _Rows); consecutive rows of one ``draw`` are one batch."""
+        last = self._pending[-1] if self._pending else None
+        if type(last) is _Rows and last.key[0] is draw:
+            last.parts.append(row)
+        else:
+            self._pending.append(_Rows((draw,), [row]))
 
 
 @functools.lru_cache(maxsize=1024)
@@ -325,15 +385,41 @@ def _text_mask(content: str, size: float):
     return rows, cols, coverage
 
 
+class _Bounded:
+    """A pending drawing that changes only pixels in ``boxes`` (x0, x1, y0, y1, half-open)."""
+
+    def __init__(self, draw, boxes):
+        self.draw, self.boxes = draw, boxes
+
+    def __call__(self, img) -> None:
+        self.draw(img)
+
+    def bounds(self, res):
+        return self.boxes
+
+
 class _Batch:
     """Primitives of one kind queued by consecutive calls, drawn together when the pixels are looked at."""
 
     def __init__(self, key, parts: list):
         self.key, self.parts = key, parts
 
+    def _arrays(self):
+        return self.parts[0] if len(self.parts) == 1 else [np.concatenate(a) for a in zip(*self.parts)]
+
     def __call__(self, img) -> None:
-        arrays = self.parts[0] if len(self.parts) == 1 else [np.concatenate(a) for a in zip(*self.parts)]
-        self.key[0](img, *arrays)
+        self.key[0](img, *self._arrays())
+
+    def bounds(self, res):
+        """The boxes the batch may draw in (its primitives' boxes padded by a pixel: each, when there are few,
+        else their union), None when unknown."""
+        lo, hi = _EXTENT[self.key[0]](*self._arrays())
+        if np.isnan(lo).any() or np.isnan(hi).any():
+            return None
+        if len(lo) > ImageCanvas.MAX_BOXES:
+            lo, hi = lo.min(axis=0, keepdims=True), hi.max(axis=0, keepdims=True)
+        lo, hi = np.clip(np.floor(lo) - 1, 0, res), np.clip(np.ceil(hi) + 2, 0, res)
+        return [(int(a), int(b), int(c), int(d)) for a, c, b, d in np.concatenate([lo, hi], axis=1).tolist()]
 
 
 # The primitives are drawn by simgrad kernels (render2d.py: tiles in parallel, the numpy rasteriser's coverage and
@@ -352,6 +438,10 @@ def _circles(img, c, r, rgb) -> None:
     k = _kernels()
     if k is not None:
         return k.circles(img, c, r, rgb)
+    if len(c) <= _FEW:
+        for k in range(len(c)):
+            _circle_in_box(img, c[k, 0], c[k, 1], r[k], rgb[k])
+        return
     ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
     lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
 
@@ -360,6 +450,33 @@ def _circles(img, c, r, rgb) -> None:
         return np.clip(r[o] - dist, 0.0, 1.0), (rgb, o)
 
     raster.rasterize(img, np.arange(len(c)), lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1], shade)
+
+
+# At most this many circles are drawn one after another on their boxes' slices (the sample lists and sort of
+# raster.rasterize cost ~0.1 ms however few pixels are drawn; ``gui.circle`` once a frame is common).
+_FEW = 4
+
+
+def _circle_in_box(img, cx, cy, r, rgb) -> None:
+    """One circle blended in place as render2d's kernel blends it: coverage clamp(r - distance) from integer
+    pixel coordinates, ``dest * (1 - a) + rgb * a`` in float64, opaque samples replace the pixel."""
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r) and r > 0):
+        return
+    W, H = img.shape[:2]
+    i0, i1 = max(math.ceil(cx - r), 0), min(math.floor(cx + r), W - 1)
+    j0, j1 = max(math.ceil(cy - r), 0), min(math.floor(cy + r), H - 1)
+    if i0 > i1 or j0 > j1:
+        return
+    dx = cx - np.arange(i0, i1 + 1, dtype=np.float64)
+    dy = cy - np.arange(j0, j1 + 1, dtype=np.float64)
+    d2 = np.add.outer(dx * dx, dy * dy)
+    a = r - np.sqrt(d2, out=d2)
+    box = img[i0:i1 + 1, j0:j1 + 1]
+    col = np.asarray(rgb, np.float64)
+    part = (a > 0.0) & (a < 1.0)
+    ap = a[part][:, None]
+    box[part] = box[part] * (1.0 - ap) + col * ap
+    box[a >= 1.0] = col
 
 
 def _lines(img, A, B, r, colors) -> None:
@@ -415,3 +532,42 @@ def _barycentric_colors(P, area2, o, e, vc):
     w = np.clip(w, 0.0, 1.0)
     w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
     return np.einsum("sk,skc->sc", w, vc[o])
+
+
+class _Rows(_Batch):
+    """One-primitive calls queued as float rows (the arrays of the kind's array call side by side: centre, radius
+    and colour of a circle; start, end, half-width and colour of a segment), made arrays when drawn."""
+
+    def _arrays(self):
+        rows = np.array(self.parts, np.float64)
+        if self.key[0] is _circles:
+            return rows[:, 0:2], rows[:, 2], rows[:, 3:6]
+        return rows[:, 0:2], rows[:, 2:4], rows[:, 4], rows[:, 5:8]
+
+    def bounds(self, res):
+        if len(self.parts) > _FEW:
+            return super().bounds(res)
+        boxes = []  # a few rows: their boxes in Python (numpy's set-up would cost more), padded as _Batch pads
+        for row in self.parts:
+            if self.key[0] is _circles:
+                x, y, r = row[:3]
+                lo, hi = (x - r, y - r), (x + r, y + r)
+            else:
+                ax, ay, bx, by, r = row[:5]
+                lo, hi = (min(ax, bx) - r, min(ay, by) - r), (max(ax, bx) + r, max(ay, by) + r)
+            if any(math.isnan(v) for v in lo + hi):
+                return None
+            x0, y0 = (min(max(math.floor(v) - 1, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
+                      for v, n in zip(lo, res))
+            x1, y1 = (min(max(math.ceil(v) + 2, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
+                      for v, n in zip(hi, res))
+            boxes.append((x0, x1, y0, y1))
+        return boxes
+
+
+# Per primitive kind: the (n, 2) lower and upper corners of what its arguments may cover, in pixels.
+_EXTENT = {
+    _circles: lambda c, r, rgb: (c - r[:, None], c + r[:, None]),
+    _lines: lambda A, B, r, colors: (np.minimum(A, B) - r[:, None], np.maximum(A, B) + r[:, None]),
+    _triangles: lambda P, colors: (P.min(axis=1), P.max(axis=1)),
+}

@@ -8,6 +8,7 @@ which is what simulations on servers and in tests need.
 
 from __future__ import annotations
 
+import functools
 import numbers
 import os
 import sys
@@ -27,6 +28,25 @@ def _colors_arg(color, n):
     if isinstance(color, np.ndarray) and color.dtype.kind in "iu" and color.shape != (n,):
         raise ValueError(f"color array must have shape ({n},), got {color.shape}")
     return as_rgb(color, n)
+
+
+def _xy(p) -> tuple | None:
+    """A point given as two Python or numpy reals, or a float numpy array of shape (2,), as two floats (the values
+    ``_points`` would give); None for anything else (which takes the array path)."""
+    if type(p) is np.ndarray:
+        if p.shape == (2,) and p.dtype.kind == "f":
+            return float(p[0]), float(p[1])
+    elif type(p) in (tuple, list) and len(p) == 2:
+        x, y = p
+        if isinstance(x, numbers.Real) and isinstance(y, numbers.Real):
+            return float(x), float(y)
+    return None
+
+
+@functools.lru_cache(maxsize=256)
+def _hex_rgb(color: int) -> tuple:
+    """0xRRGGBB as the float RGB ``as_rgb`` gives, as a tuple (cached: programs draw with a few colours)."""
+    return tuple(float(v) for v in as_rgb(color))
 
 
 def _fast_pixels(arr: np.ndarray) -> np.ndarray:
@@ -248,6 +268,10 @@ class GUI:
 
     def circle(self, pos, color=0xFFFFFF, radius=1):
         """One filled circle; ``radius`` in pixels."""
+        p = _xy(pos)
+        if p is not None and type(color) is int and isinstance(radius, numbers.Real):
+            self.canvas.circle1(p[0], p[1], float(radius), _hex_rgb(color))
+            return
         self.canvas.circles(_points(pos)[:1], radius, _colors_arg(color, 1))
 
     def circles(self, pos, radius=1, color=0xFFFFFF, palette=None, palette_indices=None):
@@ -273,6 +297,10 @@ class GUI:
 
     def line(self, begin, end, radius=1, color=0xFFFFFF):
         """One segment; ``radius`` is its half-width in pixels."""
+        a, b = _xy(begin), _xy(end)
+        if a is not None and b is not None and type(color) is int and isinstance(radius, numbers.Real):
+            self.canvas.line1(a[0], a[1], b[0], b[1], float(radius), _hex_rgb(color))
+            return
         self.canvas.lines(_points(begin)[:1], _points(end)[:1], radius, _colors_arg(color, 1))
 
     def lines(self, begin, end, radius=1, color=0xFFFFFF):

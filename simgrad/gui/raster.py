@@ -54,11 +54,13 @@ class SegmentPieces:
 
     def __init__(self, A, B, r, ok, res):
         D = B - A
-        L2 = (D**2).sum(axis=1)
         pad = np.where(ok, r + 1.0, 0.0)
         ta, tb = clip_segments(np.where(ok[:, None], A, 0.0), np.where(ok[:, None], D, 0.0), pad, res)
         ok = ok & (tb >= ta)
-        visible = np.where(ok, (tb - ta) * np.sqrt(L2), 0.0)
+        # at most the padded canvas's diagonal: with an endpoint near 1e300, tb - ta keeps rounding error times a
+        # huge (or infinite: 0 * inf is NaN, which fmin drops) length, and the piece count would overflow
+        diagonal = np.hypot(res[0] + 2.0 * pad, res[1] + 2.0 * pad)
+        visible = np.where(ok, np.fmin((tb - ta) * np.hypot(D[:, 0], D[:, 1]), diagonal), 0.0)
         piece_len = np.maximum(PIECE, 2.0 * pad)
         self.pieces = np.where(ok, np.maximum(1, np.ceil(visible / piece_len)), 0).astype(np.int64)
         self.owner = owner = np.repeat(np.arange(len(A)), self.pieces)

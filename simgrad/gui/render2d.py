@@ -218,6 +218,80 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
                         _blend(img, i, j, a, c)
 
 
+@ti.kernel
+def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, per_vertex: _I32):
+    """Every segment in call order on one thread (the CPU's one tile). ``ends`` rows: start x, y, end x, y and
+    half-width in pixels. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
+    shades (the same float64 operations, so the same pixels), but without pieces: a column visits only the rows
+    near the part of the segment within ``pad`` of it, each pixel once."""
+    w = ti.cast(img.shape[0], ti.f64)
+    h = ti.cast(img.shape[1], ti.f64)
+    ti.loop_config(serialize=True)
+    for o in range(ends.shape[0]):
+        ax0 = ends[o, 0]
+        ay0 = ends[o, 1]
+        r = ends[o, 4]
+        dx0 = ends[o, 2] - ax0
+        dy0 = ends[o, 3] - ay0
+        if _finite(ax0) and _finite(ay0) and _finite(ends[o, 2]) and _finite(ends[o, 3]) and _finite(r) and r > 0.0:
+            pad = r + 1.0
+            ta = ti.cast(0.0, ti.f64)
+            tb = ti.cast(1.0, ti.f64)
+            for axis in ti.static(range(2)):
+                a = ax0 if axis == 0 else ay0
+                d = dx0 if axis == 0 else dy0
+                hi = (w if axis == 0 else h) + pad
+                if d != 0.0:
+                    t_lo = (-pad - a) / d
+                    t_hi = (hi - a) / d
+                    ta = ti.max(ta, ti.min(t_lo, t_hi))
+                    tb = ti.min(tb, ti.max(t_lo, t_hi))
+                elif a < -pad or a > hi:
+                    tb = -1.0
+            if tb >= ta:
+                span = tb - ta
+                ax = ax0 + dx0 * ta
+                ay = ay0 + dy0 * ta
+                dx = dx0 * span
+                dy = dy0 * span
+                l2 = dx * dx + dy * dy
+                band = (r + 1e-6) * (r + 1e-6) * l2
+                i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - pad), 0.0), ti.i32)
+                i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + pad), w - 1.0), ti.i32)
+                for i in range(i0, i1 + 1):
+                    px = i + 0.5 - ax
+                    # the part of the segment whose x is within pad of the column's centre, then its rows +- pad
+                    s0 = ti.cast(0.0, ti.f64)
+                    s1 = ti.cast(1.0, ti.f64)
+                    if dx != 0.0:
+                        u = (px - pad) / dx
+                        v = (px + pad) / dx
+                        s0 = ti.max(s0, ti.min(u, v))
+                        s1 = ti.min(s1, ti.max(u, v))
+                    if s0 <= s1:
+                        y0 = ay + s0 * dy
+                        y1 = ay + s1 * dy
+                        j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - pad), 0.0), ti.i32)
+                        j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + pad), h - 1.0), ti.i32)
+                        for j in range(j0, j1 + 1):
+                            py = j + 0.5 - ay
+                            cross = px * dy - py * dx
+                            if l2 > 0.0 and cross * cross >= band:
+                                continue
+                            s = ti.cast(0.0, ti.f64)
+                            if l2 > 0.0:
+                                s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
+                            ex = px - s * dx
+                            ey = py - s * dy
+                            alpha = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+                            if alpha > 0.0:
+                                c = c0[o]
+                                if per_vertex != 0:
+                                    u = ta + s * span
+                                    c = c0[o] * (1.0 - u) + c1[o] * u
+                                _blend(img, i, j, alpha, c)
+
+
 @ti.func
 def _edge(ux, uy, vx, vy, px, py):
     """Taichi's edge function cross(p - u, v - u), in raster.edge_functions' operation order."""
@@ -291,17 +365,22 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
     A = np.asarray(A, np.float64)
     B = np.asarray(B, np.float64)
     r = np.asarray(radius, np.float64)
+    if vertex_colors is not None:
+        vc = np.asarray(vertex_colors, np.float64)
+        c0, c1 = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1])
+    else:
+        c0 = c1 = np.ascontiguousarray(colors, np.float64)
+    if _one_tile(len(A)):
+        if len(A):
+            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1,
+                            int(vertex_colors is not None))
+        return
     ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
     seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])
     start, items, boxes, tiles_y = bin_boxes(seg.x0, seg.y0, seg.x1, seg.y1, img.shape[:2])
     if not items.size:
         return
     geo = np.ascontiguousarray(np.column_stack([seg.A, seg.D, seg.L2, r, seg.pieces, seg.ta, seg.span]))
-    if vertex_colors is not None:
-        vc = np.asarray(vertex_colors, np.float64)
-        c0, c1 = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1])
-    else:
-        c0 = c1 = np.ascontiguousarray(colors, np.float64)
     _lines(img, start, items, boxes, seg.owner.astype(np.int32), seg.k.astype(np.int32), geo, c0, c1,
            int(vertex_colors is not None), tiles_y)
 

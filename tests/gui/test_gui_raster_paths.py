@@ -60,3 +60,29 @@ def test_tiled_and_one_tile_kernel_drawing_agree(monkeypatch):
         pictures.append(img)
     assert np.array_equal(pictures[0], pictures[1])
     assert np.abs(pictures[0]).max() > 0.1
+
+
+def test_one_tile_segments_without_pieces_match_tiled_pieces(monkeypatch):
+    # on the CPU a segment is drawn column by column (the rows near it, each pixel once) instead of as padded
+    # pieces: the awkward segments (clipped far off the canvas, axis-aligned, zero-length, not finite, wide, per-vertex
+    # colours through the clipping) give bit-identical pictures either way
+    import simgrad as ti
+    from simgrad.gui import render2d
+
+    ti.init(arch=ti.cpu)
+    a = np.array([[-1e6, 10.0], [5.0, -40.0], [10.0, 10.0], [3.0, 3.0], [np.nan, 1.0], [-5.0, -5.0], [20.5, 0.0],
+                  [0.0, 47.5], [63.9, 1.0], [30.0, 20.0], [1e300, 1.0], [-3.0, 25.0]])
+    b = np.array([[1e6, 30.0], [5.0, 90.0], [10.0, 10.0], [60.0, 45.0], [4.0, 4.0], [70.0, 53.0], [20.5, 48.0],
+                  [64.0, 47.5], [-1.0, 46.0], [31.0, 20.5], [2.0, 3.0], [2.0, 25.0]])
+    r = np.array([1.5, 2.0, 3.0, 0.7, 2.0, 9.0, 0.5, 1.0, 4.0, 2.5, 1.0, 1.2])
+    rng = np.random.default_rng(5)
+    vc = rng.random((len(a), 2, 3))
+    pictures = []
+    for one_tile in (False, True):
+        monkeypatch.setattr(render2d, "_one_tile", lambda n, one_tile=one_tile: one_tile)
+        img = np.full((W, H, 3), 0.25, np.float32)
+        render2d.lines(img, a, b, r, vc[:, 0])
+        render2d.lines(img, a[::-1], b[::-1], r[::-1], None, vertex_colors=vc)
+        pictures.append(img)
+    assert np.array_equal(pictures[0], pictures[1])
+    assert (pictures[0] != 0.25).sum() > 1000
