@@ -226,12 +226,26 @@ class NdarrayParam(Param):
 
     def __init__(self, name: str, ann, kernel_name: str):
         super().__init__(name, ann if isinstance(ann, NdarrayType) else NdarrayType(), kernel_name)
+        # a numpy array's key is a function of its dtype and shape (it has no gradient): kept per (dtype, shape),
+        # as working out the element shape and checking it against the annotation costs ~2 us a launch
+        self._numpy_keys: dict = {}
 
     @classmethod
     def accepts(cls, ann) -> bool:
         return isinstance(ann, NdarrayType) or ann is NdarrayType or ann is np.ndarray
 
     def key(self, a, keep: list):
+        if type(a) is np.ndarray:
+            known = self._numpy_keys.get((a.dtype, a.shape))
+            if known is None:
+                known = self._key(a)
+                if len(self._numpy_keys) >= 64:
+                    self._numpy_keys.clear()
+                self._numpy_keys[(a.dtype, a.shape)] = known
+            return known
+        return self._key(a)
+
+    def _key(self, a):
         if not hasattr(a, "dtype") or not hasattr(a, "shape"):
             raise SimgradTypeError(f"kernel {self.kernel_name}: argument '{self.name}' expects an ndarray, got "
                                    f"{type(a).__name__} (Invalid type for argument {self.name}, got {a})")

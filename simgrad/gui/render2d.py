@@ -29,6 +29,10 @@ __all__ = ["TILE", "bin_boxes", "circles", "lines", "triangles"]
 
 TILE = 16
 
+#: one segment's pixels in a column are visited in runs of a multiple of this many (the vector width the
+#: loop vectoriser picks for it with AVX-512)
+RUN = 16
+
 if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to mypy
     _IMG: TypeAlias = Any
     _I1: TypeAlias = Any
@@ -218,12 +222,43 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
                         _blend(img, i, j, a, c)
 
 
+@ti.func
+def _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex):
+    """One pixel of a segment as ``_lines`` shades it, without branches (the loops over a row or column of
+    pixels vectorise): a pixel the segment does not cover is written back as it was."""
+    px = i + 0.5 - ax
+    py = j + 0.5 - ay
+    s = ti.select(l2 > 0.0, ti.min(ti.max((px * dx + py * dy) / ti.select(l2 > 0.0, l2, 1.0), 0.0), 1.0), 0.0)
+    ex = px - s * dx
+    ey = py - s * dy
+    alpha = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+    u = ta + s * span
+    c = ti.select(per_vertex != 0, c0 * (1.0 - u) + c1 * u, c0)
+    _blend(img, i, j, alpha, c)
+
+
+@ti.func
+def _near(p, a, d, pad):
+    """The parameter range [s0, s1] within [0, 1] where a + s d is within ``pad`` of ``p`` (empty: s0 > s1)."""
+    s0 = ti.cast(0.0, ti.f64)
+    s1 = ti.cast(1.0, ti.f64)
+    if d != 0.0:
+        u = (p - pad - a) / d
+        v = (p + pad - a) / d
+        s0 = ti.max(s0, ti.min(u, v))
+        s1 = ti.min(s1, ti.max(u, v))
+    elif ti.abs(p - a) > pad:
+        s1 = -1.0
+    return s0, s1
+
+
 @ti.kernel
 def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, per_vertex: _I32):
     """Every segment in call order on one thread (the CPU's one tile). ``ends`` rows: start x, y, end x, y and
     half-width in pixels. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
-    shades (the same float64 operations, so the same pixels), but without pieces: a column visits only the rows
-    near the part of the segment within ``pad`` of it, each pixel once."""
+    shades (the same float64 operations, so the same pixels), but without pieces: each column of pixels visits
+    only the run of rows near the part of the segment within ``pad`` of it, each pixel once. Runs go along the
+    image's contiguous axis, whatever the segment's direction: a loop across columns did not vectorise."""
     w = ti.cast(img.shape[0], ti.f64)
     h = ti.cast(img.shape[1], ti.f64)
     ti.loop_config(serialize=True)
@@ -255,41 +290,24 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, per_vertex: _I32):
                 dx = dx0 * span
                 dy = dy0 * span
                 l2 = dx * dx + dy * dy
-                band = (r + 1e-6) * (r + 1e-6) * l2
+                ca = c0[o]
+                cb = c1[o]
                 i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - pad), 0.0), ti.i32)
                 i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + pad), w - 1.0), ti.i32)
                 for i in range(i0, i1 + 1):
-                    px = i + 0.5 - ax
-                    # the part of the segment whose x is within pad of the column's centre, then its rows +- pad
-                    s0 = ti.cast(0.0, ti.f64)
-                    s1 = ti.cast(1.0, ti.f64)
-                    if dx != 0.0:
-                        u = (px - pad) / dx
-                        v = (px + pad) / dx
-                        s0 = ti.max(s0, ti.min(u, v))
-                        s1 = ti.min(s1, ti.max(u, v))
+                    s0, s1 = _near(i + 0.5, ax, dx, pad)
                     if s0 <= s1:
                         y0 = ay + s0 * dy
                         y1 = ay + s1 * dy
                         j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - pad), 0.0), ti.i32)
                         j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + pad), h - 1.0), ti.i32)
+                        # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
+                        # written back unchanged), so short runs take the vector loop too
+                        n = (j1 - j0 + RUN) // RUN * RUN
+                        j1 = ti.min(j0 + n - 1, img.shape[1] - 1)
+                        j0 = ti.max(j1 - n + 1, 0)
                         for j in range(j0, j1 + 1):
-                            py = j + 0.5 - ay
-                            cross = px * dy - py * dx
-                            if l2 > 0.0 and cross * cross >= band:
-                                continue
-                            s = ti.cast(0.0, ti.f64)
-                            if l2 > 0.0:
-                                s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
-                            ex = px - s * dx
-                            ey = py - s * dy
-                            alpha = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
-                            if alpha > 0.0:
-                                c = c0[o]
-                                if per_vertex != 0:
-                                    u = ta + s * span
-                                    c = c0[o] * (1.0 - u) + c1[o] * u
-                                _blend(img, i, j, alpha, c)
+                            _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
 
 
 @ti.func
