@@ -243,8 +243,9 @@ def _near(p, a, d, pad):
     s0 = ti.cast(0.0, ti.f64)
     s1 = ti.cast(1.0, ti.f64)
     if d != 0.0:
-        u = (p - pad - a) / d
-        v = (p + pad - a) / d
+        inv = 1.0 / d  # (a reciprocal: the range only bounds the pixels visited, pad leaves a pixel to spare)
+        u = (p - pad - a) * inv
+        v = (p + pad - a) * inv
         s0 = ti.max(s0, ti.min(u, v))
         s1 = ti.min(s1, ti.max(u, v))
     elif ti.abs(p - a) > pad:
