@@ -413,11 +413,13 @@ class _Batch:
     def bounds(self, res):
         """The boxes the batch may draw in (its primitives' boxes padded by a pixel: each, when there are few,
         else their union), None when unknown."""
-        lo, hi = _EXTENT[self.key[0]](*self._arrays())
+        arrays = self._arrays()
+        if len(arrays[0]) > ImageCanvas.MAX_BOXES:  # one box around them all, from per-axis extremes (an (n, 2)
+            lo, hi = _union_extent(self.key[0], *arrays)  # reduction along axis 0 is ~20x slower than two 1-D ones)
+        else:
+            lo, hi = _EXTENT[self.key[0]](*arrays)
         if np.isnan(lo).any() or np.isnan(hi).any():
             return None
-        if len(lo) > ImageCanvas.MAX_BOXES:
-            lo, hi = lo.min(axis=0, keepdims=True), hi.max(axis=0, keepdims=True)
         lo, hi = np.clip(np.floor(lo) - 1, 0, res), np.clip(np.ceil(hi) + 2, 0, res)
         return [(int(a), int(b), int(c), int(d)) for a, c, b, d in np.concatenate([lo, hi], axis=1).tolist()]
 
@@ -566,6 +568,19 @@ class _Rows(_Batch):
 
 
 # Per primitive kind: the (n, 2) lower and upper corners of what its arguments may cover, in pixels.
+def _union_extent(draw, *arrays):
+    """(1, 2) corners around every primitive of a batch (a superset of _EXTENT's union: the largest radius at the
+    extreme centres), NaN when any coordinate is NaN (np.min and np.max propagate it)."""
+    if draw is _triangles:
+        points, pad = arrays[0].reshape(-1, 2), 0.0
+    elif draw is _circles:
+        points, pad = arrays[0], arrays[1].max(initial=0.0)
+    else:
+        points, pad = np.concatenate([arrays[0], arrays[1]]), arrays[2].max(initial=0.0)
+    x, y = points[:, 0], points[:, 1]
+    return np.array([[x.min() - pad, y.min() - pad]]), np.array([[x.max() + pad, y.max() + pad]])
+
+
 _EXTENT = {
     _circles: lambda c, r, rgb: (c - r[:, None], c + r[:, None]),
     _lines: lambda A, B, r, colors: (np.minimum(A, B) - r[:, None], np.maximum(A, B) + r[:, None]),

@@ -38,6 +38,7 @@ if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to m
     _I1: TypeAlias = Any
     _B1: TypeAlias = Any
     _G2: TypeAlias = Any
+    _F1: TypeAlias = Any
     _C1: TypeAlias = Any
     _I32: TypeAlias = Any
 else:
@@ -45,6 +46,7 @@ else:
     _I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     _B1 = ti.types.ndarray(dtype=ti.types.vector(4, ti.i32), ndim=1)
     _G2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+    _F1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
     _C1 = ti.types.ndarray(dtype=ti.types.vector(3, ti.f64), ndim=1)
     _I32 = ti.i32
 
@@ -147,22 +149,23 @@ def _finite(x):
 
 
 @ti.kernel
-def _circles_in_order(img: _IMG, geo: _G2, colors: _C1):
+def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I32):
     """Every circle in call order on one thread, its pixel box computed here as numpy computes it for the
-    tiles (the one-tile case needs no numpy boxes: at 200k circles a frame they cost as much as drawing)."""
+    tiles (the one-tile case needs no numpy boxes: at 200k circles a frame they cost as much as drawing).
+    Circle p takes colour ``colors[p * each]`` (``each`` 0: one colour for all)."""
     w = ti.cast(img.shape[0], ti.f64)
     h = ti.cast(img.shape[1], ti.f64)
     ti.loop_config(serialize=True)
-    for p in range(geo.shape[0]):
-        cx = geo[p, 0]
-        cy = geo[p, 1]
-        r = geo[p, 2]
+    for p in range(centers.shape[0]):
+        cx = centers[p, 0]
+        cy = centers[p, 1]
+        r = radii[p]
         if _finite(cx) and _finite(cy) and _finite(r) and r > 0.0:
             i0 = ti.cast(ti.min(ti.max(ti.ceil(cx - r), 0.0), w), ti.i32)
             i1 = ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32)
             j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
             j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
-            _circle(img, i0, i1, j0, j1, cx, cy, r, colors[p])
+            _circle(img, i0, i1, j0, j1, cx, cy, r, colors[p * each])
 
 
 @ti.kernel
@@ -254,9 +257,10 @@ def _near(p, a, d, pad):
 
 
 @ti.kernel
-def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, per_vertex: _I32):
+def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32):
     """Every segment in call order on one thread (the CPU's one tile). ``ends`` rows: start x, y, end x, y and
-    half-width in pixels. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
+    half-width in pixels; ``colouring`` 2: per-vertex colours ``c0`` to ``c1``, 1: ``c0`` per segment, 0: ``c0``'s
+    one row for all. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
     shades (the same float64 operations, so the same pixels), but without pieces: each column of pixels visits
     only the run of rows near the part of the segment within ``pad`` of it, each pixel once. Runs go along the
     image's contiguous axis, whatever the segment's direction: a loop across columns did not vectorise."""
@@ -291,8 +295,9 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, per_vertex: _I32):
                 dx = dx0 * span
                 dy = dy0 * span
                 l2 = dx * dx + dy * dy
-                ca = c0[o]
-                cb = c1[o]
+                ca = c0[o * ti.min(colouring, 1)]  # colouring 0: one colour for all (c0 has one row)
+                cb = c1[o * ti.min(colouring, 1)]
+                per_vertex = ti.cast(colouring == 2, ti.i32)
                 i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - pad), 0.0), ti.i32)
                 i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + pad), w - 1.0), ti.i32)
                 for i in range(i0, i1 + 1):
@@ -360,6 +365,15 @@ def _triangles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: 
                         _blend(img, i, j, 1.0, c)
 
 
+def _colour_table(colors):
+    """(table, each): one row when every primitive has the colour of a broadcast (n, 3) view (``as_rgb`` of one
+    colour: its 0-stride rows are not copied out), else the colours themselves, and whether to index per item."""
+    colors = np.asarray(colors, np.float64)
+    if len(colors) and colors.strides[0] == 0:
+        return np.ascontiguousarray(colors[:1]), 0
+    return np.ascontiguousarray(colors), 1
+
+
 def circles(img, centers, radii, colors):
     """Draw circles into ``img`` (float32 (W, H, 3), C-contiguous): ``centers`` (n, 2) and ``radii`` (n,) in
     pixels, ``colors`` (n, 3) float RGB."""
@@ -367,8 +381,8 @@ def circles(img, centers, radii, colors):
     r = np.asarray(radii, np.float64)
     if _one_tile(len(c)):
         if len(c):
-            _circles_in_order(img, np.ascontiguousarray(np.column_stack([c, r])),
-                              np.ascontiguousarray(colors, np.float64))
+            table, each = _colour_table(colors)
+            _circles_in_order(img, np.ascontiguousarray(c), np.ascontiguousarray(r), table, each)
         return
     ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
     lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
@@ -387,12 +401,15 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
     if vertex_colors is not None:
         vc = np.asarray(vertex_colors, np.float64)
         c0, c1 = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1])
+    elif _one_tile(len(A)):
+        c0, each = _colour_table(colors)
+        c1 = c0
     else:
         c0 = c1 = np.ascontiguousarray(colors, np.float64)
     if _one_tile(len(A)):
         if len(A):
-            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1,
-                            int(vertex_colors is not None))
+            mode = 2 if vertex_colors is not None else each  # 2: per-vertex colours, 1: one each, 0: one for all
+            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1, mode)
         return
     ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
     seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])

@@ -83,6 +83,8 @@ def test_one_tile_segments_without_pieces_match_tiled_pieces(monkeypatch):
         img = np.full((W, H, 3), 0.25, np.float32)
         render2d.lines(img, a, b, r, vc[:, 0])
         render2d.lines(img, a[::-1], b[::-1], r[::-1], None, vertex_colors=vc)
+        render2d.lines(img, a, b, r * 0.5, np.broadcast_to([0.9, 0.1, 0.5], (len(a), 3)))  # one colour for all
+        render2d.circles(img, a, r, np.broadcast_to([0.2, 0.8, 0.4], (len(a), 3)))
         pictures.append(img)
     assert np.array_equal(pictures[0], pictures[1])
     assert (pictures[0] != 0.25).sum() > 1000
