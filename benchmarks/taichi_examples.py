@@ -69,6 +69,18 @@ class _State:
     frame_s: list = []  # per shown frame: the program's work since the last show() plus the framework's show()
     last_show = None  # real clock when the last show() returned
 
+    @classmethod
+    def keep_image(cls, img):
+        """Copy the shown picture into one float32 buffer kept across frames: a fresh 4 MB array per frame (and
+        freeing the last) made the next frame's Python and numpy work up to 7x slower in a framework that
+        allocates as it draws (glibc returning and faulting back pages), outside what the program itself does."""
+        import numpy as np
+
+        img = np.asarray(img)
+        if cls.image is None or cls.image.shape != img.shape:
+            cls.image = np.empty(img.shape, np.float32)
+        np.copyto(cls.image, img, casting="unsafe")
+
 
 def _clock_module():
     """A copy of ``time`` whose clocks advance 1/60 s per shown frame (and 1 us per call, so deltas are > 0)."""
@@ -200,8 +212,7 @@ def _headless(ti, cache_dir):
         def show(self, file=None):
             def capture():
                 try:
-                    _State.image = (_fast_gui_image(self) if _is_fast(self)
-                                    else np.array(self.get_image(), np.float32))
+                    _State.keep_image(_fast_gui_image(self) if _is_fast(self) else self.get_image())
                 except Exception as e:  # noqa: BLE001 - recorded, not fatal
                     print(f"@@harness: get_image failed: {e!r}", file=sys.stderr)
 
@@ -248,7 +259,7 @@ def _headless(ti, cache_dir):
         def show(self):
             def capture():
                 try:
-                    _State.image = np.array(self.get_image_buffer_as_numpy(), dtype=np.float32, copy=True)
+                    _State.keep_image(self.get_image_buffer_as_numpy())
                 except Exception as e:  # noqa: BLE001
                     print(f"@@harness: get_image_buffer_as_numpy failed: {e!r}", file=sys.stderr)
 

@@ -130,3 +130,16 @@ def test_a_few_circles_blend_as_the_kernel_blends():
     np.testing.assert_array_equal(few, kernel)
     assert np.nanmax(np.abs(few - general)) < 1e-6
     assert np.abs(few - base)[~np.isnan(base)].max() > 0.5
+
+
+def test_get_image_writes_one_buffer_again_as_taichi_does():
+    # taichi 1.7.4's GUI.get_image copies the canvas into its one `img` buffer and returns it: a later call
+    # overwrites what an earlier one returned (no allocation per frame)
+    gui = new_gui()
+    first = gui.get_image()
+    assert (first[..., :3] == 0).all() and (first[..., 3] == 1).all()
+    gui.circle((0.5, 0.5), 0xFFFFFF, 5)
+    second = gui.get_image()
+    assert second is first and first[W // 2, H // 2, 0] == 1.0
+    first[..., 3] = 0.0  # the caller's writes to the buffer do not stick
+    assert (gui.get_image()[..., 3] == 1).all()
