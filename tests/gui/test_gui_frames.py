@@ -143,3 +143,25 @@ def test_get_image_writes_one_buffer_again_as_taichi_does():
     assert second is first and first[W // 2, H // 2, 0] == 1.0
     first[..., 3] = 0.0  # the caller's writes to the buffer do not stick
     assert (gui.get_image()[..., 3] == 1).all()
+
+
+def test_grey_set_image_fills_every_channel_with_the_value(raster_path):
+    # a grey float32 image (a field's or numpy's) fills each pixel's three channels with its value, exactly:
+    # NaN, infinities, negatives and values past 1 included (the kernel once a program exists, numpy before)
+    import simgrad as ti
+
+    rng = np.random.default_rng(4)
+    g = (rng.random((W, H)) * 3 - 1).astype(np.float32)
+    g[1, 2], g[3, 4], g[5, 6] = np.nan, np.inf, -np.inf
+    sources = [g, g.astype(np.float64)]
+    if raster_path == "kernels":
+        f = ti.field(ti.f32, shape=(W, H))
+        f.from_numpy(g)
+        sources.append(f)
+    for source in sources:
+        gui = new_gui(0x808080)
+        gui.circle((0.5, 0.5), 0xFF0000, 4)
+        gui.set_image(source)
+        out = gui.get_image()[..., :3]
+        for c in range(3):
+            np.testing.assert_array_equal(out[..., c], g)
