@@ -78,7 +78,7 @@ def timed(args, draw, show, label, results, note):
         show()
         times.append(time.perf_counter() - t0)
     ms = np.array(times) * 1e3
-    results[label] = {"median_ms": round(float(np.median(ms)), 1), "best_ms": round(float(ms.min()), 1)}
+    results[label] = {"median_ms": round(float(np.median(ms)), 3), "best_ms": round(float(ms.min()), 3)}
     print(f"{label:18s} median {np.median(ms):6.1f} ms   best {ms.min():6.1f} ms   ({args.frames} frames, "
           f"{args.res[0]}x{args.res[1]}, {note})", flush=True)
 
