@@ -131,7 +131,7 @@ class SparseMatrix:
         return self
 
     def _scale(self, k):
-        return SparseMatrix._wrap((self.matrix * self.dtype.np.type(k)).astype(self.dtype.np), self._format)
+        return SparseMatrix._wrap((self.matrix * self.dtype.np.type(k)).astype(self.dtype.np, copy=False), self._format)
 
     def __mul__(self, other):
         """A number times the matrix, or the elementwise (Hadamard) product with another SparseMatrix."""

@@ -304,6 +304,29 @@ def test_llt_reads_the_lower_triangle():
         np.testing.assert_allclose(s.solve(rhs), np.linalg.solve(ref, rhs))
 
 
+def test_the_symmetric_matrix_of_a_lower_triangle_is_scipys_tril_sum():
+    # LLT/LDLT factorise the matrix tril(a) + tril(a, -1).T (Eigen reads the lower triangle only); it is built
+    # from one COO pass: the same structure and values, explicit zeros and a non-symmetric upper part included
+    import scipy.sparse as sp
+
+    from simgrad.linalg.sparse_solver import _symmetric_from_lower
+
+    rng = np.random.default_rng(6)
+    for trial in range(60):
+        n = int(rng.integers(1, 30))
+        a = sp.random(n, n, density=rng.random(), random_state=trial, format="csr", dtype=np.float32)
+        if trial % 3 == 0:
+            a.data[::3] = 0.0
+        want = (sp.tril(a, format="csc") + sp.tril(a, k=-1, format="csc").T).tocsc()
+        got = _symmetric_from_lower(sp, a)
+        want.sort_indices()
+        got.sort_indices()
+        assert got.dtype == want.dtype and got.shape == want.shape
+        np.testing.assert_array_equal(got.indptr, want.indptr)
+        np.testing.assert_array_equal(got.indices, want.indices)
+        np.testing.assert_array_equal(got.data, want.data)
+
+
 def test_sparse_cg_matches_numpy():
     a = _laplacian_dense(6)
     A = _from_dense(a)
