@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from simgrad.ir import ops as O
 from simgrad.ir.fieldref import FieldRef
-from simgrad.ir.nodes import Stmt, walk
+from simgrad.ir.nodes import Block, Stmt, walk
 from simgrad.ir.ops import Op
 
 _ALWAYS = O.PURE | {Op.LOCAL_LOAD, Op.ALLOCA}
@@ -54,7 +54,7 @@ def in_bounds(ptr: Stmt) -> bool:
 def value_range(s: Stmt, depth: int = 0) -> tuple[int, int] | None:
     """[lo, hi] that the integer value of s lies in, when the IR shows it: constants, the index of a loop
     with constant bounds, and raw digits, casts, sums and differences of those; None otherwise."""
-    if depth > 16 or not s.type.is_int:
+    if depth > 16 or s.type is None or not s.type.is_int:
         return None
     if s.op is Op.LOCAL_LOAD:
         v = _stored_value(s)
@@ -92,7 +92,7 @@ def _stored_value(load: Stmt) -> Stmt | None:
     load (a ti.func's parameter, a name assigned once): else None."""
     a = load.operands[0]
     home = a.block
-    if a.op is not Op.ALLOCA or home is None:
+    if a.op is not Op.ALLOCA or not isinstance(home, Block):
         return None
     writes = [x for x in walk(home) if x is not load and a in x.operands and x.op is not Op.LOCAL_LOAD]
     if len(writes) != 1 or writes[0].op is not Op.LOCAL_STORE or writes[0].block is not home:
