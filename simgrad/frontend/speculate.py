@@ -89,7 +89,8 @@ def value_range(s: Stmt, depth: int = 0) -> tuple[int, int] | None:
 
 def _stored_value(load: Stmt) -> Stmt | None:
     """The value a local holds at `load` when it is written once, in the block that declares it, before the
-    load (a ti.func's parameter, a name assigned once): else None."""
+    load, and the load is in no loop nested in that block (a ti.func's parameter, a name assigned once): else
+    None. A write after the load can then reach it only through the block's start, past that one write."""
     a = load.operands[0]
     home = a.block
     if a.op is not Op.ALLOCA or not isinstance(home, Block):
@@ -99,8 +100,8 @@ def _stored_value(load: Stmt) -> Stmt | None:
         return None
     x = load
     while x.block is not home:  # the load's statement in the declaring block
-        if x.block is None or x.block.parent is None:
-            return None
+        if x.block is None or x.block.parent is None or x.block.parent.op in (Op.RANGE_FOR, Op.WHILE):
+            return None  # inside a loop of the block, a write after the load would reach it next time round
         x = x.block.parent
     return writes[0].operands[1] if home.stmts.index(writes[0]) < home.stmts.index(x) else None
 

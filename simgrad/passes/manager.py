@@ -39,8 +39,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
     # loop-invariant index arithmetic out of parallel loops, then merged where it became common
     steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
-    # quant fields: accesses become integer IR on their physical cells (compare-and-swap loops for writes)
     steps.append(("store_select", stores.store_select))  # `if c: x[p] = v` after a store to x[p]: a select
+    # quant fields: accesses become integer IR on their physical cells (compare-and-swap loops for writes)
     steps.append(("quant", quant.expand_quant))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)
     steps.append(("parallel_strategy", partial(parallel_strategy.parallel_strategy, debug=debug)))

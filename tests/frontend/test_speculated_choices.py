@@ -262,3 +262,46 @@ def test_gradients_through_selected_choices_match_finite_differences():
         e[k] = h
         assert gx[k] == pytest.approx((value(xs + e, ys) - value(xs - e, ys)) / (2 * h), rel=1e-6, abs=1e-8)
         assert gy[k] == pytest.approx((value(xs, ys + e) - value(xs, ys - e)) / (2 * h), rel=1e-6, abs=1e-8)
+
+
+def test_local_index_written_later_in_a_loop_stays_guarded():
+    """`j` is written once before the loop when the choice is lowered, but again after it in the loop: its
+    value at the load is not 0, so x[j] may leave the field (debug mode would report x[4])."""
+    ti.init(arch=ti.cpu, debug=True)
+    n = 4
+    x = ti.field(ti.f32, shape=n)
+    out = ti.field(ti.f32, shape=())
+
+    @ti.kernel
+    def run():
+        j = 0
+        ti.loop_config(serialize=True)
+        for _k in range(10):
+            out[None] += j < n and x[j]
+            j = j + 1
+
+    x.from_numpy(np.array([1, 2, 3, 4], np.float32))
+    run()
+    assert out[None] == 10
+
+
+def test_ti_func_parameter_index_is_known():
+    """A ti.func's parameter is a local written once where the call is inlined: its range is its argument's."""
+    ti.init(arch=ti.cpu)
+    n = 6
+    x = ti.field(ti.f32, shape=n)
+    out = ti.field(ti.f32, shape=n)
+
+    @ti.func
+    def positive(i):
+        return i > 1 and x[i] > 0
+
+    @ti.kernel
+    def run():
+        for i in x:
+            out[i] = positive(i)
+
+    x.from_numpy(np.array([1, -1, 2, -2, 3, 0], np.float32))
+    run()
+    np.testing.assert_array_equal(out.to_numpy(), [0, 0, 1, 0, 1, 0])
+    assert _ifs(run) == 0
