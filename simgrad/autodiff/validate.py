@@ -73,7 +73,7 @@ def in_place_targets(kernel: Kernel) -> list:
     loaded: set = set()  # elements read so far, in program order
     out: dict = {}
     for s in walk(kernel.body):
-        if s.op is Op.GLOBAL_LOAD:
+        if s.op is Op.GLOBAL_LOAD and not s.attrs.get("own_store"):  # not passes/store_select.py's re-read
             loaded.add(_element(s.operands[0]))
         elif _writes_global(s) and _element(s.operands[0]) in loaded:  # read, then overwritten: in place
             target = s.operands[0].attrs["target"]

@@ -4,6 +4,7 @@ offset in the IR; what is left here is the base the offset applies to, and the d
 from __future__ import annotations
 
 from simgrad import dtypes as dt
+from simgrad.codegen.alias import dense_place, field_end
 from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Stmt
 from simgrad.ir.ops import Op
@@ -52,6 +53,8 @@ def lower_global_ptr(gen, f, s) -> str:
         if private is not None:  # its root points before the copy: no inbounds
             f.emit(f"{p} = getelementptr i8, ptr {private}, i64 {off}")
         else:
+            if dense_place(s) is not None:
+                f.reaches(target.layout[0], field_end(target))
             f.emit(f"{p} = getelementptr inbounds i8, ptr {f.root(target.layout[0])}, i64 {off}")
     else:
         f.emit(f"{p} = getelementptr inbounds i8, ptr {f.array_base(target)}, i64 {off}")

@@ -17,6 +17,7 @@ from simgrad import dtypes as dt
 from simgrad.codegen import arith
 from simgrad.codegen.access import lower_check_index as check_index
 from simgrad.codegen.access import lower_global_ptr as global_address
+from simgrad.codegen.alias import MemoryFacts, root_facts
 from simgrad.codegen.sparse import lower_sparse_action, lower_sparse_cell, lower_tree_root
 from simgrad.ir.nodes import Block, Kernel, Stmt
 from simgrad.ir.ops import OPS, Op
@@ -48,6 +49,7 @@ class ModuleText:
         self.decls: set[str] = set()
         self.globals: list[str] = []
         self.functions: list[str] = []
+        self.facts = MemoryFacts()  # field memory's alias scopes (codegen/alias.py)
 
     def declare(self, text: str) -> None:
         self.decls.add(text)
@@ -60,7 +62,8 @@ class ModuleText:
         return name
 
     def text(self) -> str:
-        return "\n".join(sorted(self.decls) + self.globals + self.functions + [_RUNTIME_HELPERS]) + "\n"
+        return "\n".join(sorted(self.decls) + self.globals + self.facts.globals() + self.functions
+                         + [_RUNTIME_HELPERS]) + "\n"
 
 
 _RUNTIME_HELPERS = r"""
@@ -121,6 +124,7 @@ class FunctionText:
         self.counter = 0
         self.loops: list[tuple[str, str]] = []  # (break label, continue label)
         self.roots: dict[int, str] = {}
+        self.root_ends: dict[int, tuple[int, int]] = {}  # tree -> (its root's prologue line, bytes known there)
         self.array_bases: dict[int, str] = {}
         self.array_shapes: dict[tuple[int, int], str] = {}
         self.tid = "%tid" if in_task else "0"
@@ -199,7 +203,17 @@ class FunctionText:
             self.prologue.append(f"  {p} = getelementptr ptr, ptr {table}, i64 {tree_id}")
             self.prologue.append(f"  {v} = load ptr, ptr {p}, !invariant.load !0")
             self.roots[tree_id] = v
+            self.root_ends[tree_id] = (len(self.prologue) - 1, 0)
         return self.roots[tree_id]
+
+    def reaches(self, tree_id: int, nbytes: int) -> None:
+        """A field of the tree reaches nbytes into its buffer: its root's load says so (codegen/alias.py)."""
+        self.root(tree_id)
+        line, known = self.root_ends[tree_id]
+        if nbytes > known:
+            text = self.prologue[line].split(", !invariant.load")[0]
+            self.prologue[line] = f"{text}, !invariant.load !0{root_facts(nbytes)}"
+            self.root_ends[tree_id] = (line, nbytes)
 
     def array_base(self, arg) -> str:
         if arg.slot not in self.array_bases:
@@ -599,13 +613,15 @@ def lower_check_index(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 
 def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("g")
-    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {f.v(s.operands[0])}")
+    ty = llvm_type(s.vtype)
+    f.emit(f"{r} = load {ty}, ptr {f.v(s.operands[0])}{g.module.facts.access(s.operands[0], ty)}")
     f.names[s] = r
 
 
 def lower_global_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     p, v = s.operands
-    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {f.v(p)}")
+    ty = llvm_type(v.type)
+    f.emit(f"store {ty} {f.v(v)}, ptr {f.v(p)}{g.module.facts.access(p, ty)}")
 
 
 def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -636,10 +652,11 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.fm))
         f.emit(f"store {ty} {n}, ptr {acc}")
     elif form == PLAIN:  # serial code, a local of the iteration, an owned element or a private copy
-        f.emit(f"{r} = load {ty}, ptr {f.v(p)}")
+        md = g.module.facts.access(p, ty)
+        f.emit(f"{r} = load {ty}, ptr {f.v(p)}{md}")
         n = f.tmp("new")
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.float_flags(s)))
-        f.emit(f"store {ty} {n}, ptr {f.v(p)}")
+        f.emit(f"store {ty} {n}, ptr {f.v(p)}{md}")
     elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
         r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))
     elif t is dt.u1:  # LLVM has no atomics on i1: update the byte that holds it (0 or 1 stays 0 or 1)

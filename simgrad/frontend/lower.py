@@ -22,10 +22,10 @@ from simgrad.errors import (
 from simgrad.frontend.frames import Frame
 from simgrad.frontend.refs import LOCAL_REFS, DynamicElementRef, GlobalRef, MatrixRef, StructRef, VarRef
 from simgrad.frontend.source import FunctionSource
+from simgrad.frontend.speculate import speculatable
 from simgrad.ir import context
-from simgrad.ir import ops as O
 from simgrad.ir.builder import Builder
-from simgrad.ir.nodes import Kernel, walk
+from simgrad.ir.nodes import Kernel
 from simgrad.ir.ops import Op
 from simgrad.lang import operators
 from simgrad.lang.expr import Expr
@@ -694,8 +694,9 @@ class KernelLowering:
 
     def choose(self, cond: Expr, then_fn, else_fn):
         """A value chosen at run time (ternary, and/or), each side evaluated in its own branch. Sides
-        without memory reads or effects are hoisted and picked by a select (one differentiable op); a
-        side that reads memory stays guarded, as in Taichi (`x[i] if i < n else 0` never reads x[n])."""
+        that may run unchosen (no effects, loads only of elements known in bounds: frontend/speculate.py)
+        are hoisted and picked by a select (one differentiable op, no branch for LLVM to if-convert); any
+        other side stays guarded, as in Taichi (`x[i] if i < n else 0` never reads x[n])."""
         parent = self.builder.block
         c = operators.ne(cond, 0)
         stmt = self.builder.emit(Op.IF, None, (c.stmt,), nblocks=2)
@@ -704,7 +705,7 @@ class KernelLowering:
             with self.dynamic(block):
                 values.append(fn())
         at = parent.stmts.index(stmt)
-        if all(x.op in _SPECULATABLE for block in stmt.blocks for x in walk(block)):
+        if speculatable(stmt.blocks):
             hoisted = [x for block in stmt.blocks for x in block.stmts]
             for x in hoisted:
                 x.block = parent
@@ -923,9 +924,6 @@ class VarList(list):
 
     def __contains__(self, item):
         return item in self.values()
-
-
-_SPECULATABLE = O.PURE | {Op.LOCAL_LOAD}
 
 
 def _choice_type(a, b) -> dt.DataType:

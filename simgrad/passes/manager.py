@@ -29,6 +29,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold."""
     from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
     from simgrad.passes import lanes as simt
+    from simgrad.passes import store_select as stores
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -38,6 +39,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
     # loop-invariant index arithmetic out of parallel loops, then merged where it became common
     steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
+    steps.append(("store_select", stores.store_select))  # `if c: x[p] = v` after a store to x[p]: a select
     # quant fields: accesses become integer IR on their physical cells (compare-and-swap loops for writes)
     steps.append(("quant", quant.expand_quant))
     # how each parallel loop and atomic update runs (plain, per-thread sum, private copy, paired CAS, atomic)

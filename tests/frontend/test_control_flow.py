@@ -503,7 +503,8 @@ def test_runtime_index_into_local_vectors():
 
 
 def test_guarded_ternary_and_bool_ops_are_differentiable():
-    """A ternary whose sides read memory is lowered to a guarded branch (not a select): gradients flow."""
+    """A ternary or bool op whose sides read memory (a branch, or a select when the loads are in bounds:
+    frontend/speculate.py): gradients flow."""
     n = 6
     x = ti.field(ti.f32, shape=n, needs_grad=True)
     loss = ti.field(ti.f32, shape=(), needs_grad=True)

@@ -1,4 +1,8 @@
 !0 = !{}
+!900000 = distinct !{!900000, !"simgrad fields"}
+!900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
+!900003 = !{!900002}
+!900004 = !{}
 define internal void @sg_kernel_task1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
   %ctx = load ptr, ptr %clo
@@ -9,7 +13,7 @@ entry:
   %cp.16 = getelementptr i64, ptr %ctx, i64 0
   %cv.17 = load ptr, ptr %cp.16
   %rp.18 = getelementptr ptr, ptr %cv.17, i64 0
-  %root.19 = load ptr, ptr %rp.18, !invariant.load !0
+  %root.19 = load ptr, ptr %rp.18, !invariant.load !0, !dereferenceable !{i64 64}, !align !{i64 64}
   br label %pre.5
 pre.5:
   br label %head.6
@@ -23,7 +27,7 @@ body.7:
   %ptr.15 = getelementptr inbounds i8, ptr %root.19, i64 %v.14
   %cv.20 = sitofp i32 %i.10 to float
   %v.21 = fmul nsz float %capv.2, %cv.20
-  store float %v.21, ptr %ptr.15
+  store float %v.21, ptr %ptr.15, !alias.scope !900003, !noalias !900004
   br label %latch.8
 latch.8:
   %inext.11 = add i32 %i.10, 1

@@ -1,5 +1,15 @@
 declare noalias ptr @calloc(i64, i64)
 !0 = !{}
+!900000 = distinct !{!900000, !"simgrad fields"}
+!900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
+!900003 = !{!900002}
+!900004 = !{!900005, !900008}
+!900005 = distinct !{!900005, !900000, !"tree 0 byte 4"}
+!900006 = !{!900005}
+!900007 = !{!900002, !900008}
+!900008 = distinct !{!900008, !900000, !"tree 1 byte 0"}
+!900009 = !{!900008}
+!900010 = !{!900002, !900005}
 define internal void @sg_kernel_task1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
   %ctx = load ptr, ptr %clo
@@ -10,15 +20,15 @@ entry:
   %cp.16 = getelementptr i64, ptr %ctx, i64 0
   %cv.17 = load ptr, ptr %cp.16
   %rp.18 = getelementptr ptr, ptr %cv.17, i64 0
-  %root.19 = load ptr, ptr %rp.18, !invariant.load !0
+  %root.19 = load ptr, ptr %rp.18, !invariant.load !0, !dereferenceable !{i64 60}, !align !{i64 64}
   %cp.41 = getelementptr i64, ptr %ctx, i64 0
   %cv.42 = load ptr, ptr %cp.41
   %rp.43 = getelementptr ptr, ptr %cv.42, i64 1
-  %root.44 = load ptr, ptr %rp.43, !invariant.load !0
+  %root.44 = load ptr, ptr %rp.43, !invariant.load !0, !dereferenceable !{i64 32}, !align !{i64 64}
   %cp.47 = getelementptr i64, ptr %ctx, i64 0
   %cv.48 = load ptr, ptr %cp.47
   %rp.49 = getelementptr ptr, ptr %cv.48, i64 2
-  %root.50 = load ptr, ptr %rp.49, !invariant.load !0
+  %root.50 = load ptr, ptr %rp.49, !invariant.load !0, !dereferenceable !{i64 4}, !align !{i64 64}
   br label %pre.4
 pre.4:
   br label %head.5
@@ -94,7 +104,7 @@ entry:
   %cp.44 = getelementptr i64, ptr %ctx, i64 0
   %cv.45 = load ptr, ptr %cp.44
   %rp.46 = getelementptr ptr, ptr %cv.45, i64 2
-  %root.47 = load ptr, ptr %rp.46, !invariant.load !0
+  %root.47 = load ptr, ptr %rp.46, !invariant.load !0, !dereferenceable !{i64 4}, !align !{i64 64}
   br label %pre.18
 pre.18:
   br label %head.19
@@ -107,22 +117,22 @@ body.20:
   %cv.27 = sext i32 %v.26 to i64
   %v.28 = mul nuw nsw i64 %cv.27, 8
   %ptr.29 = getelementptr i8, ptr %pr.6, i64 %v.28
-  %old.30 = load float, ptr %ptr.29
+  %old.30 = load float, ptr %ptr.29, !alias.scope !900003, !noalias !900004
   %new.31 = fadd nsz float %old.30, 0x3FF0000000000000
-  store float %new.31, ptr %ptr.29
+  store float %new.31, ptr %ptr.29, !alias.scope !900003, !noalias !900004
   %cv.32 = sext i32 %v.26 to i64
   %v.33 = mul nuw nsw i64 %cv.32, 8
   %v.34 = add nuw nsw i64 4, %v.33
   %ptr.35 = getelementptr i8, ptr %pr.6, i64 %v.34
-  %old.36 = load float, ptr %ptr.35
+  %old.36 = load float, ptr %ptr.35, !alias.scope !900006, !noalias !900007
   %new.37 = fadd nsz float %old.36, 0x4000000000000000
-  store float %new.37, ptr %ptr.35
+  store float %new.37, ptr %ptr.35, !alias.scope !900006, !noalias !900007
   %cv.38 = sext i32 %v.26 to i64
   %v.39 = mul nuw nsw i64 %cv.38, 4
   %ptr.40 = getelementptr i8, ptr %pr.13, i64 %v.39
-  %old.41 = load float, ptr %ptr.40
+  %old.41 = load float, ptr %ptr.40, !alias.scope !900009, !noalias !900010
   %new.42 = fadd nsz float %old.41, 0x3FF0000000000000
-  store float %new.42, ptr %ptr.40
+  store float %new.42, ptr %ptr.40, !alias.scope !900009, !noalias !900010
   %ptr.43 = getelementptr inbounds i8, ptr %root.47, i64 0
   %old.48 = load float, ptr %red.17
   %new.49 = fadd nsz float %old.48, 0x3FF0000000000000
