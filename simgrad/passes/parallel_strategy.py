@@ -49,8 +49,7 @@ class LoopStrategy:
         if self.reductions:
             parts.append("reduce=[" + ", ".join(f"%{place.id}" for place, _ in self.reductions.values()) + "]")
         if self.regions:
-            parts.append("private=[" + ", ".join(f"tree {r.tree_id} [{r.lo}, {r.hi}) prefix {len(r.prefix)}"
-                                                 for r in self.regions) + f"], weight={self.weight}")
+            parts.append("private=[" + ", ".join(r.ir_name() for r in self.regions) + f"], weight={self.weight}")
         return "tasks(" + ", ".join(parts) + ")"
 
 
