@@ -108,7 +108,7 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(alloc)
     bufs = []
     got = "true"
-    for k, (r, n) in enumerate(zip(regions, sizes)):
+    for k, n in enumerate(sizes):
         buf, slot, nonnull, all_ok = _copies(f, nthreads, n), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
         f.emit(f"store ptr {buf}, ptr {slot}")

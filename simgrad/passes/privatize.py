@@ -121,15 +121,15 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
     A field the loop also reads or stores qualifies only where those accesses provably hit another
     slice; an ndarray component only when the loop neither reads nor stores it. Other components of the
     array may be read, stored or updated atomically: their partials stay zero, and zero partials are left
-    alone by the final sum. `shared`: ids of targets some iteration updates at elements it does not own (the others need no
-    atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices. A copy
+    alone by the final sum. `shared`: ids of targets some iteration updates at elements it does not own (the
+    others need no atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices. A copy
     may span bytes of fields that are not privatised (interleaved layouts): they stay zero in it, and
     the final sum leaves an element alone where the copy holds zero. In debug mode slices are off (an
     out-of-bounds slice index must be reported, not summed into)."""
     adds: dict[int, list] = {}
     others: dict[int, list] = {}
     _updates(loop.blocks[0], uses, 1, adds, others)
-    groups: dict[tuple, Region] = {}
+    groups: dict[tuple, Region] = {}  # keyed by (tree, dtype, slice key, strides) or ("array", slot, dtype)
     weight = 0
     for tid, updates in adds.items():
         f = updates[0][0].operands[0].attrs["target"]
@@ -141,10 +141,10 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
         if isinstance(f, ArrayRef):
             if others.get(tid):
                 continue  # the loop reads (or stores) the component it would add into a copy of
-            gkey = ("array", f.slot, f.dtype.name)
-            r = groups.get(gkey)
+            akey = ("array", f.slot, f.dtype.name)
+            r = groups.get(akey)
             if r is None:
-                r = groups[gkey] = Region(-1, 0, 0, f.dtype, (), array=f)
+                r = groups[akey] = Region(-1, 0, 0, f.dtype, (), array=f)
             for a, times in updates:
                 r.keys.add((tid, access_key(a.operands[0], 0)))
                 weight += times
