@@ -26,7 +26,7 @@ from simgrad import dtypes as dt
 from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import Op
-from simgrad.passes.digits import digit_chain, digit_of
+from simgrad.passes.digits import invariant_chain, invariant_digit
 from simgrad.passes.privatize import Region, access_key, private_regions
 
 PLAIN, REDUCE, PAIR, ATOMIC, PRIVATE = "plain", "reduce", "pair", "atomic", "private|"
@@ -175,26 +175,28 @@ def _varying(ptr: Stmt, loop: Stmt, inside: set) -> tuple:
     return tuple(out)
 
 
-def _digit_base(o: Stmt, loop: Stmt) -> Stmt:
+def _digit_base(o: Stmt, loop: Stmt, inside: set) -> Stmt:
     """The digit `(index // d) % m` an index is a constant away from (`i + 1` in `for i, j in ti.ndrange((1,
     n - 1), ...)`), else the index itself: a constant shift keeps a chain of digits injective."""
     base, _c = offset_form(o)
-    return base if base is not None and digit_of(base, loop) is not None else o
+    return base if base is not None and invariant_digit(base, loop, inside) is not None else o
 
 
 def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
     """True when the element's indices determine the loop index: apart from loop-invariant values they
-    are digits `(index // d) % m` of it, each plus a constant, that chain from d = 1 up to a digit without
-    modulus; or, in a struct-for over sparse cells (loop attrs `cells`), they are the cell's own indices,
-    every one."""
+    are digits `(index // d) % m` of it (d and m constants or values from before the loop: an ndarray's
+    run-time extents in `for i, j in arr`), each plus a constant, that chain from d = 1 up to a digit without
+    modulus; or, in a struct-for over sparse cells (loop attrs `cells`), they are the cell's own indices, every
+    one."""
     ncells = loop.attrs.get("cells")
     if ncells and len(ptr.operands) == ncells and all(
             id(o) in inside and o.attrs.get("cell_index") == k for k, o in enumerate(ptr.operands)):
         return True
-    idx = [_digit_base(o, loop) for o in ptr.operands]
-    if any(o.op is not Op.CONST and (o is loop or id(o) in inside) and digit_of(o, loop) is None for o in idx):
+    idx = [_digit_base(o, loop, inside) for o in ptr.operands]
+    if any(o.op is not Op.CONST and (o is loop or id(o) in inside) and invariant_digit(o, loop, inside) is None
+           for o in idx):
         return False  # an index computed in the iteration some other way
-    return digit_chain(idx, loop) is not None
+    return invariant_chain(idx, loop, inside)
 
 
 def _reductions(loop: Stmt, inside: set, uses: dict, debug: bool = False) -> dict:

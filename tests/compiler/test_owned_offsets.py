@@ -65,3 +65,41 @@ def test_two_shifts_of_one_field_stay_atomic_and_exact():
     want[0] = want[n] = 1
     np.testing.assert_array_equal(w.to_numpy(), want)
     assert all(s.attrs["strategy"] != "plain" for s in walk(both.instance(()).ir.body) if s.op is Op.ATOMIC)
+
+
+@pytest.mark.parametrize("shape", [(7, 9), (3, 4, 5)])
+def test_struct_for_over_an_ndarray_owns_its_elements_through_run_time_extents(shape):
+    """`for I in ti.grouped(a)` splits the flat index by the array's run-time extents (`L % n`, `L // n`):
+    a[I] += ... is owned (plain; before, an atomic or a per-thread copy of the whole array), the transposed
+    element too; rows[I[0]] (many iterations per row) and a digit without the rest of its chain are not."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=4)
+    rng = np.random.default_rng(len(shape))
+    start = rng.standard_normal(shape)
+    a = start.copy()
+    t = np.zeros(shape[::-1])
+    rows = np.zeros(shape[0])
+    last = np.zeros(shape[-1])
+
+    @ti.kernel
+    def bump(a: ti.types.ndarray(ndim=len(shape)), t: ti.types.ndarray(ndim=len(shape)),
+             rows: ti.types.ndarray(ndim=1), last: ti.types.ndarray(ndim=1)):
+        for I in ti.grouped(a):
+            a[I] += 2.0 * a[I] + 1.0
+            if ti.static(len(shape) == 2):
+                t[I[1], I[0]] += 1.0
+            else:
+                t[I[2], I[1], I[0]] += 1.0
+            rows[I[0]] += 1.0
+            last[I[len(shape) - 1]] += 1.0
+
+    bump(a, t, rows, last)
+    np.testing.assert_allclose(a, 3 * start + 1, rtol=1e-15)
+    np.testing.assert_array_equal(t, np.ones(shape[::-1]))
+    np.testing.assert_array_equal(rows, np.full(shape[0], np.prod(shape[1:])))
+    np.testing.assert_array_equal(last, np.full(shape[-1], np.prod(shape[:-1])))
+    forms = {}
+    for s in walk(bump.instance((a, t, rows, last)).ir.body):
+        if s.op is Op.ATOMIC:
+            forms.setdefault(s.operands[0].attrs["target"].name, set()).add(s.attrs["strategy"])
+    assert forms["a"] == {"plain"} and forms["t"] == {"plain"}
+    assert "plain" not in forms["rows"] and "plain" not in forms["last"]
