@@ -208,6 +208,18 @@ def _emit_sum_into(f, r: Region, buf: str, nbytes: str, nthreads: str, pfor: str
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {k}")
         f.emit(f"store {ty} {v}, ptr {slot}")
     f.emit(f"call void {pfor}(ptr @{name}, ptr {clo}, i64 0, i64 {count}, i64 {SUM_GRAIN})")
+    # After Ctrl-C the pool hands out no more chunks: the sum runs here whole (the copies persist, so partials left
+    # in them would go into the next launch's results). A part the pool did sum left zeros: summing it again is
+    # a no-op.
+    flag, stopped = f.tmp("pcan"), f.tmp("pcan")
+    f.emit(f"{flag} = load atomic i32, ptr {f.cancel_flag()} monotonic, align 4")
+    f.emit(f"{stopped} = icmp ne i32 {flag}, 0")
+    here, on = f.label("psumhere"), f.label("psumdone")
+    f.emit(f"br i1 {stopped}, label %{here}, label %{on}")
+    f.start_block(here)
+    f.emit(f"call void @{name}(ptr {clo}, i64 0, i64 {count}, i32 0)")
+    f.emit(f"br label %{on}")
+    f.start_block(on)
     f.gen.module.functions.append(_sum_task(name, r.dtype, None if r.array is not None else r.count))
 
 

@@ -233,7 +233,7 @@ entry:
   %rp.32 = getelementptr ptr, ptr %cv.31, i64 1
   %root.33 = load ptr, ptr %rp.32, !invariant.load !0
   %sclo.74 = alloca [4 x i64], align 8
-  %sclo.81 = alloca [4 x i64], align 8
+  %sclo.85 = alloca [4 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
@@ -320,29 +320,43 @@ private.39:
   %sslot.78 = getelementptr i64, ptr %sclo.74, i64 3
   store i64 16, ptr %sslot.78
   call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.74, i64 0, i64 16, i64 8192)
-  %real.80 = getelementptr i8, ptr %root.33, i64 0
-  %real.79 = getelementptr i8, ptr %real.80, i64 0
-  %sslot.82 = getelementptr i64, ptr %sclo.81, i64 0
-  store ptr %priv.68, ptr %sslot.82
-  %sslot.83 = getelementptr i64, ptr %sclo.81, i64 1
-  store ptr %real.79, ptr %sslot.83
-  %sslot.84 = getelementptr i64, ptr %sclo.81, i64 2
-  store i64 %cv.9, ptr %sslot.84
-  %sslot.85 = getelementptr i64, ptr %sclo.81, i64 3
-  store i64 8, ptr %sslot.85
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.81, i64 0, i64 8, i64 8192)
+  %pcan.79 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %pcan.80 = icmp ne i32 %pcan.79, 0
+  br i1 %pcan.80, label %psumhere.81, label %psumdone.82
+psumhere.81:
+  call void @sg_kernel_task1_private_sum0(ptr %sclo.74, i64 0, i64 16, i32 0)
+  br label %psumdone.82
+psumdone.82:
+  %real.84 = getelementptr i8, ptr %root.33, i64 0
+  %real.83 = getelementptr i8, ptr %real.84, i64 0
+  %sslot.86 = getelementptr i64, ptr %sclo.85, i64 0
+  store ptr %priv.68, ptr %sslot.86
+  %sslot.87 = getelementptr i64, ptr %sclo.85, i64 1
+  store ptr %real.83, ptr %sslot.87
+  %sslot.88 = getelementptr i64, ptr %sclo.85, i64 2
+  store i64 %cv.9, ptr %sslot.88
+  %sslot.89 = getelementptr i64, ptr %sclo.85, i64 3
+  store i64 8, ptr %sslot.89
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.85, i64 0, i64 8, i64 8192)
+  %pcan.90 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %pcan.91 = icmp ne i32 %pcan.90, 0
+  br i1 %pcan.91, label %psumhere.92, label %psumdone.93
+psumhere.92:
+  call void @sg_kernel_task1_private_sum1(ptr %sclo.85, i64 0, i64 8, i32 0)
+  br label %psumdone.93
+psumdone.93:
   br label %scatterdone.34
 atomic.37:
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
   br label %scatterdone.34
 scatterdone.34:
-  %cancel.86 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.87 = icmp ne i32 %cancel.86, 0
-  br i1 %cancelled.87, label %stop.88, label %go.89
-stop.88:
+  %cancel.94 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.95 = icmp ne i32 %cancel.94, 0
+  br i1 %cancelled.95, label %stop.96, label %go.97
+stop.96:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.89:
+go.97:
   ret void
 }
 
