@@ -232,3 +232,15 @@ def test_a_component_the_loop_reads_stays_atomic_the_others_are_copied():
                    if s.op is Op.ATOMIC and isinstance(s.operands[0].attrs.get("target"), ArrayRef))
     assert forms == ["atomic", "private|atomic"]
     assert _copies_made(both, (keys, h, seen))
+
+
+def test_debug_mode_checks_the_indices_of_a_privatised_scatter():
+    ti.init(arch=ti.cpu, cpu_max_num_threads=4, debug=True)
+    keys = np.random.default_rng(0).integers(0, 16, 100_000).astype(np.int32)
+    h = np.zeros(16, np.int32)
+    _histogram(keys, h)
+    np.testing.assert_array_equal(h, np.bincount(keys, minlength=16))
+    assert _copies_made(_histogram, (keys, h))
+    keys[5] = 99
+    with pytest.raises(ti.SimgradError, match="index 99 is out of bounds in dimension 0 of ndarray h"):
+        _histogram(keys, h)
