@@ -30,7 +30,8 @@ def lower_check_index(gen, f, s) -> str:
 
 def lower_global_ptr(gen, f, s) -> str:
     """The element's address: its tree's root (or this thread's private copy of the field, codegen/
-    privatize.py) or its ndarray's base, plus the byte offset the IR computed."""
+    privatize.py) or its ndarray's base (or this thread's copy of the array), plus the byte offset the IR
+    computed."""
     if not s.attrs.get("lowered"):
         raise AssertionError(f"internal: {s!r} reached codegen without passes/lower_access.py")
     off = f.v(s.operands[-1])
@@ -57,7 +58,8 @@ def lower_global_ptr(gen, f, s) -> str:
                 f.reaches(target.layout[0], field_end(target))
             f.emit(f"{p} = getelementptr inbounds i8, ptr {f.root(target.layout[0])}, i64 {off}")
     else:
-        f.emit(f"{p} = getelementptr inbounds i8, ptr {f.array_base(target)}, i64 {off}")
+        private = f.private_root_of(s)  # this thread's copy of the whole ndarray, or the array itself
+        f.emit(f"{p} = getelementptr inbounds i8, ptr {private or f.array_base(target)}, i64 {off}")
     return p
 
 

@@ -10,10 +10,10 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
-from simgrad.codegen.privatize import emit_private_launch, emit_runs_alone, slice_shift
+from simgrad.codegen.privatize import emit_private_launch, emit_runs_alone, region_bytes, slice_shift
 from simgrad.ir.nodes import Stmt, walk
 from simgrad.ir.ops import Op
-from simgrad.passes.parallel_strategy import LoopStrategy
+from simgrad.passes.parallel_strategy import PRIVATE, LoopStrategy
 from simgrad.passes.privatize import Region
 from simgrad.runtime import abi
 from simgrad.runtime.jit import NO_SLP
@@ -81,9 +81,14 @@ class CpuCodegen(KernelCodegen):
             return
         pname = f"{tname}_private"
         self._emit_task(s, plan, pname, captured, slots, regions, first_slot=len(captured) + 1)
+        alone_name = pname
+        if _needs_atomics(s, copied=False):  # updates the copies do not take: plain too when on one thread alone
+            alone_name = f"{pname}_serial"
+            self._emit_task(s, plan, alone_name, captured, slots, regions, first_slot=len(captured) + 1,
+                            serial=True)
         nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
         emit_private_launch(f, regions, plan.weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64,
-                            e64, grain)
+                            e64, grain, alone_name)
 
     def _emit_task(self, s: Stmt, plan: LoopStrategy, tname: str, captured: list[Stmt], slots: list[Capture],
                    regions: list[Region], first_slot: int = 0, serial: bool = False) -> None:
@@ -174,10 +179,12 @@ class CpuCodegen(KernelCodegen):
         t.start_block(done)
 
 
-def _needs_atomics(loop: Stmt) -> bool:
+def _needs_atomics(loop: Stmt, copied: bool = True) -> bool:
     """Whether some update of the loop is an atomic read-modify-write across threads (atomic or paired; not the
-    compare-and-swap loops of quant cells, which stay as they are)."""
+    compare-and-swap loops of quant cells, which stay as they are); `copied=False`: not counting the updates of
+    per-thread copies (`private|...`)."""
     return any(x.op is Op.ATOMIC and x.attrs.get("kind") != "cas"
+               and (copied or not x.attrs.get("strategy", "").startswith(PRIVATE))
                and x.attrs.get("strategy", "").split("|")[-1] in ("atomic", "pair") for x in walk(loop.blocks[0]))
 
 
@@ -205,11 +212,15 @@ def _private_root(t: FunctionText, region: Region, slot: int) -> None:
     the fields' usual byte offsets land inside it."""
     q, buf, t64, off, base, root = (t.tmp("pr") for _ in range(6))
     lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
-             f"{t64} = zext i32 %tid to i64", f"{off} = mul i64 {t64}, {region.hi - region.lo}",
-             f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
-    shift = slice_shift(lines, lambda: t.tmp("sh"), t.v, region)
-    neg = t.tmp("pr")
-    lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{root} = getelementptr i8, ptr {base}, i64 {neg}"]
+             f"{t64} = zext i32 %tid to i64"]
+    size = region_bytes(lines, lambda: t.tmp("rb"), t.array_shape, region)
+    lines += [f"{off} = mul i64 {t64}, {size}", f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
+    if region.array is not None:  # the whole array: its offsets land in the copy as they are
+        root = base
+    else:
+        shift = slice_shift(lines, lambda: t.tmp("sh"), t.v, region)
+        neg = t.tmp("pr")
+        lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{root} = getelementptr i8, ptr {base}, i64 {neg}"]
     t.prologue += ["  " + line for line in lines]
     for tid, key in region.keys:
         t.private_roots[(tid, key)] = root

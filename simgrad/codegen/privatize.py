@@ -2,7 +2,8 @@
 
 The generated entry decides at run time from the trip count whether the copies pay off
 (`emit_private_launch`); otherwise the usual atomic task runs. Summing per-thread partials reorders float
-additions, which atomics already leave unordered.
+additions, which atomics already leave unordered. An ndarray's region is sized at launch from its extents
+(`region_bytes`): its copies grow when a larger array comes.
 """
 
 from __future__ import annotations
@@ -32,6 +33,27 @@ def slice_shift(lines: list, tmp, value, region: Region) -> str:
     return total
 
 
+def region_bytes(lines: list, tmp, shape, r: Region) -> str:
+    """The bytes of one copy of the region (i64; an ndarray's from the launch's extents, `shape(arg, dim)` naming
+    one); appends the computation to `lines`."""
+    if r.array is None:
+        return str(r.hi - r.lo)
+    total = str(r.array.num_components * r.dtype.nbytes)
+    for k in range(r.array.ndim):
+        m = tmp()
+        lines.append(f"{m} = mul i64 {total}, {shape(r.array, k)}")
+        total = m
+    return total
+
+
+def _bytes(f, r: Region) -> str:
+    lines: list[str] = []
+    n = region_bytes(lines, lambda: f.tmp("rb"), f.array_shape, r)
+    for line in lines:
+        f.emit(line)
+    return n
+
+
 def emit_runs_alone(f, nthreads: str, begin: str, end: str, grain: int) -> tuple[str, str]:
     """(iterations, i1 whether the pool runs the loop on the calling thread alone): one pool thread, or at most
     a grain of iterations, simgrad_parallel_for's serial path (launches never overlap). Its tasks may then
@@ -45,13 +67,15 @@ def emit_runs_alone(f, nthreads: str, begin: str, end: str, grain: int) -> tuple
 
 
 def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_slot: int, task: str,
-                        private_task: str, pfor: str, nthreads: str, begin: str, end: str, grain: int) -> None:
+                        private_task: str, pfor: str, nthreads: str, begin: str, end: str, grain: int,
+                        alone_task: str) -> None:
     """Caller side: run `private_task` over per-thread zeroed copies of the regions and add them into the
     fields when the loop's updates cost more as atomics than the copies cost to zero and sum (see
     ATOMIC_COST); else run the atomic `task`. When the pool will run the whole loop on this thread (one
     thread, or no more iterations than a grain: simgrad_parallel_for's serial path; launches never overlap),
-    `private_task` runs with the fields themselves as thread 0's copies: plain updates, nothing to sum."""
-    elems = sum(r.count for r in regions)
+    `alone_task` (the private task, or its variant whose other updates are plain too) runs with the fields
+    themselves as thread 0's copies: plain updates, nothing to sum."""
+    sizes = [_bytes(f, r) for r in regions]  # one copy of each region, in bytes
     work, need, big, ok = (f.tmp("pv") for _ in range(4))
     iters, alone = emit_runs_alone(f, nthreads, begin, end, grain)
     direct, decide = f.label("direct"), f.label("decide")
@@ -61,42 +85,31 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
         slot = f.tmp("pslot")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
         f.emit(f"store ptr {_field_slice(f, r)}, ptr {slot}")
-    f.emit(f"call void {pfor}(ptr @{private_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
+    f.emit(f"call void {pfor}(ptr @{alone_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
     done = f.label("scatterdone")
     f.emit(f"br label %{done}")
     f.start_block(decide)
+    elems = _sum_of(f, [_elements(f, r, n) for r, n in zip(regions, sizes)])
     f.emit(f"{work} = mul i64 {iters}, {weight * ATOMIC_COST}")
     f.emit(f"{need} = mul i64 {nthreads}, {elems}")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")  # (several threads here: one took the direct path)
     nbytes, fits = f.tmp("pv"), f.tmp("pv")
-    f.emit(f"{nbytes} = mul i64 {nthreads}, {sum(r.hi - r.lo for r in regions)}")
+    f.emit(f"{nbytes} = mul i64 {nthreads}, {_sum_of(f, sizes)}")
     f.emit(f"{fits} = icmp ule i64 {nbytes}, {MAX_COPY_BYTES}")
     f.emit(f"{ok} = and i1 {big}, {fits}")
+    for r, n in zip(regions, sizes):
+        if r.array is not None:  # an empty ndarray: no copy to make (the loop cannot update it)
+            some, both = f.tmp("pv"), f.tmp("pv")
+            f.emit(f"{some} = icmp sgt i64 {n}, 0")
+            f.emit(f"{both} = and i1 {ok}, {some}")
+            ok = both
     plain, alloc, run = f.label("atomic"), f.label("alloc"), f.label("private")
     f.emit(f"br i1 {ok}, label %{alloc}, label %{plain}")
     f.start_block(alloc)
-    f.gen.module.declare("declare noalias ptr @calloc(i64, i64)")
-    # The copies persist in context slots between launches: allocated zeroed on first use, zeroed again as
-    # the final sum reads them, so a launch neither allocates nor clears (that was a serial memset of every
-    # thread's copy per launch). The launcher frees them (runtime/launch.py).
     bufs = []
     got = "true"
-    for k, r in enumerate(regions):
-        ctx_slot = f.tmp("pctx")
-        f.emit(f"{ctx_slot} = getelementptr i64, ptr %ctx, i64 {f.gen.private_slot()}")
-        have, fresh, ready = f.tmp("phave"), f.label("pfresh"), f.label("pready")
-        f.emit(f"{have} = load ptr, ptr {ctx_slot}")
-        isnull = f.tmp("pnull")
-        f.emit(f"{isnull} = icmp eq ptr {have}, null")
-        f.emit(f"br i1 {isnull}, label %{fresh}, label %{ready}")
-        f.start_block(fresh)
-        new = f.tmp("pnew")
-        f.emit(f"{new} = call ptr @calloc(i64 {nthreads}, i64 {r.hi - r.lo})")
-        f.emit(f"store ptr {new}, ptr {ctx_slot}")
-        f.emit(f"br label %{ready}")
-        f.start_block(ready)
-        buf, slot, nonnull, all_ok = f.tmp("priv"), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
-        f.emit(f"{buf} = load ptr, ptr {ctx_slot}")
+    for k, n in enumerate(sizes):
+        buf, slot, nonnull, all_ok = _copies(f, nthreads, n), f.tmp("pslot"), f.tmp("pnn"), f.tmp("pok")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {first_slot + k}")
         f.emit(f"store ptr {buf}, ptr {slot}")
         f.emit(f"{nonnull} = icmp ne ptr {buf}, null")
@@ -106,8 +119,8 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"br i1 {got}, label %{run}, label %{plain}")  # out of memory: the atomic task needs none
     f.start_block(run)
     f.emit(f"call void {pfor}(ptr @{private_task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
-    for k, (r, buf) in enumerate(zip(regions, bufs)):
-        _emit_sum_into(f, r, buf, nthreads, pfor, f"{private_task}_sum{k}")
+    for k, (r, buf, n) in enumerate(zip(regions, bufs, sizes)):
+        _emit_sum_into(f, r, buf, n, nthreads, pfor, f"{private_task}_sum{k}")
     f.emit(f"br label %{done}")
     f.start_block(plain)
     f.emit(f"call void {pfor}(ptr @{task}, ptr {clo}, i64 {begin}, i64 {end}, i64 {grain})")
@@ -115,8 +128,66 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(done)
 
 
+def _elements(f, r: Region, nbytes: str) -> str:
+    """The elements of one copy of the region (i64)."""
+    if r.array is None:
+        return str(r.count)
+    n = f.tmp("pv")
+    f.emit(f"{n} = udiv exact i64 {nbytes}, {r.dtype.nbytes}")
+    return n
+
+
+def _sum_of(f, terms: list[str]) -> str:
+    """The i64 sum of `terms` (constants folded)."""
+    const = sum(int(t) for t in terms if not t.startswith("%"))
+    total = str(const)
+    for t in terms:
+        if t.startswith("%"):
+            nxt = f.tmp("pv")
+            f.emit(f"{nxt} = add i64 {total}, {t}")
+            total = nxt
+    return total
+
+
+def _copies(f, nthreads: str, nbytes: str) -> str:
+    """Every thread's zeroed copy of `nbytes` bytes (null when out of memory). The copies persist between launches
+    in a holder the launcher owns ({pointer, capacity in bytes}; its context slot holds the holder's address, so a
+    copied context, lang/graph.py's replay, shares them): allocated zeroed on first use, zeroed again as the final
+    sum reads them, so a launch neither allocates nor clears (that was a serial memset of every thread's copy per
+    launch). A larger ndarray than the holder's capacity replaces them (calloc: still zero). The launcher frees
+    them (runtime/launch.py)."""
+    f.gen.module.declare("declare noalias ptr @calloc(i64, i64)")
+    f.gen.module.declare("declare void @free(ptr)")
+    hslot, holder, have, capp, cap, need, enough = (f.tmp("ph") for _ in range(7))
+    f.emit(f"{hslot} = getelementptr i64, ptr %ctx, i64 {f.gen.private_slot()}")
+    f.emit(f"{holder} = load ptr, ptr {hslot}")
+    f.emit(f"{have} = load ptr, ptr {holder}")
+    f.emit(f"{capp} = getelementptr i64, ptr {holder}, i64 1")
+    f.emit(f"{cap} = load i64, ptr {capp}")
+    f.emit(f"{need} = mul i64 {nthreads}, {nbytes}")
+    f.emit(f"{enough} = icmp uge i64 {cap}, {need}")
+    fresh, ready = f.label("pfresh"), f.label("pready")
+    f.emit(f"br i1 {enough}, label %{ready}, label %{fresh}")
+    f.start_block(fresh)
+    new, isnull, newcap = f.tmp("pnew"), f.tmp("pnull"), f.tmp("pcap")
+    f.emit(f"call void @free(ptr {have})")
+    f.emit(f"{new} = call ptr @calloc(i64 {nthreads}, i64 {nbytes})")
+    f.emit(f"store ptr {new}, ptr {holder}")
+    f.emit(f"{isnull} = icmp eq ptr {new}, null")
+    f.emit(f"{newcap} = select i1 {isnull}, i64 0, i64 {need}")
+    f.emit(f"store i64 {newcap}, ptr {capp}")
+    f.emit(f"br label %{ready}")
+    f.start_block(ready)
+    buf = f.tmp("priv")
+    f.emit(f"{buf} = load ptr, ptr {holder}")
+    return buf
+
+
 def _field_slice(f, r: Region) -> str:
-    """The address of the region's bytes in the field itself (the slice its prefix indices pick)."""
+    """The address of the region's bytes in the field itself (the slice its prefix indices pick), or the
+    ndarray's data."""
+    if r.array is not None:
+        return f.array_base(r.array)
     lines: list[str] = []
     shift = slice_shift(lines, lambda: f.tmp("sh"), f.v, r)
     for line in lines:
@@ -127,26 +198,42 @@ def _field_slice(f, r: Region) -> str:
     return real
 
 
-def _emit_sum_into(f, r: Region, buf: str, nthreads: str, pfor: str, name: str) -> None:
+def _emit_sum_into(f, r: Region, buf: str, nbytes: str, nthreads: str, pfor: str, name: str) -> None:
     """Add every thread's copy into the field, split across the pool by element ranges (task `name`)."""
     real, clo = _field_slice(f, r), f.tmp("sclo")
-    f.prologue.append(f"  {clo} = alloca [3 x i64], align 8")
-    for k, (ty, v) in enumerate((("ptr", buf), ("ptr", real), ("i64", nthreads))):
+    count = _elements(f, r, nbytes)
+    f.prologue.append(f"  {clo} = alloca [4 x i64], align 8")
+    for k, (ty, v) in enumerate((("ptr", buf), ("ptr", real), ("i64", nthreads), ("i64", count))):
         slot = f.tmp("sslot")
         f.emit(f"{slot} = getelementptr i64, ptr {clo}, i64 {k}")
         f.emit(f"store {ty} {v}, ptr {slot}")
-    f.emit(f"call void {pfor}(ptr @{name}, ptr {clo}, i64 0, i64 {r.count}, i64 {SUM_GRAIN})")
-    f.gen.module.functions.append(_sum_task(name, r.dtype, r.count))
+    f.emit(f"call void {pfor}(ptr @{name}, ptr {clo}, i64 0, i64 {count}, i64 {SUM_GRAIN})")
+    # After Ctrl-C the pool hands out no more chunks: the sum runs here whole (the copies persist, so partials left
+    # in them would go into the next launch's results). A part the pool did sum left zeros: summing it again is
+    # a no-op.
+    flag, stopped = f.tmp("pcan"), f.tmp("pcan")
+    f.emit(f"{flag} = load atomic i32, ptr {f.cancel_flag()} monotonic, align 4")
+    f.emit(f"{stopped} = icmp ne i32 {flag}, 0")
+    here, on = f.label("psumhere"), f.label("psumdone")
+    f.emit(f"br i1 {stopped}, label %{here}, label %{on}")
+    f.start_block(here)
+    f.emit(f"call void @{name}(ptr {clo}, i64 0, i64 {count}, i32 0)")
+    f.emit(f"br label %{on}")
+    f.start_block(on)
+    f.gen.module.functions.append(_sum_task(name, r.dtype, None if r.array is not None else r.count))
 
 
 SUM_GRAIN = 8192  # elements per chunk of the final sum
 
 
-def _sum_task(name: str, dtype, n: int) -> str:
+def _sum_task(name: str, dtype, n: int | None) -> str:
     """field[k] += copy_t[k] for k in [lo, hi) and every thread's copy t, in thread order, leaving the copy
     zero for the next launch. A zero partial leaves the element untouched: bytes of other fields in the
-    copied range stay as they are, and an element no iteration updated keeps even the sign of a zero."""
+    copied range stay as they are, and an element no iteration updated keeps even the sign of a zero.
+    `n`: the elements of one copy, None when the closure's fourth word holds it (an ndarray's)."""
     ty = dtype.llvm
+    count = str(n) if n is not None else "%n"
+    load_n = "" if n is not None else "  %np = getelementptr i64, ptr %clo, i64 3\n  %n = load i64, ptr %np\n"
     if dtype.is_float:
         combine = (f"  %added = fadd {ty} %old, %part\n  %zero = fcmp oeq {ty} %part, 0.0\n"
                    f"  %new = select i1 %zero, {ty} %old, {ty} %added\n  store {ty} 0.0, ptr %src")
@@ -159,13 +246,13 @@ entry:
   %real = load ptr, ptr %realp
   %ntp = getelementptr i64, ptr %clo, i64 2
   %nt = load i64, ptr %ntp
-  br label %thead
+{load_n}  br label %thead
 thead:
   %t = phi i64 [0, %entry], [%tnext, %kdone]
   %tc = icmp slt i64 %t, %nt
   br i1 %tc, label %tbody, label %done
 tbody:
-  %base = mul i64 %t, {n}
+  %base = mul i64 %t, {count}
   %copy = getelementptr inbounds {ty}, ptr %buf, i64 %base
   br label %khead
 khead:

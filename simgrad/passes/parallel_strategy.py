@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 from simgrad import dtypes as dt
 from simgrad.ir.fieldref import FieldRef
-from simgrad.ir.nodes import Block, Kernel, Stmt, walk
+from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import Op
-from simgrad.passes.digits import digit_chain, digit_of
+from simgrad.passes.digits import invariant_chain, invariant_digit
 from simgrad.passes.privatize import Region, access_key, private_regions
 
 PLAIN, REDUCE, PAIR, ATOMIC, PRIVATE = "plain", "reduce", "pair", "atomic", "private|"
@@ -49,8 +49,7 @@ class LoopStrategy:
         if self.reductions:
             parts.append("reduce=[" + ", ".join(f"%{place.id}" for place, _ in self.reductions.values()) + "]")
         if self.regions:
-            parts.append("private=[" + ", ".join(f"tree {r.tree_id} [{r.lo}, {r.hi}) prefix {len(r.prefix)}"
-                                                 for r in self.regions) + f"], weight={self.weight}")
+            parts.append("private=[" + ", ".join(r.ir_name() for r in self.regions) + f"], weight={self.weight}")
         return "tasks(" + ", ".join(parts) + ")"
 
 
@@ -81,10 +80,7 @@ def _serial(block: Block, uses: dict, debug: bool) -> None:
 
 def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
     inside = {id(x) for x in walk(loop.blocks[0])}
-    # fields some iteration writes at an element it does not own keep every update atomic
-    shared = {id(x.operands[0].attrs["target"]) for x in walk(loop.blocks[0])
-              if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR
-              and not injective_in(loop, x.operands[0], inside)}
+    shared = _shared_targets(loop, inside)
     reductions = _reductions(loop, inside, uses, debug)
     reduced = {key[0] for key in reductions}
     regions, weight = private_regions(loop, inside, uses, shared, reduced, debug)
@@ -149,17 +145,58 @@ def _pairable(a: Stmt, p2: Stmt, b: Stmt, uses: dict) -> bool:
         and all(t.stride % 8 == 0 for t in terms1)
 
 
+def _shared_targets(loop: Stmt, inside: set) -> set[int]:
+    """Ids of the fields (ndarray components) some iteration writes at an element it does not own: every
+    update of them stays atomic. A target is owned when each of its written elements is an injective function
+    of the loop index (injective_in) and all of them agree on every index that varies with the iteration
+    (`_varying`): then only one iteration can write any element. `x[i]` and `x[i + 1]` are each injective, but
+    iteration i + 1 writes what iteration i writes second; `x[i, 0]` and `x[i, 1]` agree where it matters."""
+    writes: dict[int, list[Stmt]] = {}
+    for x in walk(loop.blocks[0]):
+        if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR:
+            writes.setdefault(id(x.operands[0].attrs["target"]), []).append(x.operands[0])
+    shared = set()
+    for tid, ptrs in writes.items():
+        if not all(injective_in(loop, p, inside) for p in ptrs) \
+                or len({_varying(p, loop, inside) for p in ptrs}) > 1:
+            shared.add(tid)
+    return shared
+
+
+def _varying(ptr: Stmt, loop: Stmt, inside: set) -> tuple:
+    """The indices of an element that vary with the iteration, as (axis, base, constant) (offset_form),
+    loop-invariant ones left out."""
+    out = []
+    for axis, o in enumerate(ptr.operands):
+        if o.op is Op.CONST or (o is not loop and id(o) not in inside):
+            continue
+        base, c = offset_form(o)
+        out.append((axis, id(base), c))
+    return tuple(out)
+
+
+def _digit_base(o: Stmt, loop: Stmt, inside: set) -> Stmt:
+    """The digit `(index // d) % m` an index is a constant away from (`i + 1` in `for i, j in ti.ndrange((1,
+    n - 1), ...)`), else the index itself: a constant shift keeps a chain of digits injective."""
+    base, _c = offset_form(o)
+    return base if base is not None and invariant_digit(base, loop, inside) is not None else o
+
+
 def injective_in(loop: Stmt, ptr: Stmt, inside: set) -> bool:
     """True when the element's indices determine the loop index: apart from loop-invariant values they
-    are digits `(index // d) % m` of it that chain from d = 1 up to a digit without modulus; or, in a
-    struct-for over sparse cells (loop attrs `cells`), they are the cell's own indices, every one."""
+    are digits `(index // d) % m` of it (d and m constants or values from before the loop: an ndarray's
+    run-time extents in `for i, j in arr`), each plus a constant, that chain from d = 1 up to a digit without
+    modulus; or, in a struct-for over sparse cells (loop attrs `cells`), they are the cell's own indices, every
+    one."""
     ncells = loop.attrs.get("cells")
     if ncells and len(ptr.operands) == ncells and all(
             id(o) in inside and o.attrs.get("cell_index") == k for k, o in enumerate(ptr.operands)):
         return True
-    if any(o.op is not Op.CONST and id(o) in inside and digit_of(o, loop) is None for o in ptr.operands):
+    idx = [_digit_base(o, loop, inside) for o in ptr.operands]
+    if any(o.op is not Op.CONST and (o is loop or id(o) in inside) and invariant_digit(o, loop, inside) is None
+           for o in idx):
         return False  # an index computed in the iteration some other way
-    return digit_chain(ptr.operands, loop) is not None
+    return invariant_chain(idx, loop, inside)
 
 
 def _reductions(loop: Stmt, inside: set, uses: dict, debug: bool = False) -> dict:

@@ -6,6 +6,8 @@ spends most of its time in lock-prefixed read-modify-writes. When a loop only *a
 reads it, never stores to it, never uses an atomic's old value), each thread can add into a private,
 zeroed copy of the field's memory with plain instructions, and the copies are summed into the field once
 after the loop. Which regions qualify, and how many updates per iteration go into them, is decided here.
+An ndarray argument qualifies the same way (mpm88_graph's P2G into grid ndarrays): its region is the
+whole array, every component, sized only at launch from the extents in the context.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from simgrad.dtypes import DataType
-from simgrad.ir.fieldref import FieldRef
+from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Stmt, offset_form
 from simgrad.ir.ops import Op
 
@@ -30,10 +32,18 @@ class Region:
     dtype: DataType
     prefix: tuple  # ((index Stmt, stride in bytes), ...)
     keys: set = field(default_factory=set)  # (id(field), access_key) of the updates it takes
+    #: an ndarray argument's data instead of a tree's bytes (any of its components; tree_id, lo, hi unused):
+    #: the whole array, its size read from the launch's extents
+    array: ArrayRef | None = None
 
     @property
     def count(self) -> int:
         return (self.hi - self.lo) // self.dtype.nbytes
+
+    def ir_name(self) -> str:
+        if self.array is not None:
+            return f"{self.array.name} (ndarray)"
+        return f"tree {self.tree_id} [{self.lo}, {self.hi}) prefix {len(self.prefix)}"
 
 
 def _span(f: FieldRef, nprefix: int) -> tuple[int, int]:
@@ -109,24 +119,38 @@ def private_regions(loop: Stmt, inside: set, uses: dict, shared: set, reduced: s
     """Regions worth privatising in a parallel loop and the estimated updates per iteration into them.
 
     A field the loop also reads or stores qualifies only where those accesses provably hit another
-    slice. `shared`: ids of targets some iteration updates at elements it does not own (the others need no
-    atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices. A copy
+    slice; an ndarray component only when the loop neither reads nor stores it. Other components of the
+    array may be read, stored or updated atomically: their partials stay zero, and zero partials are left
+    alone by the final sum. `shared`: ids of targets some iteration updates at elements it does not own (the
+    others need no atomics anyway); `reduced`: ids of targets the loop already sums per thread at fixed indices. A copy
     may span bytes of fields that are not privatised (interleaved layouts): they stay zero in it, and
     the final sum leaves an element alone where the copy holds zero. In debug mode slices are off (an
     out-of-bounds slice index must be reported, not summed into)."""
     adds: dict[int, list] = {}
     others: dict[int, list] = {}
     _updates(loop.blocks[0], uses, 1, adds, others)
-    groups: dict[tuple, Region] = {}
+    groups: dict[tuple, Region] = {}  # keyed by (tree, dtype, slice key, strides) or ("array", slot, dtype)
     weight = 0
     for tid, updates in adds.items():
         f = updates[0][0].operands[0].attrs["target"]
-        if tid not in shared or tid in reduced or not isinstance(f, FieldRef) or f.sparse \
-                or f.layout is None or f.dtype.name not in ("f32", "f64", "i32", "i64"):
+        if tid not in shared or tid in reduced or f.dtype.name not in ("f32", "f64", "i32", "i64"):
             continue
         ptrs = [a.operands[0] for a, _times in updates]
         if any(id(p) not in inside for p in ptrs):
             continue  # an address computed before the loop would still point into the field itself
+        if isinstance(f, ArrayRef):
+            if others.get(tid):
+                continue  # the loop reads (or stores) the component it would add into a copy of
+            akey = ("array", f.slot, f.dtype.name)
+            r = groups.get(akey)
+            if r is None:
+                r = groups[akey] = Region(-1, 0, 0, f.dtype, (), array=f)
+            for a, times in updates:
+                r.keys.add((tid, access_key(a.operands[0], 0)))
+                weight += times
+            continue
+        if not isinstance(f, FieldRef) or f.sparse or f.layout is None:
+            continue
         nprefix = 0 if debug else _prefix_len(f, ptrs, loop, inside)
         if any(not _other_slice(o, p, nprefix) for o in others.get(tid, ()) for p in ptrs):
             continue  # the loop reads (or stores) what it would add into a copy of

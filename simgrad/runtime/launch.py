@@ -58,7 +58,12 @@ class Launcher:
         # the slots past the returns hold the privatised loops' per-thread copies, kept between launches;
         # then the GPU target's scratch words (values that cross its kernels: codegen/nvptx.py)
         start = CTX_ARGS + nslots + len(returns) + 1
-        self._private = slice(start, start + private_slots)
+        # each slot holds the address of a holder {pointer to every thread's copies, their capacity in bytes}
+        # (codegen/privatize.py _copies): contexts copied for replay (Sequence) share the holders, so the native
+        # code may replace a too small allocation without leaving a copy pointing at freed memory
+        self._holders = np.zeros((private_slots, 2), dtype=np.int64)
+        if private_slots:
+            self.buf[start:start + private_slots] = self._holders.ctypes.data + 16 * np.arange(private_slots)
         self.buf[list(HEADER_SLOTS)] = program.context_header()
         self.buf[CTX_NTHREADS] = program.pool.num_threads
         self.tape: np.ndarray | None = None
@@ -77,7 +82,7 @@ class Launcher:
     def __del__(self):
         """Free the private copies the native code allocated (calloc) into this launcher's context."""
         try:
-            for p in self.buf[self._private]:
+            for p in self._holders[:, 0]:
                 if p:
                     _LIBC_FREE(int(p))
         except Exception:  # interpreter shutdown

@@ -129,3 +129,42 @@ def test_tape_loss_ndarray_must_hold_one_element_and_a_gradient():
         ti.ad.Tape(loss=ti.ndarray(ti.f32, shape=2, needs_grad=True))
     with pytest.raises(ti.SimgradError, match="no gradient"):
         ti.ad.Tape(loss=ti.ndarray(ti.f32, shape=1))
+
+
+@pytest.mark.parametrize("threads", [1, 4])
+def test_adjoint_of_an_ndarray_gather_scatters_into_per_thread_copies(threads):
+    """out[i] = sum_k c_k * d[idx(i, k)] over a small d: the adjoint adds d.grad[idx] += c_k * out.grad[i], a
+    scatter into an ndarray gradient, run over per-thread copies at 4 threads (compiler/test_ndarray_privatize.py
+    for the forward scatters). Kernel.grad and the Tape against central differences in float64."""
+    ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=threads)
+    n, cells = 3000, 7
+
+    @ti.kernel
+    def gather(d: ti.types.ndarray(dtype=ti.math.vec2), out: ti.types.ndarray()):
+        for i in range(n):
+            for k in ti.static(range(3)):
+                v = d[(i * 3 + k * 5) % cells]
+                out[None] += (k + 1.0) * ti.sin(v[0] + 0.1 * i) * v[1]
+
+    rng = np.random.default_rng(3)
+    d = ti.Vector.ndarray(2, ti.f64, shape=cells, needs_grad=True)
+    d.from_numpy(rng.random((cells, 2)))
+    out = ti.ndarray(ti.f64, shape=(), needs_grad=True)
+
+    def loss():
+        out.fill(0)
+        gather(d, out)
+        return out[None]
+
+    want = fd_grad(loss, d)
+    with ti.ad.Tape(loss=out):
+        gather(d, out)
+    assert rel_err(d.grad.to_numpy(), want) < 1e-7
+    d.grad.fill(0)
+    out.grad[None] = 1.0
+    gather.grad(d, out)
+    assert rel_err(d.grad.to_numpy(), want) < 1e-7
+    text = gather._instance_for((d, out), "grad").llvm_text
+    assert "_private" in text  # the variant exists at any thread count; the run-time rule picks it
+    if threads > 1:
+        assert gather._instance_for((d, out), "grad").launcher._holders[:, 0].any()

@@ -355,9 +355,10 @@ def test_a_loop_run_on_one_thread_updates_the_fields_directly(threads, n):
 
 @pytest.mark.parametrize("threads,n", [(1, 20000), (4, 20000), (4, 100)])
 def test_atomic_updates_have_a_plain_variant_for_a_loop_on_one_thread(threads, n):
-    """A loop whose updates need atomics (an ndarray scatter: no per-thread copies) also gets a `_serial` task
-    whose updates are plain, run when the pool runs the loop on the calling thread alone (one thread, or at most
-    a grain of iterations); otherwise the atomic task runs. Every kind of update agrees with numpy either way."""
+    """A loop whose updates need atomics (ndarray min/max/mul: no per-thread copies; its adds go to copies) also
+    gets a `_serial` task whose updates are plain, run when the pool runs the loop on the calling thread alone (one
+    thread, or at most a grain of iterations); otherwise the atomic task runs. Every kind of update agrees with
+    numpy either way."""
     ti.init(arch=ti.cpu, cpu_max_num_threads=threads)
     rng = np.random.default_rng(7)
     idx = rng.integers(0, 37, n).astype(np.int32)
@@ -384,4 +385,4 @@ def test_atomic_updates_have_a_plain_variant_for_a_loop_on_one_thread(threads, n
         assert lo[k] == (sel.min() if sel.size else np.inf) and hi[k] == (sel.max() if sel.size else -np.inf)
         np.testing.assert_allclose(prod[k], np.prod(1.0 + 1e-3 * sel), rtol=1e-9)
     text = scatter._instance_for((idx, val, s, lo, hi, cnt, prod), "").llvm_text
-    assert "_serial" in text
+    assert "_private_serial" in text

@@ -231,6 +231,36 @@ def test_owned_through_the_digits_of_a_flattened_loop():
     assert forms == ["plain", "plain", "private|atomic", "private|atomic"]
 
 
+def test_owned_through_digits_shifted_by_constants_where_every_write_agrees():
+    """`for i, j in ti.ndrange((1, 5), (1, 9))` indexes with digits plus one (karman_vortex_street's
+    update_macro_var): u[i + 1, j + 1] updated and stored there alone is owned. Writes that disagree on a varying
+    index are shared even though each is injective: w[i] and w[i + 1] (iteration i + 1 writes what i writes
+    second), a[i, 1] and a[2, i] (iterations 2 and 1 both write a[2, 1]). c[i, 0] and c[i, 1] agree on i: owned."""
+    ti.init(arch=ti.cpu)
+    u = ti.field(ti.f32, shape=(6, 10), name="u")
+    w = ti.field(ti.f32, shape=40, name="w")
+    a = ti.field(ti.f32, shape=(40, 40), name="a")
+    c = ti.field(ti.f32, shape=(40, 2), name="c")
+    k, b = new_kernel("shifted")
+    one = b.const(1.0, dt.f32)
+    loop = parallel_for(b, 32)
+    with b.inside(loop.blocks[0]):
+        i = b.binary(Op.ADD, b.binary(Op.RAW_DIV, loop, b.const(8, dt.i32)), b.const(1, dt.i32))
+        j = b.binary(Op.ADD, b.binary(Op.RAW_MOD, loop, b.const(8, dt.i32)), b.const(1, dt.i32))
+        store(b, ptr(b, u, i, j), one)
+        atomic_add(b, ptr(b, u, i, j), one)
+        atomic_add(b, ptr(b, w, loop), one)
+        atomic_add(b, ptr(b, w, b.binary(Op.ADD, loop, b.const(1, dt.i32))), one)
+        atomic_add(b, ptr(b, a, loop, b.const(1, dt.i32)), one)
+        atomic_add(b, ptr(b, a, b.const(2, dt.i32), loop), one)
+        atomic_add(b, ptr(b, c, loop, b.const(0, dt.i32)), one)
+        atomic_add(b, ptr(b, c, loop, b.const(1, dt.i32)), one)
+    parallel_strategy(k)
+    forms = [s.attrs["strategy"] for s in walk(k.body) if s.op is Op.ATOMIC]
+    assert forms == ["plain", "private|atomic", "private|atomic", "private|atomic", "private|atomic", "plain",
+                     "plain"]
+
+
 def _access_kernel():
     """A parallel loop over a 4x8 grid (flat index digits), reading a field in its own order (affine), a
     blocked field (division and remainder terms) and a loop-invariant element (offset before the loop)."""

@@ -1,4 +1,5 @@
 declare noalias ptr @calloc(i64, i64)
+declare void @free(ptr)
 !0 = !{}
 !900000 = distinct !{!900000, !"simgrad fields"}
 !900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
@@ -241,8 +242,8 @@ entry:
   %cv.31 = load ptr, ptr %cp.30
   %rp.32 = getelementptr ptr, ptr %cv.31, i64 1
   %root.33 = load ptr, ptr %rp.32, !invariant.load !0
-  %sclo.62 = alloca [3 x i64], align 8
-  %sclo.68 = alloca [3 x i64], align 8
+  %sclo.74 = alloca [4 x i64], align 8
+  %sclo.85 = alloca [4 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
@@ -271,67 +272,101 @@ decide.19:
   %pv.13 = and i1 %pv.12, %pv.36
   br i1 %pv.13, label %alloc.38, label %atomic.37
 alloc.38:
-  %pctx.40 = getelementptr i64, ptr %ctx, i64 11
-  %phave.41 = load ptr, ptr %pctx.40
-  %pnull.44 = icmp eq ptr %phave.41, null
-  br i1 %pnull.44, label %pfresh.42, label %pready.43
-pfresh.42:
-  %pnew.45 = call ptr @calloc(i64 %cv.9, i64 64)
-  store ptr %pnew.45, ptr %pctx.40
-  br label %pready.43
-pready.43:
-  %priv.46 = load ptr, ptr %pctx.40
-  %pslot.47 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.46, ptr %pslot.47
-  %pnn.48 = icmp ne ptr %priv.46, null
-  %pok.49 = and i1 true, %pnn.48
-  %pctx.50 = getelementptr i64, ptr %ctx, i64 12
-  %phave.51 = load ptr, ptr %pctx.50
-  %pnull.54 = icmp eq ptr %phave.51, null
-  br i1 %pnull.54, label %pfresh.52, label %pready.53
-pfresh.52:
-  %pnew.55 = call ptr @calloc(i64 %cv.9, i64 32)
-  store ptr %pnew.55, ptr %pctx.50
-  br label %pready.53
-pready.53:
-  %priv.56 = load ptr, ptr %pctx.50
-  %pslot.57 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.56, ptr %pslot.57
-  %pnn.58 = icmp ne ptr %priv.56, null
-  %pok.59 = and i1 %pok.49, %pnn.58
-  br i1 %pok.59, label %private.39, label %atomic.37
+  %ph.40 = getelementptr i64, ptr %ctx, i64 11
+  %ph.41 = load ptr, ptr %ph.40
+  %ph.42 = load ptr, ptr %ph.41
+  %ph.43 = getelementptr i64, ptr %ph.41, i64 1
+  %ph.44 = load i64, ptr %ph.43
+  %ph.45 = mul i64 %cv.9, 64
+  %ph.46 = icmp uge i64 %ph.44, %ph.45
+  br i1 %ph.46, label %pready.48, label %pfresh.47
+pfresh.47:
+  call void @free(ptr %ph.42)
+  %pnew.49 = call ptr @calloc(i64 %cv.9, i64 64)
+  store ptr %pnew.49, ptr %ph.41
+  %pnull.50 = icmp eq ptr %pnew.49, null
+  %pcap.51 = select i1 %pnull.50, i64 0, i64 %ph.45
+  store i64 %pcap.51, ptr %ph.43
+  br label %pready.48
+pready.48:
+  %priv.52 = load ptr, ptr %ph.41
+  %pslot.53 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.52, ptr %pslot.53
+  %pnn.54 = icmp ne ptr %priv.52, null
+  %pok.55 = and i1 true, %pnn.54
+  %ph.56 = getelementptr i64, ptr %ctx, i64 12
+  %ph.57 = load ptr, ptr %ph.56
+  %ph.58 = load ptr, ptr %ph.57
+  %ph.59 = getelementptr i64, ptr %ph.57, i64 1
+  %ph.60 = load i64, ptr %ph.59
+  %ph.61 = mul i64 %cv.9, 32
+  %ph.62 = icmp uge i64 %ph.60, %ph.61
+  br i1 %ph.62, label %pready.64, label %pfresh.63
+pfresh.63:
+  call void @free(ptr %ph.58)
+  %pnew.65 = call ptr @calloc(i64 %cv.9, i64 32)
+  store ptr %pnew.65, ptr %ph.57
+  %pnull.66 = icmp eq ptr %pnew.65, null
+  %pcap.67 = select i1 %pnull.66, i64 0, i64 %ph.61
+  store i64 %pcap.67, ptr %ph.59
+  br label %pready.64
+pready.64:
+  %priv.68 = load ptr, ptr %ph.57
+  %pslot.69 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.68, ptr %pslot.69
+  %pnn.70 = icmp ne ptr %priv.68, null
+  %pok.71 = and i1 %pok.55, %pnn.70
+  br i1 %pok.71, label %private.39, label %atomic.37
 private.39:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.61 = getelementptr i8, ptr %root.26, i64 0
-  %real.60 = getelementptr i8, ptr %real.61, i64 0
-  %sslot.63 = getelementptr i64, ptr %sclo.62, i64 0
-  store ptr %priv.46, ptr %sslot.63
-  %sslot.64 = getelementptr i64, ptr %sclo.62, i64 1
-  store ptr %real.60, ptr %sslot.64
-  %sslot.65 = getelementptr i64, ptr %sclo.62, i64 2
-  store i64 %cv.9, ptr %sslot.65
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.62, i64 0, i64 16, i64 8192)
-  %real.67 = getelementptr i8, ptr %root.33, i64 0
-  %real.66 = getelementptr i8, ptr %real.67, i64 0
-  %sslot.69 = getelementptr i64, ptr %sclo.68, i64 0
-  store ptr %priv.56, ptr %sslot.69
-  %sslot.70 = getelementptr i64, ptr %sclo.68, i64 1
-  store ptr %real.66, ptr %sslot.70
-  %sslot.71 = getelementptr i64, ptr %sclo.68, i64 2
-  store i64 %cv.9, ptr %sslot.71
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.68, i64 0, i64 8, i64 8192)
+  %real.73 = getelementptr i8, ptr %root.26, i64 0
+  %real.72 = getelementptr i8, ptr %real.73, i64 0
+  %sslot.75 = getelementptr i64, ptr %sclo.74, i64 0
+  store ptr %priv.52, ptr %sslot.75
+  %sslot.76 = getelementptr i64, ptr %sclo.74, i64 1
+  store ptr %real.72, ptr %sslot.76
+  %sslot.77 = getelementptr i64, ptr %sclo.74, i64 2
+  store i64 %cv.9, ptr %sslot.77
+  %sslot.78 = getelementptr i64, ptr %sclo.74, i64 3
+  store i64 16, ptr %sslot.78
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.74, i64 0, i64 16, i64 8192)
+  %pcan.79 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %pcan.80 = icmp ne i32 %pcan.79, 0
+  br i1 %pcan.80, label %psumhere.81, label %psumdone.82
+psumhere.81:
+  call void @sg_kernel_task1_private_sum0(ptr %sclo.74, i64 0, i64 16, i32 0)
+  br label %psumdone.82
+psumdone.82:
+  %real.84 = getelementptr i8, ptr %root.33, i64 0
+  %real.83 = getelementptr i8, ptr %real.84, i64 0
+  %sslot.86 = getelementptr i64, ptr %sclo.85, i64 0
+  store ptr %priv.68, ptr %sslot.86
+  %sslot.87 = getelementptr i64, ptr %sclo.85, i64 1
+  store ptr %real.83, ptr %sslot.87
+  %sslot.88 = getelementptr i64, ptr %sclo.85, i64 2
+  store i64 %cv.9, ptr %sslot.88
+  %sslot.89 = getelementptr i64, ptr %sclo.85, i64 3
+  store i64 8, ptr %sslot.89
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.85, i64 0, i64 8, i64 8192)
+  %pcan.90 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %pcan.91 = icmp ne i32 %pcan.90, 0
+  br i1 %pcan.91, label %psumhere.92, label %psumdone.93
+psumhere.92:
+  call void @sg_kernel_task1_private_sum1(ptr %sclo.85, i64 0, i64 8, i32 0)
+  br label %psumdone.93
+psumdone.93:
   br label %scatterdone.34
 atomic.37:
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
   br label %scatterdone.34
 scatterdone.34:
-  %cancel.72 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.73 = icmp ne i32 %cancel.72, 0
-  br i1 %cancelled.73, label %stop.74, label %go.75
-stop.74:
+  %cancel.94 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.95 = icmp ne i32 %cancel.94, 0
+  br i1 %cancelled.95, label %stop.96, label %go.97
+stop.96:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.75:
+go.97:
   ret void
 }
 
