@@ -26,7 +26,7 @@ import pytest
 import simgrad as ti
 from simgrad import dtypes as dt
 from simgrad.codegen.llvm import LOWERING, lower_elementwise
-from simgrad.ir import context, numeric
+from simgrad.ir import context, numeric, vecmath
 from simgrad.ir.builder import Builder
 from simgrad.ir.opdefs import FLOAT, INT, Instr, Special
 from simgrad.ir.ops import OPS, Op
@@ -143,11 +143,11 @@ def _emit(op: Op, t: dt.DataType, *operands: Expr) -> Expr:
 
 
 @functools.cache
-def _machine(t: dt.DataType) -> dict[Op, np.ndarray]:
+def _machine(t: dt.DataType, fast_math: bool = True) -> dict[Op, np.ndarray]:
     """What compiled kernels compute for every op taking `t`, on _operands(op, t): one kernel per result
-    type (the type itself, i32 for comparisons)."""
+    type (the type itself, i32 for comparisons). fast_math: f32 math is ir/vecmath.py's, else libm's."""
     results: dict[Op, np.ndarray] = {}
-    ti.init(arch=ti.cpu)
+    ti.init(arch=ti.cpu, fast_math=fast_math)
     for i32_result in (False, True):
         ops = [op for op in OPS if OPS[op].accepts(t) and (OPS[op].result == "i32") == i32_result]
         rows = [_operands(op, t) for op in ops]
@@ -193,20 +193,21 @@ def _sign_free(op: Op) -> bool:
     return op in (Op.MIN, Op.MAX) or isinstance(low, Instr) or low in (Special("neg"), Special("rsqrt"))
 
 
-@pytest.mark.parametrize("op,t", _cases())
-def test_fold_equals_the_compiled_op(op, t):
+@pytest.mark.parametrize("op,t,fast_math", [(op, t, fm) for op, t in _cases() for fm in (True, False)
+                                             if fm or (t.is_float and op in vecmath.FUNCTIONS)])
+def test_fold_equals_the_compiled_op(op, t, fast_math):
     """(a) and (c): simplify's fold of constant operands is bit for bit what the kernel computes at run time, in
     the default flush-to-zero mode (runtime/fpenv.py: a subnormal result is a zero, folded as the constant the
-    compile makes of it)."""
+    compile makes of it); with fast_math f32 math is ir/vecmath.py's (folded by its numpy model), else libm's."""
     d = OPS[op]
-    machine = _machine(t)[op]
+    machine = _machine(t, fast_math)[op]
     result_t = d.result_type(t)
     bad = []
     folded_any = False
     for vals, got in zip(_operands(op, t), machine):
         stmt = Builder.detached(op, result_t, tuple(Builder.constant(v, t) for v in vals))
         with numeric.flushing(FLUSHED if result_t.is_float and op not in PASS_THROUGH else frozenset()):
-            want = fold(stmt)
+            want = fold(stmt, vector_math=fast_math)
             if want is not None and result_t.is_float:
                 want = Builder.constant(want, result_t).attrs["value"]  # what the compile makes of it
         if want is None:

@@ -1,0 +1,383 @@
+"""Vectorisable f32 math functions (fast_math on the CPU): sin cos tan atan atan2 exp log tanh pow.
+
+Why: a loop calling libm's `cosf` cannot be vectorised (llvmlite gives LLVM no vector math library), and those
+calls were half of snow_phaseField's time. Each function here is written once against a small set of
+operations (`V`) and has two backends: codegen/vecmath.py emits it as an internal always-inline LLVM function of
+plain arithmetic and selects (no branches, no calls), which the loop vectoriser vectorises like any other
+arithmetic; `evaluate` runs the same operations in numpy (IEEE float64 without fused multiply-adds, as the
+emitted code), bit for bit what the compiled code computes, which the constant fold (passes/simplify.py) and
+the tests use. The f32 argument is widened to f64 (exact) and the result computed there and rounded once:
+range reduction and Taylor polynomials whose error (< 1e-12 relative) is far below an f32 ulp, so the result
+is within 1 ulp of the correctly rounded one (tests/codegen/test_vecmath.py measures the bound on dense
+sweeps). sin/cos/tan reduce any f32 exactly by 2/pi (Payne-Hanek style: a table of 2/pi's bits per exponent,
+three 29-bit pieces whose products with the 24-bit significand are exact), so huge arguments are right too.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable
+from decimal import Decimal, getcontext
+
+import numpy as np
+
+from simgrad.ir.ops import Op
+
+# -- constants ------------------------------------------------------------------------------------------------
+
+_BITS = 520  # 2/pi to this many fractional bits: f32's exponents reach bit 127 + 24 + 87
+
+
+def _pi_scaled(bits: int) -> int:
+    """floor(pi * 2**bits), from Machin's formula in integers (16 guard bits)."""
+    one = 1 << (bits + 16)
+
+    def arctan_inv(n: int) -> int:
+        total, term, k, sign = 0, one // n, 1, 1
+        while term:
+            total += sign * (term // k)
+            term //= n * n
+            k += 2
+            sign = -sign
+        return total
+
+    return (16 * arctan_inv(5) - 4 * arctan_inv(239)) >> 16
+
+
+_TWO_OVER_PI = (1 << (2 * _BITS + 1)) // _pi_scaled(_BITS)  # floor(2/pi * 2**_BITS), bit j at _BITS - j
+
+
+def _two_over_pi_table() -> np.ndarray:
+    """Per f32 biased exponent E (x = m * 2**s, m < 2**24 an integer): three doubles of 29 bits each, 2/pi's
+    bits j0 .. j0 + 86 with j0 = max(1, s - 1). Bits above j0 only add multiples of 4 to x * 2/pi (whole
+    turns), so x * T0 + x * T1 + x * T2 is x * 2/pi modulo 4 to 2**-61, each product exact."""
+    out = np.zeros((256, 3))
+    for e in range(255):
+        s = -149 if e == 0 else e - 150
+        j0 = max(1, s - 1)
+        for c in range(3):
+            last = j0 + 29 * c + 28
+            piece = (_TWO_OVER_PI >> (_BITS - last)) & ((1 << 29) - 1)
+            out[e, c] = math.ldexp(piece, -last)
+    return out.reshape(-1)
+
+
+TABLE = _two_over_pi_table()  # E = 255 (inf, NaN) is zero: inf * 0 is NaN, which is sin(inf)
+
+getcontext().prec = 40
+_LN2 = Decimal(2).ln()
+LN2 = float(_LN2)
+LN2_HI = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", LN2))[0] & ~((1 << 21) - 1)))[0]
+LN2_LO = float(_LN2 - Decimal(LN2_HI))
+PI = math.pi
+MAGIC = 6755399441055744.0  # 1.5 * 2**52: t + MAGIC - MAGIC is t rounded to an integer (|t| < 2**51)
+MAGIC_BITS = 0x4338000000000000
+
+# Taylor coefficients (exact enough as doubles; the truncation error is what the comments bound)
+_EXP = [1.0 / math.factorial(n) for n in range(12)]  # e**r, |r| <= ln2/2: r**12/12! < 1e-14
+_SIN = [(-1.0) ** k / math.factorial(2 * k + 1) for k in range(7)]  # |r| <= pi/4: r**14/15! < 3e-14
+_COS = [(-1.0) ** k / math.factorial(2 * k) for k in range(8)]  # r**16/16! < 1e-15
+_ATAN = [(-1.0) ** k / (2 * k + 1) for k in range(8)]  # |u| <= tan(pi/16): u**16/17 < 4e-24
+_LOG = [2.0 / (2 * k + 1) for k in range(9)]  # 2 atanh(s), |s| <= 0.172: s**18/19 < 1e-15
+_TAN_PI_16 = math.tan(math.pi / 16)
+_TAN_3PI_16 = math.tan(3 * math.pi / 16)
+_TAN_PI_8 = math.tan(math.pi / 8)
+
+
+# -- the operations the functions are written in ---------------------------------------------------------------
+
+class V:
+    """A value of one backend: `h` is its handle (an LLVM name or a numpy array), `ty` its LLVM type."""
+
+    def __init__(self, be, h, ty: str):
+        self.be, self.h, self.ty = be, h, ty
+
+    def _c(self, other) -> V:
+        return other if isinstance(other, V) else self.be.const(other, self.ty)
+
+    def _bin(self, fop: str, iop: str, other, rev: bool = False) -> V:
+        o = self._c(other)
+        a, b = (o, self) if rev else (self, o)
+        return self.be.bin(fop if self.ty in ("double", "float") else iop, a, b)
+
+    def __add__(self, o): return self._bin("fadd", "add", o)
+    def __radd__(self, o): return self._bin("fadd", "add", o, True)
+    def __sub__(self, o): return self._bin("fsub", "sub", o)
+    def __rsub__(self, o): return self._bin("fsub", "sub", o, True)
+    def __mul__(self, o): return self._bin("fmul", "mul", o)
+    def __rmul__(self, o): return self._bin("fmul", "mul", o, True)
+    def __truediv__(self, o): return self._bin("fdiv", "", o)
+    def __rtruediv__(self, o): return self._bin("fdiv", "", o, True)
+    def __and__(self, o): return self._bin("", "and", o)
+    def __or__(self, o): return self._bin("", "or", o)
+    def __xor__(self, o): return self._bin("", "xor", o)
+    def __lshift__(self, o): return self._bin("", "shl", o)
+    def __rshift__(self, o): return self._bin("", "lshr", o)
+
+    def cmp(self, pred: str, o) -> V:
+        """fcmp (olt, ogt, oeq, uno, ...) for floats, icmp (slt, eq, ...) for integers."""
+        return self.be.cmp(pred, self, self._c(o))
+
+    def to(self, how: str, ty: str) -> V:
+        """fpext, fptrunc, bitcast, trunc, zext, sext, sitofp."""
+        return self.be.cast(how, self, ty)
+
+    def abs(self) -> V:
+        return self.be.call("fabs", self)
+
+    def copysign(self, sign: V) -> V:
+        return self.be.call("copysign", self, sign)
+
+
+def select(c: V, a, b) -> V:
+    """c ? a : b; numbers are constants of the other operand's type (double when both are numbers)."""
+    x = a if isinstance(a, V) else b if isinstance(b, V) else c.be.const(a, "double")
+    return c.be.select(c, x._c(a), x._c(b))
+
+
+def _poly(x: V, coeffs: list[float]) -> V:
+    """c0 + c1 x + c2 x**2 + ... by Horner's rule."""
+    p = x * coeffs[-1] + coeffs[-2]
+    for c in reversed(coeffs[:-2]):
+        p = p * x + c
+    return p
+
+
+def _round(t: V) -> tuple[V, V]:
+    """t (|t| < 2**51) rounded to the nearest integer, as a double and as an i64 (no fptosi: NaN is no poison)."""
+    s = t + MAGIC
+    return s - MAGIC, s.to("bitcast", "i64") - MAGIC_BITS
+
+
+def _pow2(k: V) -> V:
+    """2**k for an i64 k in [-1022, 1023]."""
+    return ((k + 1023) << 52).to("bitcast", "double")
+
+
+def _exp_core(t: V) -> V:
+    """e**t for a double t in [-700, 700] (or NaN): t = k ln2 + r, e**r by its Taylor series."""
+    kd, k = _round(t * (1.0 / LN2))
+    r = (t - kd * LN2_HI) - kd * LN2_LO
+    return _poly(r, _EXP) * _pow2(k)
+
+
+def _log_core(d: V) -> V:
+    """log(d) for a positive finite double: d = 2**e m with m in [sqrt(1/2), sqrt(2)), log m = 2 atanh(s)."""
+    b = d.to("bitcast", "i64")
+    e = (b >> 52) - 1023
+    m = ((b & ((1 << 52) - 1)) | 0x3FF0000000000000).to("bitcast", "double")
+    big = m.cmp("ogt", math.sqrt(2.0))
+    m = select(big, m * 0.5, m)
+    e = e + big.to("zext", "i64")
+    s = (m - 1.0) / (m + 1.0)
+    return e.to("sitofp", "double") * LN2 + s * _poly(s * s, _LOG)
+
+
+def _reduce(x: V) -> tuple[V, V]:
+    """An f32 x as r + q pi/2 (q modulo 4 as an i64), |r| <= pi/4 (a hair more), exact to 2**-61 absolute."""
+    e = (x.to("bitcast", "i32") >> 23) & 255
+    idx = e.to("zext", "i64") * 3
+    xd = x.to("fpext", "double")
+    t0, t1, t2 = (x.be.load(idx + c) for c in range(3))
+    p0, p1, p2 = xd * t0, xd * t1, xd * t2  # exact
+    nd, n = _round(p0 + p1)
+    f = ((p0 - nd) + p1) + p2  # p0 - nd exact
+    return f * (PI / 2), n & 3
+
+
+def _sin_cos(r: V) -> tuple[V, V]:
+    z = r * r
+    return r + r * z * _poly(z, _SIN[1:]), _poly(z, _COS)
+
+
+def _sin(x: V) -> V:
+    r, q = _reduce(x)
+    s, c = _sin_cos(r)
+    v = select((q & 1).cmp("ne", 0), c, s)
+    v = select((q & 2).cmp("ne", 0), 0.0 - v, v)
+    return select(x.cmp("oeq", 0.0), x, v.to("fptrunc", "float"))  # sin(-0) = -0
+
+
+def _cos(x: V) -> V:
+    r, q = _reduce(x)
+    s, c = _sin_cos(r)
+    v = select((q & 1).cmp("ne", 0), 0.0 - s, c)
+    return select((q & 2).cmp("ne", 0), 0.0 - v, v).to("fptrunc", "float")
+
+
+def _tan(x: V) -> V:
+    r, q = _reduce(x)
+    s, c = _sin_cos(r)
+    v = select((q & 1).cmp("ne", 0), (0.0 - c) / s, s / c)
+    return select(x.cmp("oeq", 0.0), x, v.to("fptrunc", "float"))
+
+
+def _atan01(t: V) -> V:
+    """atan(t) for t in [0, 1] (or NaN): atan t = atan c + atan((t - c) / (1 + t c)) with c = tan(0, pi/8,
+    pi/4), whichever leaves |u| <= tan(pi/16), then atan u by its Taylor series."""
+    c1, c2 = t.cmp("ogt", _TAN_PI_16), t.cmp("ogt", _TAN_3PI_16)
+    cen = select(c2, 1.0, select(c1, _TAN_PI_8, 0.0))
+    base = select(c2, PI / 4, select(c1, PI / 8, 0.0))
+    u = (t - cen) / (t * cen + 1.0)
+    z = u * u
+    return base + (u + u * z * _poly(z, _ATAN[1:]))
+
+
+def _atan(x: V) -> V:
+    d = x.to("fpext", "double").abs()
+    inv = d.cmp("ogt", 1.0)
+    a = _atan01(select(inv, 1.0 / d, d))
+    a = select(inv, PI / 2 - a, a)
+    return a.copysign(x.to("fpext", "double")).to("fptrunc", "float")
+
+
+def _atan2(y: V, x: V) -> V:
+    yd, xd = y.to("fpext", "double"), x.to("fpext", "double")
+    ay, ax = yd.abs(), xd.abs()
+    swap = ay.cmp("ogt", ax)
+    num, den = select(swap, ax, ay), select(swap, ay, ax)
+    t = num / den
+    t = select(den.cmp("oeq", 0.0), 0.0, t)  # atan2(+-0, +-0)
+    t = select(num.cmp("oeq", math.inf), 1.0, t)  # atan2(+-inf, +-inf)
+    a = _atan01(t)
+    a = select(swap, PI / 2 - a, a)
+    a = select(x.to("bitcast", "i32").cmp("slt", 0), PI - a, a)  # x < 0 or x = -0
+    a = select(yd.cmp("uno", xd), yd + xd, a.copysign(yd))
+    return a.to("fptrunc", "float")
+
+
+def _exp(x: V) -> V:
+    t = x.to("fpext", "double")
+    t = select(t.cmp("ogt", 100.0), 100.0, t)  # e**100 overflows f32, e**-160 rounds to 0; NaN stays
+    t = select(t.cmp("olt", -160.0), -160.0, t)
+    return _exp_core(t).to("fptrunc", "float")
+
+
+def _log(x: V) -> V:
+    d = x.to("fpext", "double")
+    v = _log_core(d)
+    v = select(d.cmp("oeq", 0.0), -math.inf, v)
+    v = select(d.cmp("olt", 0.0), math.nan, v)
+    v = select(d.cmp("oeq", math.inf), math.inf, v)
+    v = select(d.cmp("uno", d), d, v)
+    return v.to("fptrunc", "float")
+
+
+def _tanh(x: V) -> V:
+    """tanh|x| = m / (m + 2) with m = e**(2|x|) - 1 = 2**k (e**r - 1) + (2**k - 1): no cancellation."""
+    xd = x.to("fpext", "double")
+    u = xd.abs() * 2.0
+    u = select(u.cmp("ogt", 40.0), 40.0, u)
+    kd, k = _round(u * (1.0 / LN2))
+    r = (u - kd * LN2_HI) - kd * LN2_LO
+    scale = _pow2(k)
+    m = r * _poly(r, _EXP[1:]) * scale + (scale - 1.0)
+    return (m / (m + 2.0)).copysign(xd).to("fptrunc", "float")
+
+
+def _pow(x: V, y: V) -> V:
+    """|x|**y = e**(y log|x|) in f64, then C99's special cases (Annex F.9.4.4) as selects."""
+    xd, yd = x.to("fpext", "double"), y.to("fpext", "double")
+    ax, ay = xd.abs(), yd.abs()
+    t = yd * _log_core(ax)
+    t = select(t.cmp("ogt", 200.0), 200.0, t)
+    t = select(t.cmp("olt", -200.0), -200.0, t)
+    v = _exp_core(t)
+    ypos = yd.cmp("ogt", 0.0)
+    v = select(ax.cmp("oeq", 0.0), select(ypos, 0.0, math.inf), v)
+    v = select(ax.cmp("oeq", math.inf), select(ypos, math.inf, 0.0), v)
+    v = select(ax.cmp("oeq", 1.0), 1.0, v)  # (-1)**+-inf; 1 for |x| = 1 otherwise too (the sign below)
+    small = ay.cmp("olt", 16777216.0)  # |y| >= 2**24 (or inf) is an even integer
+    yr, yi = _round(select(small, yd, 0.0))
+    integer = select(small, yr.cmp("oeq", yd), ay.cmp("oeq", ay))
+    odd = small & integer & (yi & 1).cmp("ne", 0)
+    v = select(x.to("bitcast", "i32").cmp("slt", 0) & odd, 0.0 - v, v)
+    bad = xd.cmp("olt", 0.0) & ax.cmp("one", math.inf) & (integer ^ yd.cmp("oeq", yd))  # x < 0, y finite non-int
+    v = select(bad, math.nan, v)
+    v = select(xd.cmp("uno", yd), xd + yd, v)
+    v = select(yd.cmp("oeq", 0.0) | xd.cmp("oeq", 1.0), 1.0, v)
+    return v.to("fptrunc", "float")
+
+
+#: Op -> (function name, algorithm on f32 values)
+FUNCTIONS: dict[Op, tuple[str, Callable[..., V]]] = {
+    Op.SIN: ("sin", _sin), Op.COS: ("cos", _cos), Op.TAN: ("tan", _tan), Op.ATAN2: ("atan2", _atan2),
+    Op.EXP: ("exp", _exp), Op.LOG: ("log", _log), Op.TANH: ("tanh", _tanh), Op.POW: ("pow", _pow),
+}
+ATAN = ("atan", _atan)  # not a registry op (ti.atan2 is); kept for completeness and tested
+
+
+# -- the numpy backend ------------------------------------------------------------------------------------------
+
+_NP = {"double": np.float64, "float": np.float32, "i64": np.int64, "i32": np.int32, "i1": np.bool_}
+_UNSIGNED = {"i64": np.uint64, "i32": np.uint32}
+
+
+class _Numpy:
+    """Each operation on numpy arrays, as LLVM defines it on the emitted types (IEEE, round to nearest)."""
+
+    def const(self, v, ty: str) -> V:
+        return V(self, np.array(v).astype(_NP[ty]), ty)
+
+    def bin(self, op: str, a: V, b: V) -> V:
+        x, y = a.h, b.h
+        if op in ("fadd", "add"):
+            r = x + y
+        elif op in ("fsub", "sub"):
+            r = x - y
+        elif op in ("fmul", "mul"):
+            r = x * y
+        elif op == "fdiv":
+            r = x / y
+        elif op == "and":
+            r = x & y
+        elif op == "or":
+            r = x | y
+        elif op == "xor":
+            r = x ^ y
+        elif op == "shl":
+            r = np.asarray(x).view(_UNSIGNED[a.ty]) << np.asarray(y).astype(_UNSIGNED[a.ty])
+        else:  # lshr
+            r = np.asarray(x).view(_UNSIGNED[a.ty]) >> np.asarray(y).astype(_UNSIGNED[a.ty])
+        return V(self, np.asarray(r).view(_NP[a.ty]) if a.ty in _UNSIGNED else np.asarray(r), a.ty)
+
+    def cmp(self, pred: str, a: V, b: V) -> V:
+        x, y = a.h, b.h
+        r = {"olt": lambda: x < y, "ogt": lambda: x > y, "oeq": lambda: x == y, "ole": lambda: x <= y,
+             "oge": lambda: x >= y, "uno": lambda: np.isnan(x) | np.isnan(y),
+             "one": lambda: (x != y) & ~np.isnan(x) & ~np.isnan(y),
+             "slt": lambda: x < y, "eq": lambda: x == y, "ne": lambda: x != y}[pred]()
+        return V(self, np.asarray(r), "i1")
+
+    def select(self, c: V, a: V, b: V) -> V:
+        return V(self, np.where(c.h, a.h, b.h).astype(_NP[a.ty]), a.ty)
+
+    def cast(self, how: str, a: V, ty: str) -> V:
+        x = np.asarray(a.h)
+        if how == "bitcast":
+            r = x.view(_NP[ty])
+        elif how == "zext" and a.ty != "i1":
+            r = x.view(_UNSIGNED[a.ty]).astype(_NP[ty])
+        else:  # fpext, fptrunc, trunc (wraps), sext, sitofp, zext of i1
+            r = x.astype(_NP[ty])
+        return V(self, r, ty)
+
+    def call(self, name: str, a: V, b: V | None = None) -> V:
+        return V(self, np.abs(a.h) if name == "fabs" else np.copysign(a.h, b.h), a.ty)
+
+    def load(self, idx: V) -> V:
+        return V(self, TABLE[idx.h], "double")
+
+
+def evaluate(fn: Callable[..., V], *args) -> np.ndarray:
+    """What the compiled function computes, on float32 arrays (elementwise)."""
+    be = _Numpy()
+    with np.errstate(all="ignore"):
+        vs = [V(be, np.asarray(a, dtype=np.float32), "float") for a in args]
+        return np.asarray(fn(*vs).h, dtype=np.float32)
+
+
+def fold(op: Op, *values: float) -> float:
+    """The f32 value the compiled function gives for constant operands (passes/simplify.py)."""
+    return float(evaluate(FUNCTIONS[op][1], *(np.array([v], dtype=np.float32) for v in values))[0])
