@@ -195,21 +195,21 @@ def _sin(x: V) -> V:
     r, q = _reduce(x)
     s, c = _sin_cos(r)
     v = select((q & 1).cmp("ne", 0), c, s)
-    v = select((q & 2).cmp("ne", 0), 0.0 - v, v)
+    v = select((q & 2).cmp("ne", 0), v * -1.0, v)
     return select(x.cmp("oeq", 0.0), x, v.to("fptrunc", "float"))  # sin(-0) = -0
 
 
 def _cos(x: V) -> V:
     r, q = _reduce(x)
     s, c = _sin_cos(r)
-    v = select((q & 1).cmp("ne", 0), 0.0 - s, c)
-    return select((q & 2).cmp("ne", 0), 0.0 - v, v).to("fptrunc", "float")
+    v = select((q & 1).cmp("ne", 0), s * -1.0, c)
+    return select((q & 2).cmp("ne", 0), v * -1.0, v).to("fptrunc", "float")
 
 
 def _tan(x: V) -> V:
     r, q = _reduce(x)
     s, c = _sin_cos(r)
-    v = select((q & 1).cmp("ne", 0), (0.0 - c) / s, s / c)
+    v = select((q & 1).cmp("ne", 0), (c * -1.0) / s, s / c)
     return select(x.cmp("oeq", 0.0), x, v.to("fptrunc", "float"))
 
 
@@ -292,7 +292,7 @@ def _pow(x: V, y: V) -> V:
     yr, yi = _round(select(small, yd, 0.0))
     integer = select(small, yr.cmp("oeq", yd), ay.cmp("oeq", ay))
     odd = small & integer & (yi & 1).cmp("ne", 0)
-    v = select(x.to("bitcast", "i32").cmp("slt", 0) & odd, 0.0 - v, v)
+    v = select(x.to("bitcast", "i32").cmp("slt", 0) & odd, v * -1.0, v)
     bad = xd.cmp("olt", 0.0) & ax.cmp("one", math.inf) & (integer ^ yd.cmp("oeq", yd))  # x < 0, y finite non-int
     v = select(bad, math.nan, v)
     v = select(xd.cmp("uno", yd), xd + yd, v)

@@ -1,0 +1,250 @@
+"""The vectorisable f32 math functions (ir/vecmath.py, codegen/vecmath.py; the CPU under fast_math).
+
+- accuracy: on a dense sweep of f32 bit patterns (and special values), each function is within 1 ulp of the
+  exact value (numpy's float64 function), NaN where it is NaN, and the special values (zeros of both signs,
+  infinities, NaN, atan2's quadrants, pow's C99 cases) equal the float64 result rounded, sign of zero included;
+- the numpy model is what the compiled code computes, bit for bit, in the vectorised loop body and in its scalar
+  remainder (same function, no contraction), and in a kernel without a loop;
+- the optimised LLVM IR of a loop calling cos / atan2 is vector code without a libm call (fails if the lowering
+  goes back to libm), and fast_math=False still calls libm;
+- gradients of f32 kernels using them agree with central differences of the same expression in float64.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import simgrad as ti
+from simgrad.ir import vecmath as vm
+from simgrad.ir.ops import Op
+from simgrad.runtime.jit import get_jit
+
+UNARY = {"sin": np.sin, "cos": np.cos, "tan": np.tan, "atan": np.arctan, "exp": np.exp, "log": np.log,
+         "tanh": np.tanh}
+ALGO = {name: fn for _, (name, fn) in vm.FUNCTIONS.items()} | {"atan": vm.ATAN[1]}
+SPECIAL = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1.0, -1.0, 0.5, -0.5, 2.0, -2.0, 3.0, -3.0, 1e-45, -1e-45,
+                    1.1754944e-38, 3.4028235e38, -3.4028235e38, 1e-7, 88.72, 88.73, -103.9, -104.0, 1.5707964,
+                    3.1415927, 1e7, 16777216.0, 16777217.0, 2.5, -2.5], dtype=np.float32)
+
+
+def _sweep(stride: int = 8191) -> np.ndarray:
+    return np.arange(0, 2**32, stride, dtype=np.uint64).astype(np.uint32).view(np.float32)
+
+
+def _ulp_error(got: np.ndarray, exact: np.ndarray) -> np.ndarray:
+    """|got - exact| in units of the f32 ulp at `exact`; 0 where both are NaN or got is `exact` rounded."""
+    with np.errstate(all="ignore"):
+        e = np.floor(np.log2(np.maximum(np.abs(exact), 2.0**-126)))
+        ulp = 2.0 ** (np.minimum(e, 127) - 23)
+        err = np.abs(got.astype(np.float64) - exact) / ulp
+        same = (got == exact.astype(np.float32)) | (np.isnan(got) & np.isnan(exact))
+    return np.where(same, 0.0, np.where(np.isnan(err), np.inf, err))
+
+
+def _same_bits(got: np.ndarray, want: np.ndarray) -> np.ndarray:
+    return (got.view(np.uint32) == want.view(np.uint32)) | (np.isnan(got) & np.isnan(want))
+
+
+@pytest.mark.parametrize("name", sorted(UNARY))
+def test_unary_within_one_ulp_on_a_dense_sweep(name):
+    x = np.concatenate([_sweep(), SPECIAL])
+    got = vm.evaluate(ALGO[name], x)
+    with np.errstate(all="ignore"):
+        exact = UNARY[name](x.astype(np.float64))
+    err = _ulp_error(got, exact)
+    assert err.max() <= 1.0, f"{name}({x[err.argmax()]!r}) = {got[err.argmax()]!r}, exact {exact[err.argmax()]!r}"
+    with np.errstate(all="ignore"):
+        want = exact.astype(np.float32)
+    n = len(SPECIAL)
+    assert _same_bits(got[-n:], want[-n:]).all(), list(zip(SPECIAL, got[-n:], want[-n:]))
+
+
+@pytest.mark.parametrize("name,ref", [("atan2", np.arctan2), ("pow", np.power)])
+def test_binary_within_one_ulp_and_special_cases(name, ref):
+    rng = np.random.default_rng(1)
+    x = _sweep(16381)
+    if name == "atan2":
+        a, b = x, rng.standard_normal(x.size).astype(np.float32) * np.float32(10) ** rng.integers(-30, 30, x.size)
+    else:  # every base; exponents that keep |result| mostly finite, integers for negative bases
+        a = x
+        b = (rng.standard_normal(x.size) * 4).astype(np.float32)
+        b = np.where(a < 0, np.round(b), b).astype(np.float32)
+    b = b.astype(np.float32)
+    got = vm.evaluate(ALGO[name], a, b)
+    with np.errstate(all="ignore"):
+        exact = ref(a.astype(np.float64), b.astype(np.float64))
+    err = _ulp_error(got, exact)
+    i = err.argmax()
+    assert err.max() <= 1.0, f"{name}({a[i]!r}, {b[i]!r}) = {got[i]!r}, exact {exact[i]!r}"
+    sa, sb = (s.reshape(-1).astype(np.float32) for s in np.meshgrid(SPECIAL, SPECIAL))
+    got = vm.evaluate(ALGO[name], sa, sb)
+    with np.errstate(all="ignore"):
+        exact = ref(sa.astype(np.float64), sb.astype(np.float64))
+    err = _ulp_error(got, exact)
+    assert err.max() <= 1.0
+    with np.errstate(over="ignore"):
+        want = exact.astype(np.float32)
+    zero = want == 0  # signed zeros and the rest of the exact cases
+    bad = [(a, b, g, w) for a, b, g, w in zip(sa[zero], sb[zero], got[zero], want[zero]) if not _same_bits(g, w)]
+    assert not bad
+    ok = _same_bits(got, want) | ~(np.isinf(want) | np.isnan(want) | (np.abs(want) == 1) | (want == 0))
+    assert ok.all(), list(zip(sa[~ok], sb[~ok], got[~ok], want[~ok]))
+
+
+def test_sin_cos_reduce_huge_arguments_exactly():
+    """Every f32 exponent from 2**20 up: the reduction by 2/pi is exact, not only Cody-Waite's small range."""
+    rng = np.random.default_rng(2)
+    bits = (rng.integers(147 << 23, 255 << 23, 200000)).astype(np.uint32)
+    x = bits.view(np.float32)
+    for name in ("sin", "cos", "tan"):
+        err = _ulp_error(vm.evaluate(ALGO[name], x), UNARY[name](x.astype(np.float64)))
+        assert err.max() <= 1.0, name
+
+
+_KERNEL_OPS = {"sin": ti.sin, "cos": ti.cos, "tan": ti.tan, "exp": ti.exp, "log": ti.log, "tanh": ti.tanh}
+
+
+def test_compiled_code_is_the_model_bit_for_bit_vector_and_scalar():
+    """n = 16k + 13: the vectorised body and its scalar remainder (and a loop-free kernel) all give the model's
+    bits. Without flushing, so subnormal operands and results count too."""
+    ti.init(arch=ti.cpu, flush_denormals=False, cpu_max_num_threads=1)
+    rng = np.random.default_rng(3)
+    n = 16 * 3000 + 13
+    xs = np.concatenate([SPECIAL, rng.integers(0, 2**32, n - len(SPECIAL), dtype=np.uint64).astype(np.uint32)
+                         .view(np.float32)]).astype(np.float32)
+    ys = (rng.standard_normal(n) * 3).astype(np.float32)
+    x, y = ti.field(ti.f32, n), ti.field(ti.f32, n)
+    out = ti.field(ti.f32, (8, n))
+    x.from_numpy(xs)
+    y.from_numpy(ys)
+
+    @ti.kernel
+    def run():
+        for i in range(n):
+            out[0, i] = ti.sin(x[i])
+            out[1, i] = ti.cos(x[i])
+            out[2, i] = ti.tan(x[i])
+            out[3, i] = ti.exp(x[i])
+            out[4, i] = ti.log(x[i])
+            out[5, i] = ti.tanh(x[i])
+            out[6, i] = ti.atan2(x[i], y[i])
+            out[7, i] = ti.pow(ti.abs(x[i]), y[i])
+
+    run()
+    got = out.to_numpy()
+    names = ["sin", "cos", "tan", "exp", "log", "tanh"]
+    for k, name in enumerate(names):
+        want = vm.evaluate(ALGO[name], xs)
+        assert _same_bits(got[k], want).all(), (name, xs[~_same_bits(got[k], want)][:5])
+    assert _same_bits(got[6], vm.evaluate(ALGO["atan2"], xs, ys)).all()
+    assert _same_bits(got[7], vm.evaluate(ALGO["pow"], np.abs(xs), ys)).all()
+
+    s = ti.field(ti.f32, ())
+    r = ti.field(ti.f32, ())
+
+    @ti.kernel
+    def one():
+        r[None] = ti.cos(s[None]) + ti.atan2(s[None], 0.5)
+
+    for v in (0.3, -2.5, 1e30, 7.0):
+        s[None] = v
+        one()
+        want = np.float32(vm.evaluate(ALGO["cos"], [v])[0] + vm.evaluate(ALGO["atan2"], [v], [0.5])[0])
+        assert r[None] == want
+
+
+def _optimized_task(kernel) -> str:
+    text = kernel._instance_for((), "").llvm_text
+    opt = str(get_jit()._optimized(text, 0))
+    return opt.split("define internal void @sg_kernel_task1")[1].split("\n}")[0]
+
+
+@pytest.mark.parametrize("fast_math", [True, False])
+def test_a_loop_calling_cos_and_atan2_vectorises_without_libm(fast_math):
+    """fast_math: vector instructions and no call of cosf/atan2f in the loop (fails if the lowering goes back
+    to libm); fast_math=False: the libm calls, as before."""
+    if ti.lang.impl.current_cfg().arch == ti.cuda:
+        pytest.skip("the CPU task's LLVM IR is checked on the CPU")
+    ti.init(arch=ti.cpu, fast_math=fast_math)
+    n = 4096
+    x, y = ti.field(ti.f32, n), ti.field(ti.f32, n)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            y[i] = ti.cos(x[i]) * ti.atan2(x[i], 2.0) + ti.exp(x[i])
+
+    k()
+    task = _optimized_task(k)
+    if fast_math:
+        assert "vector.body" in task and re.search(r"fmul <\d+ x double>", task)
+        assert not re.search(r"call [^\n]*@(cosf|atan2f|expf|llvm\.cos|llvm\.exp)", task)
+    else:
+        assert re.search(r"call [^\n]*@(cosf|llvm\.cos\.f32)", task) and "@atan2f" in task
+        assert "sg_vm_" not in task
+
+
+_GRAD_CASES = {
+    "sin": (lambda b, x, y: b.sin(x), lambda x, y: np.sin(x)),
+    "cos": (lambda b, x, y: b.cos(x * 3.0), lambda x, y: np.cos(x * 3.0)),
+    "tan": (lambda b, x, y: b.tan(x), lambda x, y: np.tan(x)),
+    "exp": (lambda b, x, y: b.exp(x), lambda x, y: np.exp(x)),
+    "log": (lambda b, x, y: b.log(x + 2.0), lambda x, y: np.log(x + 2.0)),
+    "tanh": (lambda b, x, y: b.tanh(x * 2.0), lambda x, y: np.tanh(x * 2.0)),
+    "atan2": (lambda b, x, y: b.atan2(x, y), lambda x, y: np.arctan2(x, y)),
+    "pow": (lambda b, x, y: b.pow(x + 2.0, y), lambda x, y: np.power(x + 2.0, y)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_GRAD_CASES))
+def test_gradients_match_central_differences_in_f64(name):
+    """The adjoint of an f32 kernel (its derivatives call the same vectorisable functions) against central
+    differences of the expression in float64."""
+    ti.init(arch=ti.cpu)
+    expr, ref = _GRAD_CASES[name]
+    n = 64
+    rng = np.random.default_rng(4)
+    xs = rng.uniform(-1.2, 1.2, n).astype(np.float32)
+    ys = rng.uniform(0.3, 2.0, n).astype(np.float32)
+    x = ti.field(ti.f32, n, needs_grad=True)
+    y = ti.field(ti.f32, n, needs_grad=True)
+    loss = ti.field(ti.f32, (), needs_grad=True)
+    x.from_numpy(xs)
+    y.from_numpy(ys)
+
+    @ti.kernel
+    def f():
+        for i in x:
+            loss[None] += expr(ti, x[i], y[i])
+
+    with ti.ad.Tape(loss):
+        f()
+    h = 1e-6
+    xd, yd = xs.astype(np.float64), ys.astype(np.float64)
+    gx = (ref(xd + h, yd) - ref(xd - h, yd)) / (2 * h)
+    gy = (ref(xd, yd + h) - ref(xd, yd - h)) / (2 * h)
+    np.testing.assert_allclose(x.grad.to_numpy(), gx, rtol=2e-5, atol=2e-5)
+    if name in ("atan2", "pow"):
+        np.testing.assert_allclose(y.grad.to_numpy(), gy, rtol=2e-5, atol=2e-5)
+
+
+def test_constants_fold_as_the_code_computes():
+    """A math call on constants folds through the model (passes/simplify.py) under fast_math: equal to the run-time
+    value of the same operand."""
+    ti.init(arch=ti.cpu)
+    a, b = ti.field(ti.f32, ()), ti.field(ti.f32, 2)
+
+    @ti.kernel
+    def k():
+        c = ti.cast(1e30, ti.f32)  # a local assigned once: a constant operand after promote
+        b[0] = ti.sin(c)
+        b[1] = ti.sin(a[None])
+
+    a[None] = 1e30
+    k()
+    assert b[0] == b[1] == vm.evaluate(ALGO["sin"], [1e30])[0]
+    assert "sg_vm_sinf(float 0x" not in k._instance_for((), "").llvm_text  # folded: no call on a constant
+    assert Op.SIN in vm.FUNCTIONS
