@@ -18,10 +18,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from decimal import Decimal, getcontext
+from decimal import Decimal, localcontext
 
 import numpy as np
 
+from simgrad import dtypes as dt
+from simgrad.ir import numeric
 from simgrad.ir.ops import Op
 
 # -- constants ------------------------------------------------------------------------------------------------
@@ -65,12 +67,50 @@ def _two_over_pi_table() -> np.ndarray:
 
 TABLE = _two_over_pi_table()  # E = 255 (inf, NaN) is zero: inf * 0 is NaN, which is sin(inf)
 
-getcontext().prec = 40
-_LN2 = Decimal(2).ln()
-LN2 = float(_LN2)
-LN2_HI = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", LN2))[0] & ~((1 << 21) - 1)))[0]
-LN2_LO = float(_LN2 - Decimal(LN2_HI))
+
+def _split3(num: int, shift: int) -> tuple[float, float, float]:
+    """num / 2**shift as three doubles, each the nearest to what the previous ones leave."""
+    out: list[float] = []
+    with localcontext() as ctx:
+        ctx.prec = 80
+        for _ in range(3):
+            d = Decimal(num) / (Decimal(2) ** shift) - sum((Decimal(v) for v in out), Decimal(0))
+            out.append(float(d))
+    return out[0], out[1], out[2]
+
+
+def _atan_table() -> np.ndarray:
+    """atan(k/16), k = 0..16, as (hi, lo) pairs: argument halving (atan x = 2 atan(x / (1 + sqrt(1 + x*x))))
+    three times, then the series, in 60-digit decimals."""
+    out = []
+    with localcontext() as ctx:
+        ctx.prec = 60
+        for k in range(17):
+            x = Decimal(k) / 16
+            for _ in range(3):
+                x = x / (1 + (1 + x * x).sqrt())
+            total, term, n = Decimal(0), x, 0
+            while abs(term) > Decimal(10) ** -58:
+                total += term / (2 * n + 1)
+                term = -term * x * x
+                n += 1
+            v = 8 * total
+            hi = float(v)
+            out += [hi, float(v - Decimal(hi))]
+    return np.array(out + [0.0] * (64 - len(out)))  # 32 pairs: an index masked with 31 stays inside
+
+
+ATAN16 = _atan_table()
+TABLES = {"two_over_pi": TABLE, "atan16": ATAN16}
+
+with localcontext() as _ctx:
+    _ctx.prec = 40
+    _LN2 = Decimal(2).ln()
+    LN2 = float(_LN2)
+    LN2_HI = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", LN2))[0] & ~((1 << 21) - 1)))[0]
+    LN2_LO = float(_LN2 - Decimal(LN2_HI))
 PI = math.pi
+PIO2_1, PIO2_2, PIO2_3 = _split3(_pi_scaled(_BITS), _BITS + 1)  # pi/2 to ~160 bits
 MAGIC = 6755399441055744.0  # 1.5 * 2**52: t + MAGIC - MAGIC is t rounded to an integer (|t| < 2**51)
 MAGIC_BITS = 0x4338000000000000
 
@@ -179,7 +219,7 @@ def _reduce(x: V) -> tuple[V, V]:
     e = (x.to("bitcast", "i32") >> 23) & 255
     idx = e.to("zext", "i64") * 3
     xd = x.to("fpext", "double")
-    t0, t1, t2 = (x.be.load(idx + c) for c in range(3))
+    t0, t1, t2 = (x.be.load("two_over_pi", idx + c) for c in range(3))
     p0, p1, p2 = xd * t0, xd * t1, xd * t2  # exact
     nd, n = _round(p0 + p1)
     f = ((p0 - nd) + p1) + p2  # p0 - nd exact
@@ -300,6 +340,101 @@ def _pow(x: V, y: V) -> V:
     return v.to("fptrunc", "float")
 
 
+# -- f64: double arithmetic with exact error terms (fma), libm for the lanes outside the fast path ----------------
+
+_SIN64 = [(-1.0) ** k / math.factorial(2 * k + 1) for k in range(9)]  # |r| <= pi/4: r**19/19! < 1e-19
+_COS64 = [(-1.0) ** k / math.factorial(2 * k) for k in range(10)]
+_ATAN64 = [(-1.0) ** k / (2 * k + 1) for k in range(7)]  # |q| <= 1/32: q**14/15 < 2**-74
+
+
+def _two_prod(a: V, b: V) -> tuple[V, V]:
+    p = a * b
+    return p, a.be.call("fma", a, b, p * -1.0)
+
+
+def _two_sum(a: V, b) -> tuple[V, V]:
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (bb * -1.0 + b)
+
+
+def _fast_two_sum(a, b: V) -> tuple[V, V]:
+    """|a| >= |b| (or a = 0)."""
+    s = b + a
+    return s, b - (s - a)
+
+
+def _sin_cos64(x: V) -> tuple[V, V, V]:
+    """sin and cos of r, and q, for x = r + q pi/2 (|x| < 2**30): Cody-Waite with pi/2 in three doubles, the
+    first step exact by fma, the second exact by two_prod/two_sum, so r = rh + rl to ~2**-100 relative."""
+    nd, n = _round(x * (2.0 / PI))
+    a = x.be.call("fma", nd * -1.0, x.be.const(PIO2_1, "double"), x)  # x - n P1: exact
+    bh, bl = _two_prod(nd, x.be.const(PIO2_2, "double"))
+    s, e = _two_sum(a, bh * -1.0)
+    rh, rl = _two_sum(s, (e - bl) - nd * PIO2_3)
+    z = rh * rh
+    sin = rh + (rh * z * _poly(z, _SIN64[1:]) + rl * (1.0 - z * 0.5))
+    hz = z * 0.5
+    w = 1.0 - hz
+    cos = w + (((1.0 - w) - hz) + (z * z * _poly(z, _COS64[2:]) - rh * rl))
+    return sin, cos, n & 3
+
+
+_HUGE64 = 2.0 ** 30
+
+
+def _sin64(x: V) -> V:
+    s, c, q = _sin_cos64(x)
+    v = select((q & 1).cmp("ne", 0), c, s)
+    v = select((q & 2).cmp("ne", 0), v * -1.0, v)
+    v = select(x.cmp("oeq", 0.0), x, v)
+    return x.be.fallback(x.abs().cmp("olt", _HUGE64) ^ True, "sin", [x], v)
+
+
+def _cos64(x: V) -> V:
+    s, c, q = _sin_cos64(x)
+    v = select((q & 1).cmp("ne", 0), s * -1.0, c)
+    v = select((q & 2).cmp("ne", 0), v * -1.0, v)
+    return x.be.fallback(x.abs().cmp("olt", _HUGE64) ^ True, "cos", [x], v)
+
+
+def _atan2_64(y: V, x: V) -> V:
+    """t = min/max of |x|, |y| (with its rounding error tl); atan t = atan(k/16) + atan u, u = (t - c)/(1 + t c)
+    with c = k/16 nearest t (|u| <= 1/32), u and the sums kept as double-doubles; then pi/2 - a, pi - a.
+    libm for inf, NaN, two zeros and extreme magnitudes (subnormal ratios)."""
+    ax, ay = x.abs(), y.abs()
+    swap = ay.cmp("ogt", ax)
+    num, den = select(swap, ax, ay), select(swap, ay, ax)
+    t = num / den
+    tl = x.be.call("fma", t * -1.0, den, num) / den  # num/den = t + tl
+    kd, k = _round(t * 16.0)
+    c = kd * 0.0625
+    d = t - c  # exact
+    ph, pe = _two_prod(t, c)
+    dh, de = _fast_two_sum(x.be.const(1.0, "double"), ph)
+    dl = de + pe + tl * c  # 1 + (t + tl) c = dh + dl
+    q = d / dh
+    ql = ((x.be.call("fma", q * -1.0, dh, d) + tl) - q * dl) / dh  # u = q + ql
+    z = q * q
+    idx = (k & 31) * 2  # in the table whatever t is (NaN lanes go to libm)
+    h, lo = _fast_two_sum(x.be.load("atan16", idx), q)
+    lo = lo + (x.be.load("atan16", idx + 1) + (ql + q * z * _poly(z, _ATAN64[1:])))
+    for cond, ch, cl in ((swap, PIO2_1, PIO2_2), (x.to("bitcast", "i64").cmp("slt", 0), 2 * PIO2_1, 2 * PIO2_2)):
+        s, e = _two_sum(x.be.const(ch, "double"), h * -1.0)
+        h2, lo2 = _fast_two_sum(s, e + (lo * -1.0 + cl))
+        h, lo = select(cond, h2, h), select(cond, lo2, lo)
+    v = (h + lo).copysign(y)
+    ok = ax.cmp("olt", 2.0 ** 990) & ay.cmp("olt", 2.0 ** 990) & den.cmp("ogt", 2.0 ** -900) \
+        & (t.cmp("ogt", 2.0 ** -900) | num.cmp("oeq", 0.0))
+    return x.be.fallback(ok ^ True, "atan2", [y, x], v)
+
+
+#: Op -> (function name, algorithm on f64 values)
+FUNCTIONS64: dict[Op, tuple[str, Callable[..., V]]] = {
+    Op.SIN: ("sin", _sin64), Op.COS: ("cos", _cos64), Op.ATAN2: ("atan2", _atan2_64),
+}
+
+
 #: Op -> (function name, algorithm on f32 values)
 FUNCTIONS: dict[Op, tuple[str, Callable[..., V]]] = {
     Op.SIN: ("sin", _sin), Op.COS: ("cos", _cos), Op.TAN: ("tan", _tan), Op.ATAN2: ("atan2", _atan2),
@@ -363,21 +498,54 @@ class _Numpy:
             r = x.astype(_NP[ty])
         return V(self, r, ty)
 
-    def call(self, name: str, a: V, b: V | None = None) -> V:
-        return V(self, np.abs(a.h) if name == "fabs" else np.copysign(a.h, b.h), a.ty)
+    def call(self, name: str, *args: V) -> V:
+        a = args[0].h
+        if name == "fabs":
+            r = np.abs(a)
+        elif name == "copysign":
+            r = np.copysign(a, args[1].h)
+        else:  # fma, only where its result is exact: a * b = p + e exactly (Dekker), then (p + c) + e
+            p, e = _dekker(a, args[1].h)
+            r = (p + args[2].h) + e
+        return V(self, np.asarray(r), args[0].ty)
 
-    def load(self, idx: V) -> V:
-        return V(self, TABLE[idx.h], "double")
+    def load(self, table: str, idx: V) -> V:
+        return V(self, TABLES[table][idx.h], "double")
+
+    def fallback(self, cond: V, name: str, args: list[V], fast: V) -> V:
+        out = np.array(fast.h, dtype=np.float64, copy=True).reshape(-1)
+        c = np.broadcast_to(cond.h, out.shape)
+        vals = [np.broadcast_to(a.h, out.shape) for a in args]
+        with numeric.flushing(frozenset()):
+            for i in np.flatnonzero(c):
+                out[i] = numeric.libm(name, dt.f64, *(float(v[i]) for v in vals))
+        return V(self, out.reshape(np.shape(fast.h)), "double")
 
 
-def evaluate(fn: Callable[..., V], *args) -> np.ndarray:
-    """What the compiled function computes, on float32 arrays (elementwise)."""
+def _dekker(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """a * b = p + e exactly (Veltkamp splitting; |a|, |b| < 2**995)."""
+    def split(v):
+        c = v * 134217729.0
+        hi = c - (c - v)
+        return hi, v - hi
+
+    p = a * b
+    ah, al = split(a)
+    bh, bl = split(b)
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+def evaluate(fn: Callable[..., V], *args, f64: bool = False) -> np.ndarray:
+    """What the compiled function computes, on float32 (f64: float64) arrays, elementwise."""
     be = _Numpy()
+    ty, npt = ("double", np.float64) if f64 else ("float", np.float32)
     with np.errstate(all="ignore"):
-        vs = [V(be, np.asarray(a, dtype=np.float32), "float") for a in args]
-        return np.asarray(fn(*vs).h, dtype=np.float32)
+        vs = [V(be, np.asarray(a, dtype=npt), ty) for a in args]
+        return np.asarray(fn(*vs).h, dtype=npt)
 
 
-def fold(op: Op, *values: float) -> float:
-    """The f32 value the compiled function gives for constant operands (passes/simplify.py)."""
-    return float(evaluate(FUNCTIONS[op][1], *(np.array([v], dtype=np.float32) for v in values))[0])
+def fold(op: Op, t: dt.DataType, *values: float) -> float:
+    """The value the compiled function gives for constant operands of type `t` (passes/simplify.py)."""
+    f64 = t is dt.f64
+    fn = (FUNCTIONS64 if f64 else FUNCTIONS)[op][1]
+    return float(evaluate(fn, *(np.array([v]) for v in values), f64=f64)[0])

@@ -47,9 +47,10 @@ def fold(s: Stmt, vector_math: bool = False):
             return None
         values.append(o.attrs["value"])
     t = s.operands[0].vtype
-    if vector_math and s.op in vecmath.FUNCTIONS and t in (dt.f32, dt.f16):
-        v = vecmath.fold(s.op, *values)
-        if numeric.flushes_subnormal(dt.f32, *values, v):
+    if vector_math and (s.op in vecmath.FUNCTIONS and t in (dt.f32, dt.f16)
+                        or s.op in vecmath.FUNCTIONS64 and t is dt.f64):
+        v = vecmath.fold(s.op, dt.f64 if t is dt.f64 else dt.f32, *values)
+        if numeric.flushes_subnormal(dt.f64 if t is dt.f64 else dt.f32, *values, v):
             return None  # the code under flush-to-zero reads and gives such values as zeros: not folded
         with np.errstate(over="ignore"):
             return float(np.float16(v)) if t is dt.f16 else v
