@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 
 import simgrad as ti
+from simgrad import dtypes as dt
+from simgrad.ir import numeric
 from simgrad.ir import vecmath as vm
 from simgrad.ir.ops import Op
 from simgrad.runtime.jit import get_jit
@@ -248,3 +250,136 @@ def test_constants_fold_as_the_code_computes():
     assert b[0] == b[1] == vm.evaluate(ALGO["sin"], [1e30])[0]
     assert "sg_vm_sinf(float 0x" not in k._instance_for((), "").llvm_text  # folded: no call on a constant
     assert Op.SIN in vm.FUNCTIONS
+
+
+# -- f64: sin, cos, atan2 (libm for the lanes outside the fast path) ------------------------------------------
+
+ALGO64 = {name: fn for _, (name, fn) in vm.FUNCTIONS64.items()}
+SPECIAL64 = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1.0, -1.0, np.pi / 2, np.pi, -np.pi, 2 * np.pi, 1e-310,
+                      -5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, 2.0 ** 30, -(2.0 ** 30) + 0.5, 1e22,
+                      6381956970095103 * 2.0 ** 797, 1e-8, 0.5, -3.0, 7.0])
+
+
+def _ulp_error64(got: np.ndarray, exact: np.ndarray) -> np.ndarray:
+    """As _ulp_error, for doubles against a long double (64-bit significand) reference."""
+    e = np.floor(np.log2(np.maximum(np.abs(exact.astype(np.float64)), 2.0**-1022)))
+    ulp = np.ldexp(np.longdouble(1), (np.minimum(e, 1023) - 52).astype(int))
+    with np.errstate(all="ignore"):
+        err = (np.abs(got.astype(np.longdouble) - exact) / ulp).astype(np.float64)
+        same = (got == exact.astype(np.float64)) | (np.isnan(got) & np.isnan(exact.astype(np.float64)))
+    return np.where(same, 0.0, np.where(np.isnan(err), np.inf, err))
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).nmant < 63, reason="needs an 80-bit long double reference")
+@pytest.mark.parametrize("name,ref", [("sin", np.sin), ("cos", np.cos)])
+def test_f64_sin_cos_within_one_ulp(name, ref):
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(-4, 4, 100000), rng.uniform(-1e6, 1e6, 50000),
+                        rng.uniform(-2.0**30, 2.0**30, 50000), np.pi / 2 * np.arange(-2000, 2000), SPECIAL64])
+    got = vm.evaluate(ALGO64[name], x, f64=True)
+    fast = np.abs(x) < 2.0**30  # beyond, and inf and NaN, the lane is libm's own (on this glibc, cos of the
+    # classic worst case 6381956970095103 * 2**797 is 8 ulp off): equal to it bit for bit
+    with np.errstate(all="ignore"):
+        err = _ulp_error64(got[fast], ref(x[fast].astype(np.longdouble)))
+    assert err.max() <= 1.0, f"{name}({x[fast][err.argmax()]!r}): {err.max()} ulp"
+    libm = np.array([numeric.libm(name, dt.f64, float(v)) for v in x[~fast]])
+    assert _same64(got[~fast], libm).all()
+    zeros = x == 0
+    assert _same64(got[zeros], np.sin(x[zeros]) if name == "sin" else np.ones(zeros.sum())).all()
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).nmant < 63, reason="needs an 80-bit long double reference")
+def test_f64_atan2_within_one_ulp_and_special_cases():
+    rng = np.random.default_rng(6)
+    n = 200000
+    y = rng.standard_normal(n) * 10.0 ** rng.integers(-20, 20, n)
+    x = rng.standard_normal(n) * 10.0 ** rng.integers(-20, 20, n)
+    got = vm.evaluate(ALGO64["atan2"], y, x, f64=True)
+    err = _ulp_error64(got, np.arctan2(y.astype(np.longdouble), x.astype(np.longdouble)))
+    assert err.max() <= 1.0, (y[err.argmax()], x[err.argmax()], err.max())
+    a, b = (v.reshape(-1) for v in np.meshgrid(SPECIAL64, SPECIAL64))
+    got = vm.evaluate(ALGO64["atan2"], a, b, f64=True)
+    want = np.arctan2(a, b)
+    assert (_ulp_error64(got, np.arctan2(a.astype(np.longdouble), b.astype(np.longdouble))) <= 1).all()
+    exact = (want == 0) | np.isnan(want) | (np.abs(want) == np.float64(np.pi)) | (np.abs(want) == np.pi / 2)
+    assert _same64(got[exact], want[exact]).all()
+
+
+def _same64(got: np.ndarray, want: np.ndarray) -> np.ndarray:
+    return (got.view(np.int64) == want.view(np.int64)) | (np.isnan(got) & np.isnan(want))
+
+
+def test_f64_compiled_code_is_the_model_with_libm_lanes():
+    """The vectorised loop, its remainder and the lanes that take libm (huge, inf, NaN, zeros) give the model's
+    bits."""
+    ti.init(arch=ti.cpu, flush_denormals=False, cpu_max_num_threads=1)
+    rng = np.random.default_rng(7)
+    n = 16 * 500 + 11
+    xs = np.concatenate([SPECIAL64, rng.uniform(-50, 50, n - 2 * len(SPECIAL64)), SPECIAL64[::-1]])
+    ys = np.concatenate([rng.standard_normal(n - len(SPECIAL64)), SPECIAL64])
+    x, y = ti.field(ti.f64, n), ti.field(ti.f64, n)
+    out = ti.field(ti.f64, (3, n))
+    x.from_numpy(xs)
+    y.from_numpy(ys)
+
+    @ti.kernel
+    def run():
+        for i in range(n):
+            out[0, i] = ti.sin(x[i])
+            out[1, i] = ti.cos(x[i])
+            out[2, i] = ti.atan2(y[i], x[i])
+
+    run()
+    got = out.to_numpy()
+    assert _same64(got[0], vm.evaluate(ALGO64["sin"], xs, f64=True)).all()
+    assert _same64(got[1], vm.evaluate(ALGO64["cos"], xs, f64=True)).all()
+    assert _same64(got[2], vm.evaluate(ALGO64["atan2"], ys, xs, f64=True)).all()
+
+
+def test_f64_loop_vectorises_with_libm_only_in_the_masked_fallback():
+    """snow_phaseField's shape: f64 atan2 then cos in a loop. Vector double code; libm is reached only through
+    the fallback wrappers (their masked vector variant in the vector loop), never called directly."""
+    if ti.lang.impl.current_cfg().arch == ti.cuda:
+        pytest.skip("the CPU task's LLVM IR is checked on the CPU")
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    n = 4096
+    x, y = ti.field(ti.f64, n), ti.field(ti.f64, n)
+
+    @ti.kernel
+    def k():
+        for i in x:
+            a = ti.atan2(x[i], 0.7)
+            y[i] = 0.006 * (1.0 + 0.12 * ti.cos(6 * a)) - ti.sin(6 * a)
+
+    k()
+    task = _optimized_task(k)
+    assert "vector.body" in task and re.search(r"fmul <\d+ x double>", task)
+    assert re.search(r"@sg_vm_atan2_slow_v\d+", task) and re.search(r"@sg_vm_cos_slow_v\d+", task)
+    assert not re.search(r"call [^\n]*@(cos|sin|atan2|llvm\.cos\.f64|llvm\.sin\.f64)\(", task)
+
+
+@pytest.mark.parametrize("name", ["sin", "cos", "atan2"])
+def test_f64_gradients_match_central_differences(name):
+    ti.init(arch=ti.cpu, default_fp=ti.f64)
+    expr, ref = _GRAD_CASES[name]
+    n = 64
+    rng = np.random.default_rng(8)
+    xs, ys = rng.uniform(-3, 3, n), rng.uniform(-2, 2, n)
+    x = ti.field(ti.f64, n, needs_grad=True)
+    y = ti.field(ti.f64, n, needs_grad=True)
+    loss = ti.field(ti.f64, (), needs_grad=True)
+    x.from_numpy(xs)
+    y.from_numpy(ys)
+
+    @ti.kernel
+    def f():
+        for i in x:
+            loss[None] += expr(ti, x[i], y[i])
+
+    with ti.ad.Tape(loss):
+        f()
+    h = 1e-6
+    np.testing.assert_allclose(x.grad.to_numpy(), (ref(xs + h, ys) - ref(xs - h, ys)) / (2 * h), rtol=1e-7, atol=1e-8)
+    if name == "atan2":
+        np.testing.assert_allclose(y.grad.to_numpy(), (ref(xs, ys + h) - ref(xs, ys - h)) / (2 * h), rtol=1e-7,
+                                   atol=1e-8)
