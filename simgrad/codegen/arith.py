@@ -8,8 +8,8 @@ from collections.abc import Callable
 
 from simgrad import dtypes as dt
 from simgrad.codegen import vecmath
-from simgrad.ir.vecmath import FUNCTIONS, FUNCTIONS64
 from simgrad.ir.opdefs import OPS, Compare, Instr, Intrinsic, Libm, Op
+from simgrad.ir.vecmath import FUNCTIONS, FUNCTIONS64
 
 
 def _sfx(t: dt.DataType) -> str:

@@ -1,6 +1,10 @@
-"""The LLVM backend of ir/vecmath.py: each f32 math function as an internal always-inline function of plain
-arithmetic and selects, so a loop that calls it vectorises (a libm call would keep the loop scalar). Used on
-the CPU with fast_math (KernelCodegen.vector_math); the GPU keeps libdevice, fast_math=False keeps libm."""
+"""The LLVM backend of ir/vecmath.py: the math functions' vector versions, which a vectorised loop calls in place
+of libm. A math call stays the scalar libm call (`nobuiltin`, so LLVM keeps it as written) and carries LLVM's
+vector-function ABI attribute naming our vector functions of 2..16 lanes: the loop vectoriser, which cannot
+vectorise a libm call otherwise (llvmlite gives it no vector math library), calls them for whole vectors. A loop
+that does not vectorise keeps libm's scalar code, as before (faster there than our f64-based code: measured on
+snow_phaseField, whose loops do not vectorise, inlining our functions made a step 1.7-2.2x slower). Used on the
+CPU under fast_math (KernelCodegen.vector_math); the GPU keeps libdevice, fast_math=False plain libm calls."""
 
 from __future__ import annotations
 
@@ -10,10 +14,10 @@ import struct
 from simgrad.ir import vecmath as vm
 from simgrad.ir.ops import Op
 
-_INTRINSIC = {"fabs": "llvm.fabs.f64", "copysign": "llvm.copysign.f64", "fma": "llvm.fma.f64"}
-#: the vector widths whose masked variants a fallback to libm has (the loop vectoriser calls them for the lanes
-#: outside the fast path: LLVM's VFABI, `vector-function-abi-variant`)
-_WIDTHS = (2, 4, 8, 16)
+#: lanes of the vector versions, by element type (AVX-512 holds 8 doubles, 16 floats)
+WIDTHS = {"double": (2, 4, 8), "float": (4, 8, 16)}
+_SLOW_WIDTHS = (2, 4, 8, 16)
+_USED = "@llvm.compiler.used"
 
 
 def _literal(v, ty: str) -> str:
@@ -24,16 +28,22 @@ def _literal(v, ty: str) -> str:
     return str(int(v))
 
 
-class _Text:
-    """Each operation as one LLVM instruction appended to `lines`."""
+_SUFFIX = {"double": "f64", "float": "f32", "i64": "i64", "i32": "i32", "i1": "i1", "ptr": "p0"}
 
-    def __init__(self) -> None:
+
+class _Text:
+    """Each operation as one LLVM instruction on vectors of `w` lanes."""
+
+    def __init__(self, w: int) -> None:
+        self.w = w
         self.lines: list[str] = []
         self.decls: set[str] = set()
         self.tables: set[str] = set()
         self.slow: set[tuple[str, int]] = set()  # libm functions the fallbacks call (name, arity)
         self.n = 0
-        self.block = "entry"
+
+    def t(self, ty: str) -> str:
+        return f"<{self.w} x {ty}>"
 
     def _new(self, text: str, ty: str) -> vm.V:
         self.n += 1
@@ -42,68 +52,54 @@ class _Text:
         return vm.V(self, name, ty)
 
     def const(self, v, ty: str) -> vm.V:
-        return vm.V(self, _literal(v, ty), ty)
+        return vm.V(self, f"splat ({ty} {_literal(v, ty)})", ty)
 
     def bin(self, op: str, a: vm.V, b: vm.V) -> vm.V:
-        return self._new(f"{op} {a.ty} {a.h}, {b.h}", a.ty)
+        return self._new(f"{op} {self.t(a.ty)} {a.h}, {b.h}", a.ty)
 
     def cmp(self, pred: str, a: vm.V, b: vm.V) -> vm.V:
         kind = "fcmp" if a.ty in ("double", "float") else "icmp"
-        return self._new(f"{kind} {pred} {a.ty} {a.h}, {b.h}", "i1")
+        return self._new(f"{kind} {pred} {self.t(a.ty)} {a.h}, {b.h}", "i1")
 
     def select(self, c: vm.V, a: vm.V, b: vm.V) -> vm.V:
-        return self._new(f"select i1 {c.h}, {a.ty} {a.h}, {b.ty} {b.h}", a.ty)
+        return self._new(f"select {self.t('i1')} {c.h}, {self.t(a.ty)} {a.h}, {self.t(b.ty)} {b.h}", a.ty)
 
     def cast(self, how: str, a: vm.V, ty: str) -> vm.V:
-        return self._new(f"{how} {a.ty} {a.h} to {ty}", ty)
+        return self._new(f"{how} {self.t(a.ty)} {a.h} to {self.t(ty)}", ty)
 
     def call(self, name: str, *args: vm.V) -> vm.V:
-        fn = _INTRINSIC[name]
-        self.decls.add(f"declare double @{fn}({', '.join(['double'] * len(args))})")
-        return self._new(f"call double @{fn}({', '.join(f'double {x.h}' for x in args)})", "double")
+        vt = self.t("double")
+        fn = f"llvm.{name}.v{self.w}f64"
+        self.decls.add(f"declare {vt} @{fn}({', '.join([vt] * len(args))})")
+        return self._new(f"call {vt} @{fn}({', '.join(f'{vt} {x.h}' for x in args)})", "double")
 
     def load(self, table: str, idx: vm.V) -> vm.V:
         self.tables.add(table)
-        size = vm.TABLES[table].size
-        p = self._new(f"getelementptr inbounds [{size} x double], ptr @sg_vm_{table}, i64 0, i64 {idx.h}", "ptr")
-        return self._new(f"load double, ptr {p.h}, align 8", "double")
+        w = self.w
+        p = self._new(f"getelementptr inbounds double, ptr @sg_vm_{table}, {self.t('i64')} {idx.h}", "ptr")
+        fn = f"llvm.masked.gather.v{w}f64.v{w}p0"
+        self.decls.add(f"declare {self.t('double')} @{fn}({self.t('ptr')}, {self.t('i1')}, {self.t('double')})")
+        return self._new(f"call {self.t('double')} @{fn}({self.t('ptr')} align 8 {p.h}, "
+                         f"{self.t('i1')} splat (i1 true), {self.t('double')} poison)", "double")
 
     def fallback(self, cond: vm.V, name: str, args: list[vm.V], fast: vm.V) -> vm.V:
-        """libm's `name` for the lanes where cond holds: a branch the vectoriser predicates, the call carrying
-        its masked vector variants."""
+        """libm's `name` for the lanes where cond holds (a call that does nothing when none does)."""
         self.slow.add((name, len(args)))
-        self.n += 1
-        slow, join = f"slow{self.n}", f"join{self.n}"
-        self.lines.append(f"  br i1 {cond.h}, label %{slow}, label %{join}")
-        self.lines.append(f"{slow}:")
-        r = f"%s{self.n}"
-        params = ", ".join(f"double {a.h}" for a in args)
-        self.lines.append(f"  {r} = call double @sg_vm_{name}_slow({params}) {_variant_attrs(name, len(args))}")
-        self.lines.append(f"  br label %{join}")
-        self.lines.append(f"{join}:")
-        out = self._new(f"phi double [ {r}, %{slow} ], [ {fast.h}, %{self.block} ]", "double")
-        self.block = join
-        return out
-
-
-def _variant_attrs(name: str, arity: int) -> str:
-    v = "v" * arity
-    variants = ",".join(f"_ZGV_LLVM_M{w}{v}_sg_vm_{name}_slow(sg_vm_{name}_slow_v{w})" for w in _WIDTHS)
-    return f'nounwind willreturn memory(none) "vector-function-abi-variant"="{variants}"'
+        vt = self.t("double")
+        params = ", ".join(f"{vt} {a.h}" for a in args)
+        r = self._new(f"call {vt} @sg_vm_{name}_slow_v{self.w}({params}, {self.t('i1')} {cond.h})", "double")
+        return self.select(cond, r, fast)
 
 
 def _slow_functions(name: str, arity: int) -> list[str]:
-    """The scalar libm wrapper and its masked vector variants (each active lane calls libm; none: nothing)."""
-    params = ", ".join(f"double %a{i}" for i in range(arity))
-    args = ", ".join(f"double %a{i}" for i in range(arity))
-    out = [f"define internal double @sg_vm_{name}_slow({params}) noinline nounwind willreturn memory(none) {{\n"
-           f"  %r = call double @{name}({args})\n  ret double %r\n}}"]
-    for w in _WIDTHS:
+    """Vector functions that call libm's `name` on the lanes their mask selects (the others: the first operand)."""
+    out = []
+    for w in _SLOW_WIDTHS:
         vt = f"<{w} x double>"
         lines = [f"define internal {vt} @sg_vm_{name}_slow_v{w}("
                  + ", ".join(f"{vt} %a{i}" for i in range(arity)) + f", <{w} x i1> %m) noinline nounwind {{",
                  "entry:", f"  %bits = bitcast <{w} x i1> %m to i{w}", f"  %none = icmp eq i{w} %bits, 0",
-                 f"  br i1 %none, label %done, label %l0"]
+                 "  br i1 %none, label %done, label %l0"]
         acc = "%a0"
         for i in range(w):
             lines += [f"l{i}:", f"  %m{i} = extractelement <{w} x i1> %m, i32 {i}",
@@ -114,30 +110,53 @@ def _slow_functions(name: str, arity: int) -> list[str]:
                 xs.append(f"double %x{i}_{j}")
             lines += [f"  %y{i} = call double @{name}({', '.join(xs)})",
                       f"  %v{i} = insertelement {vt} {acc}, double %y{i}, i32 {i}", f"  br label %n{i}",
-                      f"n{i}:", f"  %acc{i} = phi {vt} [ %v{i}, %c{i} ], [ {acc}, %l{i} ]"]
-            nxt = f"l{i + 1}" if i + 1 < w else "done"
-            lines.append(f"  br label %{nxt}")
+                      f"n{i}:", f"  %acc{i} = phi {vt} [ %v{i}, %c{i} ], [ {acc}, %l{i} ]",
+                      f"  br label %{f'l{i + 1}' if i + 1 < w else 'done'}"]
             acc = f"%acc{i}"
         lines += ["done:", f"  %out = phi {vt} [ %a0, %entry ], [ {acc}, %n{w - 1} ]", f"  ret {vt} %out", "}"]
         out.append("\n".join(lines))
     return out
 
 
-class _Definition:
-    """One function's text and what it needs in the module."""
+def libm_name(op: Op, ty: str) -> str:
+    name = (vm.FUNCTIONS if ty == "float" else vm.FUNCTIONS64)[op][0]
+    return name + ("f" if ty == "float" else "")
 
-    def __init__(self, symbol: str, ty: str, fn, arity: int) -> None:
-        be = _Text()
-        r = fn(*(vm.V(be, f"%a{i}", ty) for i in range(arity)))
-        params = ", ".join(f"{ty} %a{i}" for i in range(arity))
-        self.text = "\n".join([f"define internal {ty} @{symbol}({params}) alwaysinline nounwind {{", "entry:",
-                               *be.lines, f"  ret {ty} {r.h}", "}"])
-        self.decls = be.decls | {f"declare double @{n}({', '.join(['double'] * k)})" for n, k in be.slow}
-        self.tables = be.tables
-        self.slow = [t for n, k in sorted(be.slow) for t in _slow_functions(n, k)]
-        # kept as written: IPO would otherwise drop the unused variants and specialise the wrapper (a constant
-        # argument removed), which unmatches its variants
-        self.used = [f"@sg_vm_{n}_slow{v}" for n, k in sorted(be.slow) for v in ("", *(f"_v{w}" for w in _WIDTHS))]
+
+class _Variants:
+    """The vector versions of one function (unmasked and masked, per width) and what they need in the module."""
+
+    def __init__(self, op: Op, ty: str, arity: int) -> None:
+        fn = (vm.FUNCTIONS if ty == "float" else vm.FUNCTIONS64)[op][1]
+        base = f"sg_vm_{libm_name(op, ty)}"
+        self.functions: list[str] = []
+        self.decls: set[str] = set()
+        self.tables: set[str] = set()
+        slow: set[tuple[str, int]] = set()
+        names = []
+        for w in WIDTHS[ty]:
+            be = _Text(w)
+            r = fn(*(vm.V(be, f"%a{i}", ty) for i in range(arity)))
+            vt = be.t(ty)
+            params = ", ".join(f"{vt} %a{i}" for i in range(arity))
+            args = ", ".join(f"{vt} %a{i}" for i in range(arity))
+            self.functions.append("\n".join([f"define internal {vt} @{base}_v{w}({params}) nounwind {{", "entry:",
+                                             *be.lines, f"  ret {vt} {r.h}", "}"]))
+            self.functions.append(f"define internal {vt} @{base}_m{w}({params}, <{w} x i1> %m) nounwind {{\n"
+                                  f"  %r = call {vt} @{base}_v{w}({args})\n  ret {vt} %r\n}}")
+            self.decls |= be.decls
+            self.tables |= be.tables
+            slow |= be.slow
+            names += [f"@{base}_v{w}", f"@{base}_m{w}"]
+        for name, k in sorted(slow):
+            self.functions += _slow_functions(name, k)
+            self.decls.add(f"declare double @{name}({', '.join(['double'] * k)})")
+            names += [f"@sg_vm_{name}_slow_v{w}" for w in _SLOW_WIDTHS]
+        self.used = names
+        v = "v" * arity
+        self.attrs = ("nounwind willreturn memory(none) \"vector-function-abi-variant\"=\""
+                      + ",".join(f"_ZGV_LLVM_{k}{w}{v}_{libm_name(op, ty)}({base}_{suffix}{w})"
+                                 for w in WIDTHS[ty] for k, suffix in (("N", "v"), ("M", "m"))) + "\"")
 
 
 def _table_global(name: str) -> str:
@@ -146,34 +165,31 @@ def _table_global(name: str) -> str:
     return f"@sg_vm_{name} = internal unnamed_addr constant [{data.size} x double] [{values}], align 64"
 
 
-_CACHE: dict[tuple[Op, str], _Definition] = {}
-_USED = "@llvm.compiler.used"
+_CACHE: dict[tuple[Op, str], _Variants] = {}
 
 
 def emit_call(f, op: Op, ty: str, args: list[str]) -> str:
-    """`op` of float or double operands as a call of its vectorisable function, defined in the module on first
-    use (with its tables, and the libm fallbacks' vector variants kept alive for the vectoriser)."""
-    name, fn = (vm.FUNCTIONS if ty == "float" else vm.FUNCTIONS64)[op]
-    symbol = f"sg_vm_{name}{'f' if ty == 'float' else ''}"
+    """`op` of float or double operands: the libm call, with our vector versions defined in the module (kept
+    alive for the vectoriser through llvm.compiler.used) and named on the call."""
     if (op, ty) not in _CACHE:
-        _CACHE[(op, ty)] = _Definition(symbol, ty, fn, len(args))
+        _CACHE[(op, ty)] = _Variants(op, ty, len(args))
     d = _CACHE[(op, ty)]
     module = f.gen.module
-    if d.text not in module.functions:
-        module.functions.append(d.text)
-        module.functions.extend(t for t in d.slow if t not in module.functions)
+    if d.functions[0] not in module.functions:
+        module.functions.extend(t for t in d.functions if t not in module.functions)
         for decl in d.decls:
             module.declare(decl)
         for t in d.tables:
             if not any(g.startswith(f"@sg_vm_{t} ") for g in module.globals):
                 module.globals.append(_table_global(t))
-        if d.used:
-            old = next((g for g in module.globals if g.startswith(_USED)), None)
-            names = sorted(set(d.used) | (set(re.findall(r"@sg_vm_\w+", old)) if old else set()))
-            if old:
-                module.globals.remove(old)
-            module.globals.append(f"{_USED} = appending global [{len(names)} x ptr] "
-                                  f"[{', '.join(f'ptr {n}' for n in names)}], section \"llvm.metadata\"")
+        old = next((g for g in module.globals if g.startswith(_USED)), None)
+        names = sorted(set(d.used) | (set(re.findall(r"@sg_vm_\w+", old)) if old else set()))
+        if old:
+            module.globals.remove(old)
+        module.globals.append(f"{_USED} = appending global [{len(names)} x ptr] "
+                              f"[{', '.join(f'ptr {n}' for n in names)}], section \"llvm.metadata\"")
+    name = libm_name(op, ty)
+    module.declare(f"declare {ty} @{name}({', '.join([ty] * len(args))})")
     r = f.tmp(name)
-    f.emit(f"{r} = call {ty} @{symbol}({', '.join(f'{ty} {a}' for a in args)})")
+    f.emit(f"{r} = call {ty} @{name}({', '.join(f'{ty} {a}' for a in args)}) {d.attrs}")
     return r

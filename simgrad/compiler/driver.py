@@ -193,8 +193,7 @@ def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_su
     lanes = prog.config.simt_lanes if transform is None and not prog.on_gpu and not prog.config.debug else 0
     run_pipeline(ir, transform, debug=prog.config.debug, fast_math=prog.config.fast_math,
                  cache_sums=bool(getattr(prog.config, "cache_loop_invariant_global_vars", True)), lanes=lanes,
-                 vector_bits=prog.jit.vector_bits() if lanes < 0 else 0,
-                 vector_math=prog.config.fast_math and not prog.on_gpu)  # as codegen's vector_math
+                 vector_bits=prog.jit.vector_bits() if lanes < 0 else 0)
     symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
     tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
         else 1

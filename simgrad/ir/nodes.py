@@ -95,7 +95,6 @@ class Kernel:
         self.uses_tape = False  # an adjoint that pushes values on the per-thread tape (autodiff sets it)
         self.tape_bound: int | None = None  # tape entries a thread needs, when the loop bounds prove it
         self.functions: list[Function] = []  # the real functions its CALLs (and theirs) reach
-        self.vector_math = False  # f32 math folds as ir/vecmath.py computes it (the CPU's code under fast_math)
 
 
 class Function(Kernel):

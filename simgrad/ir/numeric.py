@@ -147,14 +147,9 @@ def libm(name: str, t: DataType, *vals: float) -> float | None:
     fn = getattr(_LIBM, name if t.bits == 64 else name + "f")
     fn.restype, fn.argtypes = c, [c] * len(vals)
     r = float(fn(*vals))
-    if flushes_subnormal(t, *vals, r):
+    if t.bits in _flush_bits and any(_subnormal(v, t) for v in (*vals, r)):
         return None  # libm's code under flush-to-zero may give another value than here: not folded
     return r
-
-
-def flushes_subnormal(t: DataType, *vals: float) -> bool:
-    """In this fold's flush-to-zero mode, one of `vals` is a subnormal of `t` (math is then not folded)."""
-    return t.bits in _flush_bits and any(_subnormal(v, t) for v in vals)
 
 
 def _subnormal(v: float, t: DataType) -> bool:

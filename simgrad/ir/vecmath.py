@@ -107,7 +107,8 @@ with localcontext() as _ctx:
     _ctx.prec = 40
     _LN2 = Decimal(2).ln()
     LN2 = float(_LN2)
-    LN2_HI = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", LN2))[0] & ~((1 << 21) - 1)))[0]
+    _bits = struct.unpack("<Q", struct.pack("<d", LN2))[0] & ~((1 << 21) - 1)  # 32 significant bits: k ln2_hi exact
+    LN2_HI = struct.unpack("<d", struct.pack("<Q", _bits))[0]
     LN2_LO = float(_LN2 - Decimal(LN2_HI))
 PI = math.pi
 PIO2_1, PIO2_2, PIO2_3 = _split3(_pi_scaled(_BITS), _BITS + 1)  # pi/2 to ~160 bits
@@ -490,6 +491,7 @@ class _Numpy:
 
     def cast(self, how: str, a: V, ty: str) -> V:
         x = np.asarray(a.h)
+        r: np.ndarray
         if how == "bitcast":
             r = x.view(_NP[ty])
         elif how == "zext" and a.ty != "i1":
@@ -542,10 +544,3 @@ def evaluate(fn: Callable[..., V], *args, f64: bool = False) -> np.ndarray:
     with np.errstate(all="ignore"):
         vs = [V(be, np.asarray(a, dtype=npt), ty) for a in args]
         return np.asarray(fn(*vs).h, dtype=npt)
-
-
-def fold(op: Op, t: dt.DataType, *values: float) -> float:
-    """The value the compiled function gives for constant operands of type `t` (passes/simplify.py)."""
-    f64 = t is dt.f64
-    fn = (FUNCTIONS64 if f64 else FUNCTIONS)[op][1]
-    return float(evaluate(fn, *(np.array([v]) for v in values), f64=f64)[0])

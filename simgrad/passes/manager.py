@@ -22,18 +22,15 @@ def _verify_enabled() -> bool:
 
 
 def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math: bool = False,
-                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0, vector_math: bool = False) -> None:
+                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0) -> None:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics);
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars); `lanes` > 1: parallel loops of while loops run that many iterations in lock
-    step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold;
-    `vector_math`: the code computes f32 math as ir/vecmath.py does, so constants fold that way."""
+    step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold."""
     from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
     from simgrad.passes import lanes as simt
 
     level = _debug()
-    for k in (kernel, *kernel.functions):
-        k.vector_math = vector_math
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
         ("promote", promote.promote),  # locals assigned once become their values
         ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE

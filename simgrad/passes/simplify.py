@@ -2,8 +2,7 @@
 
 Every elementwise op with constant operands folds to exactly what the instruction computes at its type
 (ir/opdefs.py through ir/numeric.py): integers wrap, floats round at their width (f16 through f32, as
-LLVM promotes it), math functions are the very libm calls the kernel would make (or ir/vecmath.py's
-functions where the code uses them), float min/max return the
+LLVM promotes it), math functions are the very libm calls the kernel would make, float min/max return the
 non-NaN operand (llvm.minnum), integer division by zero is not folded; identities keep the sign of zero
 (x + 0.0 is not x when x is -0.0)."""
 
@@ -11,11 +10,7 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from simgrad import dtypes as dt
 from simgrad.ir import ops as O
-from simgrad.ir import numeric, vecmath
 from simgrad.ir.builder import Builder
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import OPS, Op
@@ -24,7 +19,7 @@ from simgrad.ir.ops import OPS, Op
 def simplify(kernel: Kernel) -> bool:
     changed = False
     while True:
-        uses = _replace_pass(kernel.body, {}, {}, kernel.vector_math)
+        uses = _replace_pass(kernel.body, {}, {})
         removed = _dce(kernel.body, _use_counts(kernel.body))
         if not (uses or removed):
             return changed
@@ -35,9 +30,9 @@ def _const(s: Stmt):
     return s.attrs["value"] if s.op is Op.CONST else None
 
 
-def fold(s: Stmt, vector_math: bool = False):
+def fold(s: Stmt):
     """The constant value of an elementwise statement whose operands are all constants (ir/opdefs.py: exactly
-    what the instruction computes at its type; `vector_math`: f32/f16 math as ir/vecmath.py), or None."""
+    what the instruction computes at its type), or None."""
     d = OPS.get(s.op)
     if d is None or not s.operands:
         return None
@@ -46,15 +41,7 @@ def fold(s: Stmt, vector_math: bool = False):
         if o.op is not Op.CONST:
             return None
         values.append(o.attrs["value"])
-    t = s.operands[0].vtype
-    if vector_math and (s.op in vecmath.FUNCTIONS and t in (dt.f32, dt.f16)
-                        or s.op in vecmath.FUNCTIONS64 and t is dt.f64):
-        v = vecmath.fold(s.op, dt.f64 if t is dt.f64 else dt.f32, *values)
-        if numeric.flushes_subnormal(dt.f64 if t is dt.f64 else dt.f32, *values, v):
-            return None  # the code under flush-to-zero reads and gives such values as zeros: not folded
-        with np.errstate(over="ignore"):
-            return float(np.float16(v)) if t is dt.f16 else v
-    return d.fold(t, *values)
+    return d.fold(s.operands[0].vtype, *values)
 
 
 _IDENTITY_OPS = {Op.ADD, Op.SUB, Op.MUL, Op.CAST}
@@ -100,14 +87,14 @@ def _key(s: Stmt, repl):
     return (op, s.type, tuple(operands), tuple(s.attrs.items()))
 
 
-def _replace_pass(block: Block, repl: dict, seen: dict, vector_math: bool) -> int:
+def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
     n = 0
     seen = dict(seen)
     for s in block.stmts:
         if any(id(o) in repl for o in s.operands):
             s.operands = tuple(repl.get(id(o), o) for o in s.operands)
             n += 1
-        folded = fold(s, vector_math)
+        folded = fold(s)
         if folded is not None:
             repl[id(s)] = Builder.constant(folded, s.vtype, s.loc)
             n += 1
@@ -130,7 +117,7 @@ def _replace_pass(block: Block, repl: dict, seen: dict, vector_math: bool) -> in
             # recomputed inside it, not shared
             inner = {k: v for k, v in seen.items() if v.op is not Op.GLOBAL_PTR}
         for b in s.blocks:
-            n += _replace_pass(b, repl, inner, vector_math)
+            n += _replace_pass(b, repl, inner)
     return n
 
 
