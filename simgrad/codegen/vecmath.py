@@ -15,8 +15,8 @@ from simgrad.ir import vecmath as vm
 from simgrad.ir.ops import Op
 
 #: lanes of the vector versions, by element type (AVX-512 holds 8 doubles, 16 floats)
-WIDTHS = {"double": (2, 4, 8), "float": (4, 8, 16)}
-_SLOW_WIDTHS = (2, 4, 8, 16)
+WIDTHS = {"double": (4, 8), "float": (8, 16)}
+_SLOW_WIDTHS = (4, 8)
 _USED = "@llvm.compiler.used"
 
 
