@@ -1,16 +1,15 @@
-"""Vectorisable f32 math functions (fast_math on the CPU): sin cos tan atan atan2 exp log tanh pow.
+"""Vector math functions (fast_math on the CPU): f32 sin cos tan atan2 exp log tanh pow, f64 sin cos atan2.
 
-Why: a loop calling libm's `cosf` cannot be vectorised (llvmlite gives LLVM no vector math library), and those
-calls were half of snow_phaseField's time. Each function here is written once against a small set of
-operations (`V`) and has two backends: codegen/vecmath.py emits it as an internal always-inline LLVM function of
-plain arithmetic and selects (no branches, no calls), which the loop vectoriser vectorises like any other
-arithmetic; `evaluate` runs the same operations in numpy (IEEE float64 without fused multiply-adds, as the
-emitted code), bit for bit what the compiled code computes, which the constant fold (passes/simplify.py) and
-the tests use. The f32 argument is widened to f64 (exact) and the result computed there and rounded once:
-range reduction and Taylor polynomials whose error (< 1e-12 relative) is far below an f32 ulp, so the result
-is within 1 ulp of the correctly rounded one (tests/codegen/test_vecmath.py measures the bound on dense
-sweeps). sin/cos/tan reduce any f32 exactly by 2/pi (Payne-Hanek style: a table of 2/pi's bits per exponent,
-three 29-bit pieces whose products with the 24-bit significand are exact), so huge arguments are right too.
+Why: a loop calling libm's `cosf` cannot be vectorised (llvmlite gives LLVM no vector math library), and such
+calls were most of some examples' time. Each function is written once against a small set of operations (`V`)
+with two backends: codegen/vecmath.py emits its vector versions (plain arithmetic, selects and table gathers),
+which a vectorised loop calls in place of libm; `evaluate` runs the same operations in numpy (IEEE float64, fma
+only where its result is exact, emulated exactly), bit for bit what the vector code computes, for the tests.
+f32: the argument is widened to f64 (exact), the result computed there with range reduction and Taylor
+polynomials (error < 1e-12 relative) and rounded once: within 1 ulp of the exact value; sin/cos/tan reduce any
+f32 exactly by 2/pi (a table of 2/pi's bits per exponent, three 29-bit pieces whose products with the 24-bit
+significand are exact). f64: Cody-Waite reduction exact by fma for |x| < 2**30 and an atan(k/16) table with
+double-double corrections; other lanes (huge, inf, NaN, zeros) call libm (`fallback`).
 """
 
 from __future__ import annotations
