@@ -1,4 +1,4 @@
-"""Vector math functions (fast_math on the CPU): f32 sin cos tan atan2 exp log tanh pow, f64 sin cos atan2.
+"""Vector math functions (fast_math on the CPU): f32 sin cos tan atan2 exp log tanh pow, f64 sin cos atan2 exp.
 
 Why: a loop calling libm's `cosf` cannot be vectorised (llvmlite gives LLVM no vector math library), and such
 calls were most of some examples' time. Each function is written once against a small set of operations (`V`)
@@ -9,7 +9,7 @@ f32: the argument is widened to f64 (exact), the result computed there with rang
 polynomials (error < 1e-12 relative) and rounded once: within 1 ulp of the exact value; sin/cos/tan reduce any
 f32 exactly by 2/pi (a table of 2/pi's bits per exponent, three 29-bit pieces whose products with the 24-bit
 significand are exact). f64: Cody-Waite reduction exact by fma for |x| < 2**30 and an atan(k/16) table with
-double-double corrections; other lanes (huge, inf, NaN, zeros) call libm (`fallback`).
+double-double corrections, exp by k ln2 + r; other lanes (huge, inf, NaN, zeros) call libm (`fallback`).
 """
 
 from __future__ import annotations
@@ -429,9 +429,23 @@ def _atan2_64(y: V, x: V) -> V:
     return x.be.fallback(ok ^ True, "atan2", [y, x], v)
 
 
+_EXP64 = [1.0 / math.factorial(n) for n in range(2, 15)]  # |r| <= ln2/2: r**15/15! < 2**-70
+
+
+def _exp64(x: V) -> V:
+    """x = k ln2 + r with r = hi - lo (hi exact: k ln2_hi has 43 bits), e**r = 1 + hi + (r**2 P(r) - lo), times
+    2**k. libm for |x| >= 708 (overflow, subnormal results), inf and NaN."""
+    kd, k = _round(x * (1.0 / LN2))
+    hi = x - kd * LN2_HI
+    lo = kd * LN2_LO
+    r = hi - lo
+    p = (hi + (r * r * _poly(r, _EXP64) - lo)) + 1.0
+    return x.be.fallback(x.abs().cmp("olt", 708.0) ^ True, "exp", [x], p * _pow2(k))
+
+
 #: Op -> (function name, algorithm on f64 values)
 FUNCTIONS64: dict[Op, tuple[str, Callable[..., V]]] = {
-    Op.SIN: ("sin", _sin64), Op.COS: ("cos", _cos64), Op.ATAN2: ("atan2", _atan2_64),
+    Op.SIN: ("sin", _sin64), Op.COS: ("cos", _cos64), Op.ATAN2: ("atan2", _atan2_64), Op.EXP: ("exp", _exp64),
 }
 
 

@@ -283,6 +283,17 @@ def test_f64_sin_cos_within_one_ulp(name, ref):
 
 
 @pytest.mark.skipif(np.finfo(np.longdouble).nmant < 63, reason="needs an 80-bit long double reference")
+def test_f64_exp_within_one_ulp():
+    rng = np.random.default_rng(9)
+    x = np.concatenate([rng.uniform(-708, 708, 200000), rng.uniform(-1, 1, 100000), rng.uniform(-1e-9, 1e-9, 1000)])
+    got = vm.evaluate(ALGO64["exp"], x, f64=True)
+    err = _ulp_error64(got, np.exp(x.astype(np.longdouble)))
+    assert err.max() <= 1.0, (x[err.argmax()], err.max())
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 709.7, 710.0, -745.0, -746.0, 1e-310, 708.0, -708.0])
+    assert _same64(vm.evaluate(ALGO64["exp"], special, f64=True), _libm("exp", dt.f64, special)).all()
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).nmant < 63, reason="needs an 80-bit long double reference")
 def test_f64_atan2_within_one_ulp_and_special_cases():
     rng = np.random.default_rng(6)
     n = 200000
@@ -312,7 +323,7 @@ def test_f64_vector_lanes_are_the_model_with_libm_lanes():
     xs = np.concatenate([SPECIAL64, rng.uniform(-50, 50, n - 2 * len(SPECIAL64)), SPECIAL64[::-1]])
     ys = np.concatenate([rng.standard_normal(n - len(SPECIAL64)), SPECIAL64])
     x, y = ti.field(ti.f64, n), ti.field(ti.f64, n)
-    out = ti.field(ti.f64, (3, n))
+    out = ti.field(ti.f64, (4, n))
     x.from_numpy(xs)
     y.from_numpy(ys)
 
@@ -322,11 +333,12 @@ def test_f64_vector_lanes_are_the_model_with_libm_lanes():
             out[0, i] = ti.sin(x[i])
             out[1, i] = ti.cos(x[i])
             out[2, i] = ti.atan2(y[i], x[i])
+            out[3, i] = ti.exp(x[i] * 20.0)
 
     run()
     got = out.to_numpy()
     body = n - 128
-    for k, name, args in ((0, "sin", (xs,)), (1, "cos", (xs,)), (2, "atan2", (ys, xs))):
+    for k, name, args in ((0, "sin", (xs,)), (1, "cos", (xs,)), (2, "atan2", (ys, xs)), (3, "exp", (xs * 20.0,))):
         want = vm.evaluate(ALGO64[name], *args, f64=True)
         same = _same64(got[k], want)
         assert same[:body].all(), name
@@ -347,16 +359,16 @@ def test_f64_loop_vectorises_with_libm_only_in_the_masked_fallback():
     def k():
         for i in x:
             a = ti.atan2(x[i], 0.7)
-            y[i] = 0.006 * (1.0 + 0.12 * ti.cos(6 * a)) - ti.sin(6 * a)
+            y[i] = 0.006 * (1.0 + 0.12 * ti.cos(6 * a)) - ti.sin(6 * a) + ti.exp(a)
 
     k()
     body = _vector_body(_optimized_task(k))
-    for name in ("atan2", "cos", "sin"):
+    for name in ("atan2", "cos", "sin", "exp"):
         assert re.search(rf"call <\d+ x double> @sg_vm_{name}_v\d+\(", body), name
-    assert not re.search(r"call [^\n]*@(cos|sin|atan2|llvm\.cos\.f64|llvm\.sin\.f64)\(", body)
+    assert not re.search(r"call [^\n]*@(cos|sin|atan2|exp|llvm\.(cos|sin|exp)\.f64)\(", body)
 
 
-@pytest.mark.parametrize("name", ["sin", "cos", "atan2"])
+@pytest.mark.parametrize("name", ["sin", "cos", "atan2", "exp"])
 def test_f64_gradients_match_central_differences(name):
     ti.init(arch=ti.cpu, default_fp=ti.f64)
     expr, ref = _GRAD_CASES[name]
