@@ -7,7 +7,9 @@ import linecache
 from collections.abc import Callable
 
 from simgrad import dtypes as dt
+from simgrad.codegen import vecmath
 from simgrad.ir.opdefs import OPS, Compare, Instr, Intrinsic, Libm, Op
+from simgrad.ir.vecmath import FUNCTIONS, FUNCTIONS64
 
 
 def _sfx(t: dt.DataType) -> str:
@@ -86,6 +88,11 @@ def lower_elementwise(f, s) -> str:
     if how is None:
         raise NotImplementedError(f"{s.op.name} on {t}")
     args = [f.v(o) for o in s.operands]
+    if f.gen.vector_math and (t in (dt.f32, dt.f16) and s.op in FUNCTIONS or t is dt.f64 and s.op in FUNCTIONS64):
+        if t is dt.f16:  # through f32, as libm's
+            wide = [_conv(f, a, dt.f16, dt.f32) for a in args]
+            return _conv(f, vecmath.emit_call(f, s.op, "float", wide), dt.f32, dt.f16)
+        return vecmath.emit_call(f, s.op, t.llvm, args)
     if isinstance(how, Instr):
         r = f.tmp("v")
         if t.is_float:

@@ -24,6 +24,8 @@ Capture = tuple[int, str, bool]  # (closure slot, LLVM type, passed by value)
 class CpuCodegen(KernelCodegen):
     """LLVM IR for the host CPU: parallel loops run on the native thread pool."""
 
+    vecmath_target = True  # f32 sin, cos, exp ... vectorisable (codegen/vecmath.py) under fast_math
+
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.ntasks = 0

@@ -280,12 +280,16 @@ class KernelCodegen:
     #: the function attributes that tell LLVM results are flushed (runtime/fpenv.py), when they are
     flush_attrs = fpenv.CPU_ATTRS
 
+    #: f32 math as ir/vecmath.py's vectorisable functions under fast_math (the CPU; the GPU keeps libdevice)
+    vecmath_target = False
+
     def __init__(self, kernel: Kernel, symbol: str, debug: bool = False, fast_math: bool = True,
                  flush: bool = False):
         self.kernel = kernel
         self.symbol = symbol
         self.debug = debug
         self.fm = FAST_MATH_FLAGS if fast_math else ""
+        self.vector_math = fast_math and self.vecmath_target  # codegen/vecmath.py, else libm calls
         # flush-to-zero: every function says so to LLVM; host entries switch the mode (where the host can)
         self.fn_attrs = self.flush_attrs if flush else ""
         self.switch_fp_mode = flush and fpenv.switchable()
