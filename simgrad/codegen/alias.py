@@ -1,5 +1,6 @@
 """What LLVM cannot see of field memory, told as metadata: distinct places of dense fields never overlap
-(scoped noalias: `!alias.scope` / `!noalias` on their loads and stores), and a tree's root points at a
+(scoped noalias: `!alias.scope` / `!noalias` on their stores and plain updates; plain loads carry none, as with
+them LLVM stopped vectorising vortex_rings' advect loop, 2x slower), and a tree's root points at a
 64-byte aligned buffer that holds every element of its fields (`!dereferenceable` / `!align` on the root's
 load). Without them a store to one field made LLVM reload every other one, and a load under a branch (a
 uniform `gravity[None]` in `if grid_m[i, j] > 0:`) could not be hoisted: the vectoriser turned it into a

@@ -211,9 +211,7 @@ def _emit_sum_into(f, r: Region, buf: str, nbytes: str, nthreads: str, pfor: str
     # After Ctrl-C the pool hands out no more chunks: the sum runs here whole (the copies persist, so partials left
     # in them would go into the next launch's results). A part the pool did sum left zeros: summing it again is
     # a no-op.
-    flag, stopped = f.tmp("pcan"), f.tmp("pcan")
-    f.emit(f"{flag} = load atomic i32, ptr {f.cancel_flag()} monotonic, align 4")
-    f.emit(f"{stopped} = icmp ne i32 {flag}, 0")
+    stopped = f.cancelled()
     here, on = f.label("psumhere"), f.label("psumdone")
     f.emit(f"br i1 {stopped}, label %{here}, label %{on}")
     f.start_block(here)

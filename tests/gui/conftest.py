@@ -23,3 +23,19 @@ def read_rows():
             return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
 
     return read
+
+
+@pytest.fixture(params=["numpy", "kernels"])
+def raster_path(request, monkeypatch):
+    """Both ways ti.GUI's canvas draws: simgrad kernels (render2d.py, once a program exists) and the numpy
+    rasteriser (before ti.init). Modules whose every fact holds for both use it for all their tests."""
+    from simgrad.gui import canvas
+
+    if request.param == "numpy":
+        monkeypatch.setattr(canvas, "_kernels", lambda: None)
+    else:
+        import simgrad as ti
+
+        ti.init(arch=ti.cpu)
+        assert canvas._kernels() is not None
+    return request.param

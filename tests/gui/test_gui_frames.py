@@ -9,18 +9,7 @@ import simgrad.gui as tg
 W, H = 64, 48
 
 
-@pytest.fixture(autouse=True, params=["numpy", "kernels"])
-def raster_path(request, monkeypatch):
-    from simgrad.gui import canvas
-
-    if request.param == "numpy":
-        monkeypatch.setattr(canvas, "_kernels", lambda: None)
-    else:
-        import simgrad as ti
-
-        ti.init(arch=ti.cpu)
-        assert canvas._kernels() is not None
-    return request.param
+pytestmark = pytest.mark.usefixtures("raster_path")  # every fact for both drawing paths (conftest.py)
 
 
 def new_gui(background=0x000000):

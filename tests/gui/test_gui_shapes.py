@@ -25,20 +25,7 @@ def seg_dist(px, py, a, b):
     return np.hypot(px - a[0] - t * d[0], py - a[1] - t * d[1])
 
 
-@pytest.fixture(autouse=True, params=["numpy", "kernels"])
-def raster_path(request, monkeypatch):
-    """Every fact holds for both ways the canvas draws: simgrad kernels (render2d.py, once a program exists)
-    and the numpy rasteriser (before ti.init)."""
-    from simgrad.gui import canvas
-
-    if request.param == "numpy":
-        monkeypatch.setattr(canvas, "_kernels", lambda: None)
-    else:
-        import simgrad as ti
-
-        ti.init(arch=ti.cpu)
-        assert canvas._kernels() is not None
-    return request.param
+pytestmark = pytest.mark.usefixtures("raster_path")  # every fact for both drawing paths (conftest.py)
 
 
 @pytest.fixture

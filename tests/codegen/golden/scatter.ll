@@ -330,9 +330,9 @@ private.39:
   %sslot.78 = getelementptr i64, ptr %sclo.74, i64 3
   store i64 16, ptr %sslot.78
   call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.74, i64 0, i64 16, i64 8192)
-  %pcan.79 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %pcan.80 = icmp ne i32 %pcan.79, 0
-  br i1 %pcan.80, label %psumhere.81, label %psumdone.82
+  %cancel.79 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.80 = icmp ne i32 %cancel.79, 0
+  br i1 %cancelled.80, label %psumhere.81, label %psumdone.82
 psumhere.81:
   call void @sg_kernel_task1_private_sum0(ptr %sclo.74, i64 0, i64 16, i32 0)
   br label %psumdone.82
@@ -348,9 +348,9 @@ psumdone.82:
   %sslot.89 = getelementptr i64, ptr %sclo.85, i64 3
   store i64 8, ptr %sslot.89
   call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.85, i64 0, i64 8, i64 8192)
-  %pcan.90 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %pcan.91 = icmp ne i32 %pcan.90, 0
-  br i1 %pcan.91, label %psumhere.92, label %psumdone.93
+  %cancel.90 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.91 = icmp ne i32 %cancel.90, 0
+  br i1 %cancelled.91, label %psumhere.92, label %psumdone.93
 psumhere.92:
   call void @sg_kernel_task1_private_sum1(ptr %sclo.85, i64 0, i64 8, i32 0)
   br label %psumdone.93
