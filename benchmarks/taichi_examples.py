@@ -139,6 +139,8 @@ def _is_fast(gui):
     float RGBA over that smaller buffer (heap corruption: SIGABRT / SIGSEGV), so it is decoded instead."""
     import numpy as np
 
+    if not getattr(gui, "fast_gui", True):  # both frameworks' GUI says so (simgrad's gui.img would be one more
+        return False  # get_image: a copy of the whole picture per frame, just to learn its dtype)
     img = getattr(gui, "img", None)
     return isinstance(img, np.ndarray) and img.dtype == np.uint32
 
