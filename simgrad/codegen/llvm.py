@@ -664,10 +664,13 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         f.emit(f"store {ty} {n}, ptr {acc}")
     elif form == PLAIN:  # serial code, a local of the iteration, an owned element or a private copy
         md = g.module.facts.access(p, ty)
-        f.emit(f"{r} = load {ty}, ptr {f.v(p)}{md}")
+        # an f16 min/max kept in memory (volatile): LLVM 22's loop vectoriser aborts on a half minnum/maxnum
+        # reduction ("VPlan cost model and legacy cost model disagreed"; taichi's test_atomic_max_f16)
+        vol = "volatile " if ty == "half" and op in ("fmin", "fmax") else ""
+        f.emit(f"{r} = load {vol}{ty}, ptr {f.v(p)}{md}")
         n = f.tmp("new")
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.float_flags(s)))
-        f.emit(f"store {ty} {n}, ptr {f.v(p)}{md}")
+        f.emit(f"store {vol}{ty} {n}, ptr {f.v(p)}{md}")
     elif op in ("fmul", "mul"):  # no atomicrmw multiplies: a compare-exchange loop
         r = _cas_update(f, f.v(p), ty, t.bits, lambda old, new: _combine_text(new, op, ty, old, f.v(v), g.fm))
     elif t is dt.u1:  # LLVM has no atomics on i1: update the byte that holds it (0 or 1 stays 0 or 1)

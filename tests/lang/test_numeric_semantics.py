@@ -465,3 +465,31 @@ def test_min_max_of_literals_ignore_nan_like_the_machine():
         return ti.min(math.nan, 1.0) + max(math.nan, 2.0) + ti.min(x, 1.0)
 
     assert k(math.nan) == 4.0  # llvm.minnum/maxnum: the NaN operand is dropped, literal or not
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_f16_min_max_updates_compile_and_match_numpy(threads):
+    # an f16 ti.atomic_max/min into one element: the one-thread path makes it a plain update, which LLVM 22's
+    # loop vectoriser aborted on (a half maxnum reduction: taichi 1.7.4's test_atomic_max_f16 crashed the
+    # process); also a serial max and a struct-for max
+    ti.init(arch=ti.cpu, offline_cache=False, cpu_max_num_threads=threads)
+    f = ti.field(ti.f16, shape=4)
+    x = ti.field(ti.f16, shape=1000)
+
+    @ti.kernel
+    def k():
+        for i in range(1000):
+            ti.atomic_max(f[0], 1.12 * i)
+            ti.atomic_min(f[1], -1.12 * i)
+        s = ti.cast(0.0, ti.f16)
+        for i in range(1000):
+            s = ti.max(s, x[i])
+        f[2] = s
+        for i in x:
+            ti.atomic_max(f[3], x[i])
+
+    xs = (np.arange(1000) % 700).astype(np.float16)
+    x.from_numpy(xs)
+    k()
+    top = np.float16(np.float32(1.12) * np.float32(999))
+    np.testing.assert_array_equal(f.to_numpy(), np.array([top, -top, xs.max(), xs.max()], np.float16))
