@@ -214,19 +214,13 @@ _GRAD_CASES = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(_GRAD_CASES))
-def test_gradients_match_central_differences_in_f64(name):
-    """The adjoint of an f32 kernel (its derivatives call the same vectorisable functions) against central
-    differences of the expression in float64."""
-    ti.init(arch=ti.cpu)
-    expr, ref = _GRAD_CASES[name]
-    n = 64
-    rng = np.random.default_rng(4)
-    xs = rng.uniform(-1.2, 1.2, n).astype(np.float32)
-    ys = rng.uniform(0.3, 2.0, n).astype(np.float32)
-    x = ti.field(ti.f32, n, needs_grad=True)
-    y = ti.field(ti.f32, n, needs_grad=True)
-    loss = ti.field(ti.f32, (), needs_grad=True)
+def _tape_gradients(name, dtype, xs, ys):
+    """(dloss/dx, dloss/dy) of loss = sum of _GRAD_CASES[name] over xs, ys, by a Tape over a kernel of dtype."""
+    ti.init(arch=ti.cpu, default_fp=dtype)
+    expr = _GRAD_CASES[name][0]
+    x = ti.field(dtype, len(xs), needs_grad=True)
+    y = ti.field(dtype, len(xs), needs_grad=True)
+    loss = ti.field(dtype, (), needs_grad=True)
     x.from_numpy(xs)
     y.from_numpy(ys)
 
@@ -237,13 +231,25 @@ def test_gradients_match_central_differences_in_f64(name):
 
     with ti.ad.Tape(loss):
         f()
+    return x.grad.to_numpy(), y.grad.to_numpy()
+
+
+@pytest.mark.parametrize("name", sorted(_GRAD_CASES))
+def test_gradients_match_central_differences_in_f64(name):
+    """The adjoint of an f32 kernel (its derivatives call the same vectorisable functions) against central
+    differences of the expression in float64."""
+    rng = np.random.default_rng(4)
+    xs = rng.uniform(-1.2, 1.2, 64).astype(np.float32)
+    ys = rng.uniform(0.3, 2.0, 64).astype(np.float32)
+    ref = _GRAD_CASES[name][1]
+    gx_got, gy_got = _tape_gradients(name, ti.f32, xs, ys)
     h = 1e-6
     xd, yd = xs.astype(np.float64), ys.astype(np.float64)
     gx = (ref(xd + h, yd) - ref(xd - h, yd)) / (2 * h)
     gy = (ref(xd, yd + h) - ref(xd, yd - h)) / (2 * h)
-    np.testing.assert_allclose(x.grad.to_numpy(), gx, rtol=2e-5, atol=2e-5)
+    np.testing.assert_allclose(gx_got, gx, rtol=2e-5, atol=2e-5)
     if name in ("atan2", "pow"):
-        np.testing.assert_allclose(y.grad.to_numpy(), gy, rtol=2e-5, atol=2e-5)
+        np.testing.assert_allclose(gy_got, gy, rtol=2e-5, atol=2e-5)
 
 
 # -- f64: sin, cos, atan2 (libm for the lanes outside the fast path) ------------------------------------------
@@ -370,26 +376,11 @@ def test_f64_loop_vectorises_with_libm_only_in_the_masked_fallback():
 
 @pytest.mark.parametrize("name", ["sin", "cos", "atan2", "exp"])
 def test_f64_gradients_match_central_differences(name):
-    ti.init(arch=ti.cpu, default_fp=ti.f64)
-    expr, ref = _GRAD_CASES[name]
-    n = 64
     rng = np.random.default_rng(8)
-    xs, ys = rng.uniform(-3, 3, n), rng.uniform(-2, 2, n)
-    x = ti.field(ti.f64, n, needs_grad=True)
-    y = ti.field(ti.f64, n, needs_grad=True)
-    loss = ti.field(ti.f64, (), needs_grad=True)
-    x.from_numpy(xs)
-    y.from_numpy(ys)
-
-    @ti.kernel
-    def f():
-        for i in x:
-            loss[None] += expr(ti, x[i], y[i])
-
-    with ti.ad.Tape(loss):
-        f()
+    xs, ys = rng.uniform(-3, 3, 64), rng.uniform(-2, 2, 64)
+    ref = _GRAD_CASES[name][1]
+    gx_got, gy_got = _tape_gradients(name, ti.f64, xs, ys)
     h = 1e-6
-    np.testing.assert_allclose(x.grad.to_numpy(), (ref(xs + h, ys) - ref(xs - h, ys)) / (2 * h), rtol=1e-7, atol=1e-8)
+    np.testing.assert_allclose(gx_got, (ref(xs + h, ys) - ref(xs - h, ys)) / (2 * h), rtol=1e-7, atol=1e-8)
     if name == "atan2":
-        np.testing.assert_allclose(y.grad.to_numpy(), (ref(xs, ys + h) - ref(xs, ys - h)) / (2 * h), rtol=1e-7,
-                                   atol=1e-8)
+        np.testing.assert_allclose(gy_got, (ref(xs, ys + h) - ref(xs, ys - h)) / (2 * h), rtol=1e-7, atol=1e-8)
