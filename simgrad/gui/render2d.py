@@ -185,6 +185,17 @@ def _circles(img: _IMG, start: _I1, items: _I1, boxes: _B1, geo: _G2, colors: _C
                     colors[p])
 
 
+@ti.func
+def _segment_cover(px, py, dx, dy, l2, r):
+    """(s, coverage) of the pixel centre at (px, py) from the segment's start, direction (dx, dy) and squared
+    length l2: s the parameter of its nearest point, coverage clamp(r - distance) (raster.py's, in float64;
+    selects, no branch)."""
+    s = ti.select(l2 > 0.0, ti.min(ti.max((px * dx + py * dy) / ti.select(l2 > 0.0, l2, 1.0), 0.0), 1.0), 0.0)
+    ex = px - s * dx
+    ey = py - s * dy
+    return s, ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+
+
 @ti.kernel
 def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1, geo: _G2, c0: _C1, c1: _C1,
            per_vertex: _I32, tiles_y: _I32):
@@ -212,12 +223,7 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
                     cross = px * dy - py * dx
                     if l2 > 0.0 and cross * cross >= band:
                         continue
-                    s = ti.cast(0.0, ti.f64)  # (a bare 0.0 would make s an f32)
-                    if l2 > 0.0:
-                        s = ti.min(ti.max((px * dx + py * dy) / l2, 0.0), 1.0)
-                    ex = px - s * dx
-                    ey = py - s * dy
-                    a = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+                    s, a = _segment_cover(px, py, dx, dy, l2, r)
                     # piece boxes overlap: a pixel belongs to the piece holding its nearest point
                     if a > 0.0 and ti.min(ti.cast(s * n, ti.i32), n - 1) == piece[q]:
                         c = c0[o]
@@ -231,12 +237,7 @@ def _lines(img: _IMG, start: _I1, items: _I1, boxes: _B1, owner: _I1, piece: _I1
 def _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex):
     """One pixel of a segment as ``_lines`` shades it, without branches (the loops over a row or column of
     pixels vectorise): a pixel the segment does not cover is written back as it was."""
-    px = i + 0.5 - ax
-    py = j + 0.5 - ay
-    s = ti.select(l2 > 0.0, ti.min(ti.max((px * dx + py * dy) / ti.select(l2 > 0.0, l2, 1.0), 0.0), 1.0), 0.0)
-    ex = px - s * dx
-    ey = py - s * dy
-    alpha = ti.min(ti.max(r - ti.sqrt(ex * ex + ey * ey), 0.0), 1.0)
+    s, alpha = _segment_cover(i + 0.5 - ax, j + 0.5 - ay, dx, dy, l2, r)
     u = ta + s * span
     c = ti.select(per_vertex != 0, c0 * (1.0 - u) + c1 * u, c0)
     _blend(img, i, j, alpha, c)
@@ -416,17 +417,16 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
     r = np.asarray(radius, np.float64)
     if vertex_colors is not None:
         vc = np.asarray(vertex_colors, np.float64)
-        c0, c1 = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1])
-    elif _one_tile(len(A)):
-        c0, each = _colour_table(colors)
-        c1 = c0
+        c0, c1, colouring = np.ascontiguousarray(vc[:, 0]), np.ascontiguousarray(vc[:, 1]), 2
     else:
-        c0 = c1 = np.ascontiguousarray(colors, np.float64)
+        c0, colouring = _colour_table(colors)  # 1: one colour each, 0: one for all
+        c1 = c0
     if _one_tile(len(A)):
         if len(A):
-            mode = 2 if vertex_colors is not None else each  # 2: per-vertex colours, 1: one each, 0: one for all
-            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1, mode)
+            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1, colouring)
         return
+    if colouring == 0:  # the tiles index a colour per segment
+        c0 = c1 = np.ascontiguousarray(np.broadcast_to(c0, (len(A), 3)))
     ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1) & np.isfinite(r) & (r > 0)
     seg = raster.SegmentPieces(A, B, r, ok, img.shape[:2])
     start, items, boxes, tiles_y = bin_boxes(seg.x0, seg.y0, seg.x1, seg.y1, img.shape[:2])
