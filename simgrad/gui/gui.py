@@ -164,6 +164,7 @@ class GUI:
         self.canvas = ImageCanvas(self.res, background_color)
         # fast_gui: Taichi's window reads packed 0x00RRGGBB words (top row first) that set_image writes
         self._fast = np.zeros(self.res[0] * self.res[1], np.uint32) if self.fast_gui else None
+        self._rgba: np.ndarray | None = None  # get_image's buffer, made at its first call
         self.key_pressed = set()
         self.event = None
         self.frame = 0
@@ -250,9 +251,9 @@ class GUI:
     def get_image(self):
         """The canvas as float32 RGBA of shape (W, H, 4), like Taichi's: one buffer, written again at each call
         (a 4 MB allocation and free per frame made the next frame's Python work several times slower)."""
-        rgba = getattr(self, "_rgba", None)
-        if rgba is None or rgba.shape[:2] != self.res:
-            rgba = self._rgba = np.ones(self.res + (4,), np.float32)
+        if self._rgba is None:
+            self._rgba = np.ones(self.res + (4,), np.float32)
+        rgba = self._rgba
         rgba[..., :3] = self.canvas.img
         rgba[..., 3] = 1.0
         return rgba
