@@ -34,7 +34,6 @@ def tuned_features(cpu: str, features: str) -> str:
     return features
 
 
-
 def default_cache_dir() -> Path:
     base = os.environ.get("SIMGRAD_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "simgrad"
