@@ -99,6 +99,7 @@ class CpuCodegen(KernelCodegen):
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
         t.loop = s
         t.serial = serial
+        self.parallel_group(t)
         t.prologue.append("  %ctx = load ptr, ptr %clo")
         for v, (k, ty, by_value) in zip(captured, slots):
             q, val = t.tmp("cap"), t.tmp("capv")
@@ -174,7 +175,7 @@ class CpuCodegen(KernelCodegen):
             t.bound.add(id(div))
         self.loop_body(t, s, done, ilatch)
         t.emit(f"{rn} = add nuw nsw {ty} {r}, 1")
-        t.emit(f"br label %{ihead}")
+        t.emit(f"br label %{ihead}{self.parallel_latch(t, s)}")
         t.start_block(olatch)
         t.emit(f"{qn} = add nuw nsw {ty} {q}, 1")
         t.emit(f"br label %{ohead}")

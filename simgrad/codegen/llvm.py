@@ -145,6 +145,10 @@ class FunctionText:
         self.depth = "0"
         self.exit = "ret void"
         self.serial = False  # a task variant run only on the calling thread alone: its atomics are plain
+        # a task's `!llvm.access.group` (codegen/cpu.py parallel_group): its field loads and stores, which no other
+        # iteration of its parallel loop may touch but through atomics; the loop's latch names it
+        self.access_group: str | None = None
+        self.parallel_loop_md = ""
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -468,11 +472,28 @@ class KernelCodegen:
             self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}", f'!{k + 1} = !{{!"llvm.loop.unroll.full"}}']
             f.emit(f"br label %{head}, !llvm.loop !{k}")
         else:
-            f.emit(f"br label %{head}")
+            f.emit(f"br label %{head}{self.parallel_latch(f, s)}")
         f.start_block(done)
         if cancel:
             f.emit(f"br label %{shead}")
             f.start_block(sdone)
+
+    def parallel_group(self, f: FunctionText) -> None:
+        """Gives task f an access group and its loop the `llvm.loop.parallel_accesses` that names it: iterations of a
+        parallel loop share no field element but through atomics (Taichi's rule; simgrad's plain updates of owned
+        or private elements, the tape and locals are emitted outside the group). LLVM takes the loop as parallel
+        only when every memory access in it is in the group, so one of those leaves it to its own analysis; when
+        all are, it needs no run-time overlap checks, which it could not build for a gather (diffmpm3d's g2p
+        reads the grid at indices computed from particle positions: "cannot identify array bounds")."""
+        k = 1000 + 2 * len(self.module.globals)
+        self.module.globals += [f"!{k} = distinct !{{}}", f"!{k + 1} = distinct !{{!{k + 1}, !{k + 2}}}",
+                                f'!{k + 2} = !{{!"llvm.loop.parallel_accesses", !{k}}}']
+        f.access_group = f"!{k}"
+        f.parallel_loop_md = f"!{k + 1}"
+
+    def parallel_latch(self, f: FunctionText, s: Stmt) -> str:
+        """The `!llvm.loop` of the latch of the loop running task f's iterations of `s`, or ''."""
+        return f", !llvm.loop {f.parallel_loop_md}" if f.access_group and s is f.loop else ""
 
     def need_branch_weights(self) -> None:
         """The `!1` metadata (a cold branch) that failure paths and activations are marked with."""
@@ -625,14 +646,19 @@ def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     ty = llvm_type(s.vtype)
     # (no alias scope on a plain load: with them LLVM stopped vectorising vortex_rings' advect loop, 4.9 -> 9.8
     # ms, and P2G ran 5% slower; the stores and plain updates keep theirs)
-    f.emit(f"{r} = load {ty}, ptr {f.v(s.operands[0])}")
+    f.emit(f"{r} = load {ty}, ptr {f.v(s.operands[0])}{group(f)}")
     f.names[s] = r
+
+
+def group(f: FunctionText) -> str:
+    """The access group of a field load or store in a parallel loop's task, if it has one."""
+    return f", !llvm.access.group {f.access_group}" if f.access_group else ""
 
 
 def lower_global_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     p, v = s.operands
     ty = llvm_type(v.type)
-    f.emit(f"store {ty} {f.v(v)}, ptr {f.v(p)}{g.module.facts.access(p, ty)}")
+    f.emit(f"store {ty} {f.v(v)}, ptr {f.v(p)}{g.module.facts.access(p, ty)}{group(f)}")
 
 
 def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

@@ -20,6 +20,7 @@ def simplify(kernel: Kernel) -> bool:
     changed = False
     while True:
         uses = _replace_pass(kernel.body, {}, {})
+        uses += _fold_branches(kernel.body)
         removed = _dce(kernel.body, _use_counts(kernel.body))
         if not (uses or removed):
             return changed
@@ -118,6 +119,27 @@ def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
             inner = {k: v for k, v in seen.items() if v.op is not Op.GLOBAL_PTR}
         for b in s.blocks:
             n += _replace_pass(b, repl, inner)
+    return n
+
+
+def _fold_branches(block: Block) -> int:
+    """`if c` with a constant c is the branch it takes, its statements in the enclosing block (`if lsq > 0.5` on a
+    compile-time vector's length; `if lin < 0` once promote has forwarded a zeroed vector)."""
+    n = 0
+    out: list[Stmt] = []
+    for s in block.stmts:
+        for b in s.blocks:
+            n += _fold_branches(b)
+        c = _const(s.operands[0]) if s.op is Op.IF else None
+        if c is None:
+            out.append(s)
+            continue
+        taken = s.blocks[0] if c else s.blocks[1] if len(s.blocks) > 1 else None
+        for t in taken.stmts if taken is not None else ():
+            t.block = block
+            out.append(t)
+        n += 1
+    block.stmts = out
     return n
 
 
