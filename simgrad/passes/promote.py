@@ -63,7 +63,7 @@ def _forward(block: Block, once: set, known: dict, value_of: dict) -> None:
             known[id(s.operands[0])] = s.operands[1]
 
 
-def _stored_in(blocks: list[Block], many: set) -> set:
+def _stored_in(blocks: tuple[Block, ...], many: set) -> set:
     """The candidate locals that a store or update anywhere inside `blocks` writes."""
     out = set()
     for b in blocks:
