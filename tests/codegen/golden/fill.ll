@@ -1,3 +1,6 @@
+!1000 = distinct !{}
+!1001 = distinct !{!1001, !1002}
+!1002 = !{!"llvm.loop.parallel_accesses", !1000}
 !0 = !{}
 !900000 = distinct !{!900000, !"simgrad fields"}
 !900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
@@ -27,11 +30,11 @@ body.7:
   %ptr.15 = getelementptr inbounds i8, ptr %root.19, i64 %v.14
   %cv.20 = sitofp i32 %i.10 to float
   %v.21 = fmul nsz float %capv.2, %cv.20
-  store float %v.21, ptr %ptr.15, !alias.scope !900003, !noalias !900004
+  store float %v.21, ptr %ptr.15, !alias.scope !900003, !noalias !900004, !llvm.access.group !1000
   br label %latch.8
 latch.8:
   %inext.11 = add i32 %i.10, 1
-  br label %head.6
+  br label %head.6, !llvm.loop !1001
 done.9:
   ret void
 }
