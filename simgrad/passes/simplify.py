@@ -82,10 +82,17 @@ def _key(s: Stmt, repl):
         return None
     if s.op is Op.GLOBAL_PTR and getattr(s.attrs["target"], "sparse", False):
         return None  # a sparse element's write activates at its own place: a read must not share it
-    op, operands = s.op, [("c", o.type, o.attrs["value"]) if o.op is Op.CONST else id(o) for o in s.operands]
+    op, operands = s.op, [("c", o.type, _const_key(o)) if o.op is Op.CONST else id(o) for o in s.operands]
     if op is Op.ADD and not s.vtype.is_float and isinstance(operands[1], tuple) and operands[1][2] < 0:
         op, operands[1] = Op.SUB, ("c", operands[1][1], -operands[1][2])
     return (op, s.type, tuple(operands), tuple(s.attrs.items()))
+
+
+def _const_key(c: Stmt):
+    """A constant's value as a key: -0.0 and 0.0 are equal in Python but not the same operand (`cast -0.0` and
+    `cast 0.0` were one value once promote forwarded constants into them)."""
+    v = c.attrs["value"]
+    return (v, math.copysign(1.0, v)) if c.vtype.is_float else v
 
 
 def _replace_pass(block: Block, repl: dict, seen: dict) -> int:
