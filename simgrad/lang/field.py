@@ -301,6 +301,9 @@ class ScalarField(Field):
 
     def __getitem__(self, key):
         view = self.view
+        if type(key) is int and view is not None and view.ndim == 1 and not self.offset and 0 <= key < view.shape[0]:
+            v = view[key].item()  # (the common f[i] of a dense 1-D field, without the general checks)
+            return int(v) if self.dtype is dt.u1 else v
         if view is None:
             self._ensure()
             view = self._view
