@@ -301,10 +301,11 @@ class ScalarField(Field):
 
     def __getitem__(self, key):
         view = self.view
-        if type(key) is int and view is not None and view.ndim == 1 and not self.offset and 0 <= key < view.shape[0]:
-            v = view[key].item()  # (the common f[i] of a dense 1-D field, without the general checks)
-            return int(v) if self.dtype is dt.u1 else v
-        if view is None:
+        if view is not None:
+            if type(key) is int and view.ndim == 1 and not self.offset and 0 <= key < view.shape[0]:
+                v = view[key].item()  # (the common f[i] of a dense 1-D field, without the general checks)
+                return int(v) if self.dtype is dt.u1 else v
+        elif self.gather is None:  # (a gathered layout is materialised and alive while it has its indices)
             self._ensure()
             view = self._view
         key = self._shift(_norm_index(key, len(self.shape), self.name))
@@ -320,7 +321,7 @@ class ScalarField(Field):
 
     def __setitem__(self, key, value):
         view = self.view
-        if view is None:
+        if view is None and self.gather is None:
             self._ensure()
             view = self._view
         key = self._shift(_norm_index(key, len(self.shape), self.name))
