@@ -245,9 +245,19 @@ def _spd(n: int, seed: int) -> np.ndarray:
     return m @ m.T + np.eye(n)
 
 
+@pytest.fixture(params=["dense", "sparse"])
+def factorisation(request, monkeypatch):
+    """Both ways a SparseSolver factorises: LAPACK for small matrices, SuperLU for the rest (DENSE_MAX 0)."""
+    from simgrad.linalg import sparse_solver
+
+    if request.param == "sparse":
+        monkeypatch.setattr(sparse_solver, "DENSE_MAX", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("solver_type", ["LLT", "LDLT", "LU"])
 @pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
-def test_sparse_solver_matches_numpy(solver_type, dtype):
+def test_sparse_solver_matches_numpy(solver_type, dtype, factorisation):
     n = 12
     a = _spd(n, 1)
     A = _from_dense(a, dtype=dtype)
@@ -271,12 +281,23 @@ def test_sparse_solver_matches_numpy(solver_type, dtype):
     np.testing.assert_allclose(xn.to_numpy(), want, rtol=rtol)
 
 
-def test_sparse_solver_reports_failure():
+def test_sparse_solver_reports_failure(factorisation):
     indefinite = _from_dense(np.diag([-1.0, 2.0]))
     llt = ti.linalg.SparseSolver(dtype=ti.f64)
     llt.compute(indefinite)
     assert not llt.info()  # not positive definite, as Eigen's LLT
     assert np.isnan(llt.solve(np.ones(2))).all()
+    ldlt = ti.linalg.SparseSolver(dtype=ti.f64, solver_type="LDLT")
+    ldlt.compute(indefinite)
+    assert ldlt.info()  # Eigen's LDLT takes an indefinite matrix without a zero pivot
+    np.testing.assert_allclose(ldlt.solve(np.ones(2)), [-1.0, 0.5])
+    ldlt.compute(_from_dense(np.array([[0.0, 1.0], [1.0, 2.0]])))
+    # a zero leading pivot: taichi 1.7.4's info() is False (Eigen's LDLT does not pivot); SuperLU pivots and
+    # solves it, correctly
+    assert ldlt.info()
+    np.testing.assert_allclose(ldlt.solve(np.array([1.0, 4.0])), [2.0, 1.0])
+    ldlt.compute(_from_dense(np.array([[1.0, 1.0], [1.0, 1.0]])))
+    assert not ldlt.info()  # singular
     lu = ti.linalg.SparseSolver(dtype=ti.f64, solver_type="LU")
     lu.compute(indefinite)
     assert lu.info()
@@ -292,7 +313,7 @@ def test_sparse_solver_reports_failure():
         ti.linalg.SparseSolver().solve(np.ones(2))
 
 
-def test_llt_reads_the_lower_triangle():
+def test_llt_reads_the_lower_triangle(factorisation):
     """Eigen's LLT/LDLT take the matrix as symmetric from its lower triangle; LU uses all of it."""
     a = np.array([[4.0, 5.0], [1.0, 3.0]])
     A = _from_dense(a)
