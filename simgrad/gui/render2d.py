@@ -142,10 +142,16 @@ def _blend(img, i, j, a, c):
 @ti.func
 def _circle(img, i0, i1, j0, j1, cx, cy, r, c):
     for i in range(i0, i1 + 1):
-        dx = cx - i
         for j in range(j0, j1 + 1):
-            dy = cy - j
-            _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
+            _circle_pixel(img, i, j, cx, cy, r, c)
+
+
+@ti.func
+def _circle_pixel(img, i, j, cx, cy, r, c):
+    """Coverage clamp(r - distance) from integer pixel coordinates, blended."""
+    dx = cx - i
+    dy = cy - j
+    _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
 
 
 @ti.func
@@ -170,7 +176,16 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
             i1 = ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32)
             j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
             j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
-            _circle(img, i0, i1, j0, j1, cx, cy, r, colors[p * each])
+            c = colors[p * each]
+            if i1 - i0 <= 1 and j1 - j0 <= 1:  # at most 2 x 2 pixels (a particle): no loops to set up
+                for di in ti.static(range(2)):
+                    for dj in ti.static(range(2)):
+                        i = i0 + di
+                        j = j0 + dj
+                        if i <= i1 and j <= j1:
+                            _circle_pixel(img, i, j, cx, cy, r, c)
+            else:
+                _circle(img, i0, i1, j0, j1, cx, cy, r, c)
 
 
 @ti.kernel
