@@ -61,6 +61,36 @@ def test_builder_from_a_kernel_builds_the_laplacian(dtype, fmt):
     assert builder.build().matrix.count_nonzero() == 0
 
 
+@pytest.mark.parametrize("fmt", ["col_major", "row_major"])
+def test_duplicate_triplets_sum_in_the_order_they_came(fmt):
+    # as Eigen's setFromTriplets (taichi 1.7.4 builds 1.0 from 1e8, 1, -1e8, 1 in f32): one by one in order,
+    # not pairwise (numpy's reduceat gives 0.0), long runs too
+    long_run = 69
+    cells = [(0, 1)] * 4 + [(1, 0)] * 9 + [(2, 2)] * long_run + [(0, 1)] * 4 + [(1, 2)]
+    vals = np.array([1e8, 1, -1e8, 1] + [0.1] * 9 + [0.5] * long_run + [1e8, 1, -1e8, 1] + [3.0], np.float32)
+    groups: dict = {}
+    for k, c in enumerate(cells):
+        groups.setdefault(c, []).append(k)
+    order = [g[d] for d in range(len(cells)) for g in groups.values() if d < len(g)]  # round robin: interleaved,
+    # each cell's triplets in their order
+    want = {}
+    for k in order:
+        want[cells[k]] = np.float32(want.get(cells[k], np.float32(0)) + vals[k])
+    builder = ti.linalg.SparseMatrixBuilder(3, 3, max_num_triplets=len(cells), dtype=ti.f32, storage_format=fmt)
+    t = builder._triplets
+    t.rows[:len(cells)] = [cells[k][0] for k in order]
+    t.cols[:len(cells)] = [cells[k][1] for k in order]
+    t.values[:len(cells)] = vals[order]
+    t.count[0] = len(cells)
+    A = builder.build()
+    dense = np.zeros((3, 3), np.float32)
+    for (i, j), v in want.items():
+        dense[i, j] = v
+    assert dense[0, 1] == 1.0  # 1e8, 1, -1e8, 1 twice, in f32: 1
+    np.testing.assert_array_equal(A.matrix.toarray(), dense)
+    assert A.matrix.nnz == len(want)
+
+
 def test_builder_accumulates_over_launches_and_prints_triplets(capsys):
     builder = ti.linalg.SparseMatrixBuilder(3, 2, max_num_triplets=4, dtype=ti.f32)
 
