@@ -481,16 +481,28 @@ def _circle_in_box(img, cx, cy, r, rgb) -> None:
     j0, j1 = max(math.ceil(cy - r), 0), min(math.floor(cy + r), H - 1)
     if i0 > i1 or j0 > j1:
         return
+    part, ap, keep, full = _circle_cover(cx, cy, r, i0, i1, j0, j1)
+    box = img[i0:i1 + 1, j0:j1 + 1]
+    col = np.asarray(rgb, np.float64)
+    box[part] = box[part] * keep + col * ap
+    box[full] = col
+
+
+@functools.lru_cache(maxsize=16)
+def _circle_cover(cx, cy, r, i0, i1, j0, j1):
+    """(partly covered pixels, their coverage a and 1 - a as columns, fully covered pixels) of a circle's box:
+    kept for the circles drawn again in the next frame (a cursor, a marker), the geometry being most of the
+    work."""
     dx = cx - np.arange(i0, i1 + 1, dtype=np.float64)
     dy = cy - np.arange(j0, j1 + 1, dtype=np.float64)
     d2 = np.add.outer(dx * dx, dy * dy)
     a = r - np.sqrt(d2, out=d2)
-    box = img[i0:i1 + 1, j0:j1 + 1]
-    col = np.asarray(rgb, np.float64)
     part = (a > 0.0) & (a < 1.0)
     ap = a[part][:, None]
-    box[part] = box[part] * (1.0 - ap) + col * ap
-    box[a >= 1.0] = col
+    cover = (part, ap, 1.0 - ap, a >= 1.0)
+    for x in cover:
+        x.flags.writeable = False  # shared by later calls
+    return cover
 
 
 def _lines(img, A, B, r, colors) -> None:

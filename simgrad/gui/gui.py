@@ -383,6 +383,8 @@ class GUI:
 
     def get_event(self, *e_filter):
         """Take the first waiting event matching the filter into ``self.event``; True if found."""
+        if self._window is None:  # headless: never an event (asked every frame)
+            return False
         for e in self.get_events(*e_filter):
             self.event = e
             return True
@@ -420,6 +422,8 @@ class GUI:
 
     def is_pressed(self, *keys):
         """Whether any of ``keys`` is held (Shift/Alt/Control match either side)."""
+        if not self.key_pressed:  # (nothing held, and always so headless: asked for several keys a frame)
+            return False
         for key in keys:
             if key in (GUI.SHIFT, GUI.ALT, GUI.CTRL) and (
                 key + "_L" in self.key_pressed or key + "_R" in self.key_pressed

@@ -32,6 +32,9 @@ TILE = 16
 #: one segment's pixels in a column are visited in runs of a multiple of this many (the vector width the
 #: loop vectoriser picks for it with AVX-512)
 RUN = 16
+#: how far past the half-width a segment's pixels are still visited: rounding slack only (the visited range
+#: only bounds the work; a visited pixel the segment does not cover is written back unchanged)
+NEAR_MARGIN = 1.0e-3
 
 if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to mypy
     _IMG: TypeAlias = Any
@@ -139,10 +142,16 @@ def _blend(img, i, j, a, c):
 @ti.func
 def _circle(img, i0, i1, j0, j1, cx, cy, r, c):
     for i in range(i0, i1 + 1):
-        dx = cx - i
         for j in range(j0, j1 + 1):
-            dy = cy - j
-            _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
+            _circle_pixel(img, i, j, cx, cy, r, c)
+
+
+@ti.func
+def _circle_pixel(img, i, j, cx, cy, r, c):
+    """Coverage clamp(r - distance) from integer pixel coordinates, blended."""
+    dx = cx - i
+    dy = cy - j
+    _blend(img, i, j, ti.min(ti.max(r - ti.sqrt(dx * dx + dy * dy), 0.0), 1.0), c)
 
 
 @ti.func
@@ -167,7 +176,16 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
             i1 = ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32)
             j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
             j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
-            _circle(img, i0, i1, j0, j1, cx, cy, r, colors[p * each])
+            c = colors[p * each]
+            if i1 - i0 <= 1 and j1 - j0 <= 1:  # at most 2 x 2 pixels (a particle): no loops to set up
+                for di in ti.static(range(2)):
+                    for dj in ti.static(range(2)):
+                        i = i0 + di
+                        j = j0 + dj
+                        if i <= i1 and j <= j1:
+                            _circle_pixel(img, i, j, cx, cy, r, c)
+            else:
+                _circle(img, i0, i1, j0, j1, cx, cy, r, c)
 
 
 @ti.kernel
@@ -249,7 +267,7 @@ def _near(p, a, d, pad):
     s0 = ti.cast(0.0, ti.f64)
     s1 = ti.cast(1.0, ti.f64)
     if d != 0.0:
-        inv = 1.0 / d  # (a reciprocal: the range only bounds the pixels visited, pad leaves a pixel to spare)
+        inv = 1.0 / d  # (a reciprocal: the range only bounds the pixels visited; pad has a margin for it)
         u = (p - pad - a) * inv
         v = (p + pad - a) * inv
         s0 = ti.max(s0, ti.min(u, v))
@@ -265,7 +283,7 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32):
     half-width in pixels; ``colouring`` 2: per-vertex colours ``c0`` to ``c1``, 1: ``c0`` per segment, 0: ``c0``'s
     one row for all. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
     shades (the same float64 operations, so the same pixels), but without pieces: each column of pixels visits
-    only the run of rows near the part of the segment within ``pad`` of it, each pixel once. Runs go along the
+    only the run of rows near the part of the segment within ``r`` of it, each pixel once. Runs go along the
     image's contiguous axis, whatever the segment's direction: a loop across columns did not vectorise."""
     w = ti.cast(img.shape[0], ti.f64)
     h = ti.cast(img.shape[1], ti.f64)
@@ -301,15 +319,18 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32):
                 ca = c0[o * ti.min(colouring, 1)]  # colouring 0: one colour for all (c0 has one row)
                 cb = c1[o * ti.min(colouring, 1)]
                 per_vertex = ti.cast(colouring == 2, ti.i32)
-                i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - pad), 0.0), ti.i32)
-                i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + pad), w - 1.0), ti.i32)
+                # a pixel is covered only when its centre lies within r of the segment, so columns and rows
+                # are visited within r (and a rounding margin) of it: pixel centres sit at +0.5
+                near = r + NEAR_MARGIN
+                i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - near - 0.5), 0.0), ti.i32)
+                i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + near - 0.5), w - 1.0), ti.i32)
                 for i in range(i0, i1 + 1):
-                    s0, s1 = _near(i + 0.5, ax, dx, pad)
+                    s0, s1 = _near(i + 0.5, ax, dx, near)
                     if s0 <= s1:
                         y0 = ay + s0 * dy
                         y1 = ay + s1 * dy
-                        j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - pad), 0.0), ti.i32)
-                        j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + pad), h - 1.0), ti.i32)
+                        j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - near - 0.5), 0.0), ti.i32)
+                        j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + near - 0.5), h - 1.0), ti.i32)
                         # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
                         # written back unchanged), so short runs take the vector loop too
                         n = (j1 - j0 + RUN) // RUN * RUN

@@ -32,6 +32,13 @@ if TYPE_CHECKING:
 Layout = tuple[int, int, tuple["AccessTerm", ...], tuple[int, ...]]
 
 
+def _plain_index(key: tuple, shape) -> bool:
+    """Integers, one per axis, each inside the shape: an index that needs none of _norm_index's and
+    _check_bounds's work."""
+    return shape is not None and len(key) == len(shape) and all(
+        type(k) is int and 0 <= k < n for k, n in zip(key, shape))
+
+
 def _norm_index(key, ndim: int, name: str = "") -> tuple:
     if key is None:
         key = ()
@@ -301,9 +308,17 @@ class ScalarField(Field):
 
     def __getitem__(self, key):
         view = self.view
-        if view is None:
+        if view is not None:
+            if type(key) is int and view.ndim == 1 and not self.offset and 0 <= key < view.shape[0]:
+                v = view[key].item()  # (the common f[i] of a dense 1-D field, without the general checks)
+                return int(v) if self.dtype is dt.u1 else v
+        elif self.gather is None:  # (a gathered layout is materialised and alive while it has its indices)
             self._ensure()
             view = self._view
+        if type(key) is tuple and not self.offset and (view is not None or self.gather is not None) \
+                and _plain_index(key, self._shape):  # f[i, j]: the same, for any layout
+            v = view[key].item() if view is not None else self._flat[self.gather[key]].item()
+            return int(v) if self.dtype is dt.u1 else v
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.sparse:
@@ -317,9 +332,18 @@ class ScalarField(Field):
 
     def __setitem__(self, key, value):
         view = self.view
-        if view is None:
+        if view is None and self.gather is None:
             self._ensure()
             view = self._view
+        if (view is not None or self.gather is not None) and not self.offset and self.quant_type is None and (
+                type(key) is tuple and _plain_index(key, self._shape)
+                or type(key) is int and _plain_index((key,), self._shape)):  # (sparse fields have neither)
+            _check_value(value, self.dtype, self.name)
+            if view is not None:
+                view[key] = value
+            else:
+                self._flat[self.gather[key]] = value
+            return
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.quant_type is not None:  # kept to its bits whatever the value, as in kernels and Taichi

@@ -5,6 +5,7 @@ contract, so unrolling is what makes them free at run time (and differentiable e
 
 from __future__ import annotations
 
+import itertools
 import numbers
 
 import numpy as np
@@ -56,10 +57,16 @@ def vector_key(key):
     return key
 
 
+_set_slot = object.__setattr__
+
+
 class Matrix:
     """An n-vector (m == 0) or an n x m matrix of scalars (Python numbers or kernel values)."""
 
     __slots__ = ("entries", "n", "m")
+    entries: list
+    n: int
+    m: int
     _is_matrix = True
     # numpy defers to Matrix's reflected operators (`np.cos(0) + v` is a Matrix, as in Taichi), rather than
     # treating it as a sequence
@@ -67,26 +74,28 @@ class Matrix:
 
     def __init__(self, arr=None, dt=None, n=None, m=None, *, _entries=None):
         if _entries is not None:
-            self.entries, self.n, self.m = list(_entries), n, m
+            entries = list(_entries)
+        elif isinstance(arr, Matrix):
+            entries, n, m = list(arr.entries), arr.n, arr.m
         else:
-            if isinstance(arr, Matrix):
-                self.entries, self.n, self.m = list(arr.entries), arr.n, arr.m
+            if isinstance(arr, np.ndarray):
+                arr = arr.tolist()
+            if isinstance(arr, (numbers.Number, Expr)):
+                arr = [arr]
+            arr = list(arr)
+            if arr and isinstance(arr[0], (list, tuple, np.ndarray, Matrix)):
+                rows = [list(r.entries) if isinstance(r, Matrix) else list(r) for r in arr]
+                n, m = len(rows), len(rows[0])
+                if any(len(r) != m for r in rows):
+                    raise ValueError("matrix rows must have equal lengths")
+                entries = [e for r in rows for e in r]
             else:
-                if isinstance(arr, np.ndarray):
-                    arr = arr.tolist()
-                if isinstance(arr, (numbers.Number, Expr)):
-                    arr = [arr]
-                arr = list(arr)
-                if arr and isinstance(arr[0], (list, tuple, np.ndarray, Matrix)):
-                    rows = [list(r.entries) if isinstance(r, Matrix) else list(r) for r in arr]
-                    self.n, self.m = len(rows), len(rows[0])
-                    if any(len(r) != self.m for r in rows):
-                        raise ValueError("matrix rows must have equal lengths")
-                    self.entries = [e for r in rows for e in r]
-                else:
-                    self.entries, self.n, self.m = arr, len(arr), 0
-            if dt is not None:
-                self.entries = [operators.cast(e, dt) for e in self.entries]
+                entries, n, m = arr, len(arr), 0
+        if dt is not None:
+            entries = [operators.cast(e, dt) for e in entries]
+        _set_slot(self, "entries", entries)  # (past __setattr__'s swizzle handling: made often in Python scope)
+        _set_slot(self, "n", n)
+        _set_slot(self, "m", m)
 
     # -- shape -----------------------------------------------------------------------------------
     @property
@@ -104,29 +113,34 @@ class Matrix:
     def get_shape(self) -> tuple[int, ...]:
         return self.shape
 
-    def _like(self, entries) -> Matrix:
-        return Matrix(n=self.n, m=self.m, _entries=entries)
+    def _like(self, entries: list) -> Matrix:
+        like = object.__new__(Matrix)
+        _set_slot(like, "entries", entries)
+        _set_slot(like, "n", self.n)
+        _set_slot(like, "m", self.m)
+        return like
 
     @staticmethod
     def _map(fn, *args) -> Matrix:
         # a list, tuple or numpy array beside a matrix is a matrix of the same shape (`m == [[0, 1], [2, 3]]`),
         # never one scalar operand
-        args = tuple(Matrix(a.tolist() if hasattr(a, "tolist") else list(a))
-                     if isinstance(a, (list, tuple)) or (hasattr(a, "ndim") and getattr(a, "ndim", 0) > 0
-                                                          and not isinstance(a, Matrix)) else a
-                     for a in args)
+        if not all(type(a) in _PLAIN_OPERANDS for a in args):  # (the common case skips the probing)
+            args = tuple(Matrix(a.tolist() if hasattr(a, "tolist") else list(a))
+                         if isinstance(a, (list, tuple)) or (hasattr(a, "ndim") and getattr(a, "ndim", 0) > 0
+                                                              and not isinstance(a, Matrix)) else a
+                         for a in args)
         mats = [a for a in args if isinstance(a, Matrix)]
-        shape = mats[0].shape
+        proto = mats[0]
         for a in mats[1:]:
-            if a.shape != shape:
+            if a.n != proto.n or a.m != proto.m:
+                shape = proto.shape
                 # as Taichi: a TaichiTypeError in a kernel, numpy's ValueError in Python scope
                 if errors.compiling():  # (Taichi's words first)
                     raise SimgradTypeError(f"Cannot broadcast tensor to tensor: matrix shapes {shape} and {a.shape} "
                                            "do not match")
                 raise SimgradValueError(f"matrix shapes {shape} and {a.shape} do not match", caller_loc())
-        proto = mats[0]
-        cols = [a.entries if isinstance(a, Matrix) else [a] * len(proto.entries) for a in args]
-        return proto._like([fn(*xs) for xs in zip(*cols)])
+        cols = [a.entries if isinstance(a, Matrix) else itertools.repeat(a) for a in args]
+        return proto._like(list(map(fn, *cols)))
 
     def __len__(self) -> int:
         return self.n
@@ -163,6 +177,8 @@ class Matrix:
         return self[key if len(key) > 1 else key[0]]
 
     def __getitem__(self, key):
+        if type(key) is int and self.m == 0 and 0 <= key < self.n:  # v[0], the most common read
+            return self.entries[key]
         key = vector_key(key)
         if isinstance(key, slice) or (isinstance(key, tuple) and any(isinstance(k, slice) for k in key)):
             return self._slice(key)
@@ -222,6 +238,9 @@ class Matrix:
         return out
 
     def __setitem__(self, key, value):
+        if type(key) is int and self.m == 0 and 0 <= key < self.n:
+            self.entries[key] = value
+            return
         key = vector_key(key)
         idx = self._flat_index(key)
         if idx is None:
@@ -595,6 +614,9 @@ class Vector(Matrix, metaclass=_VectorMeta):
         from simgrad.lang.ndarray import VectorNdarray
 
         return VectorNdarray(n, dtype, shape, needs_grad)
+
+
+_PLAIN_OPERANDS = frozenset((Matrix, int, float, bool, Expr))  # operands _map takes as they are
 
 
 def _is_zero(v) -> bool:

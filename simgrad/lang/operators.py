@@ -29,9 +29,8 @@ def _np_scalar(x):
 
 
 def is_matrix(x) -> bool:
-    from simgrad.lang.matrix import Matrix
-
-    return isinstance(x, Matrix)
+    """(Matrix's class flag: no import per call, every scalar operation in both scopes asks.)"""
+    return getattr(type(x), "_is_matrix", False)
 
 
 def _literal_type(v, like: dt.DataType | None) -> dt.DataType:
@@ -116,8 +115,13 @@ def _elementwise(fn, *args):
     return Matrix._map(fn, *args)
 
 
+_PY_NUM_TYPES = frozenset(_PY_NUM)
+
+
 def _binary(pyfn, irfn):
     def op(a, b):
+        if type(a) in _PY_NUM_TYPES and type(b) in _PY_NUM_TYPES:  # Python scope's numbers, first
+            return pyfn(a, b)
         if is_matrix(a) or is_matrix(b):
             return _elementwise(op, a, b)
         if not isinstance(a, Expr) and not isinstance(b, Expr):
@@ -411,10 +415,21 @@ def cast(x, dtype):
             if isinstance(x, int) and not isinstance(x, bool):  # ti.cast(2**40, ti.i32) wraps, explicitly
                 return cast_expr(_int_literal(x), t)
             return cast_expr(to_expr(x, t), t)
-        import numpy as np
-
-        return np.array(x).astype(t.np).item()
+        return _py_cast(x, t)
     return cast_expr(x, t)
+
+
+def _py_cast(x, t: dt.DataType):
+    """A Python-scope value converted as numpy converts it; a float or exact int to a float type, and an int
+    that fits its integer type, skip numpy's array round trip (vec3(1, 2, 3) casts every entry)."""
+    import numpy as np
+
+    if (type(x) is float or (type(x) is int and -(1 << 53) <= x <= 1 << 53)) and t.is_float:
+        return float(x) if t.bits == 64 else float(t.np.type(x))
+    if type(x) is int and not t.is_float and t is not dt.u1 \
+            and -(1 << (t.bits - 1)) * t.is_signed <= x < 1 << (t.bits - t.is_signed):
+        return x
+    return np.array(x).astype(t.np).item()
 
 
 def bit_cast(x, dtype):

@@ -171,6 +171,15 @@ class StructField(Field):
     def _components(self) -> list[ScalarField]:
         return [c for f in self.members.values() for c in f._components()]
 
+    def _ready(self) -> bool:
+        """Every member's memory is there (placed, materialised, its program alive): Python-scope access needs no
+        _ensure, the cheap test in front of each `s[i].member`."""
+        comps = self.__dict__.get("_comps")
+        if comps is None:  # (the members never change once the field is made)
+            comps = self._components()
+            object.__setattr__(self, "_comps", comps)
+        return all(c._view is not None or c.gather is not None for c in comps)
+
     def placeable(self) -> list[Field]:
         """The ordinary fields to place: every member's (nested structs flattened)."""
         out: list[Field] = []
@@ -203,7 +212,8 @@ class StructField(Field):
             f._set_offset(offset)
 
     def __getitem__(self, key):
-        self._ensure()
+        if not self._ready():
+            self._ensure()
         return StructElement(self, key)
 
     def __setitem__(self, key, value):

@@ -20,3 +20,10 @@ def sparse_linalg() -> Any:
     import scipy.sparse.linalg
 
     return scipy.sparse.linalg
+
+
+def dense_linalg() -> Any:
+    sparse()
+    import scipy.linalg
+
+    return scipy.linalg

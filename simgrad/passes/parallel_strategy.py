@@ -42,6 +42,9 @@ class LoopStrategy:
     weight: int = 0  # updates per iteration into the regions (serial loops of constant trip multiply)
     #: iterations a thread takes at a time: ~4096 statements' worth of the body (a user's block_dim wins)
     grain: int = 1
+    #: no iteration stores to a field element that another reads or stores (`_independent`): the target may tell
+    #: its compiler the loop's iterations are independent
+    independent: bool = False
 
     def ir_name(self) -> str:
         """The IR printer's text: `tasks(grain=64, reduce=[%7], private=[tree 2 [0, 4096) prefix 1], weight=9)`."""
@@ -85,7 +88,7 @@ def _loop(loop: Stmt, uses: dict, debug: bool) -> None:
     reduced = {key[0] for key in reductions}
     regions, weight = private_regions(loop, inside, uses, shared, reduced, debug)
     grain = loop.attrs.get("block_dim") or max(1, 4096 // max(1, sum(1 for _ in walk(loop.blocks[0]))))
-    loop.attrs["strategy"] = LoopStrategy(reductions, regions, weight, grain)
+    loop.attrs["strategy"] = LoopStrategy(reductions, regions, weight, grain, _independent(loop, inside))
     reducing = {id(a) for _place, adds in reductions.values() for a in adds}
     private = {k for r in regions for k in r.keys}  # (id(field), slice key) of the updates copied
     nprefix = {tid: len(key) for tid, key in private}  # every update of a field has as many prefix axes
@@ -161,6 +164,27 @@ def _shared_targets(loop: Stmt, inside: set) -> set[int]:
                 or len({_varying(p, loop, inside) for p in ptrs}) > 1:
             shared.add(tid)
     return shared
+
+
+def _independent(loop: Stmt, inside: set) -> bool:
+    """Whether the iterations share no element one of them stores to: every field the loop stores to is stored
+    and read only at the element the iteration owns (injective stores, every access with the same varying
+    indices), and the ndarrays count as one array (one may be passed twice). Taichi's rule calls any other
+    sharing a race, but at one thread taichi runs such a loop in order (`x[i] = x[i - 1] + 1` counts up), and a
+    target told the iterations are independent would reorder it."""
+    stores: dict[int, list[Stmt]] = {}
+    reads: dict[int, list[Stmt]] = {}
+    for x in walk(loop.blocks[0]):
+        if x.op in (Op.GLOBAL_STORE, Op.ATOMIC, Op.GLOBAL_LOAD) and x.operands[0].op is Op.GLOBAL_PTR:
+            p = x.operands[0]
+            t = p.attrs["target"]
+            key = id(t) if isinstance(t, FieldRef) else 0  # every ndarray the same array
+            (reads if x.op is Op.GLOBAL_LOAD else stores).setdefault(key, []).append(p)
+    for key, ptrs in stores.items():
+        if not all(injective_in(loop, p, inside) for p in ptrs) \
+                or len({_varying(p, loop, inside) for p in ptrs + reads.get(key, [])}) > 1:
+            return False
+    return True
 
 
 def _varying(ptr: Stmt, loop: Stmt, inside: set) -> tuple:

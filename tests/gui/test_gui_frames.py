@@ -98,13 +98,15 @@ def test_one_primitive_calls_draw_what_the_array_calls_draw(point):
     assert np.abs(fast.get_image()[..., :3] - 0x20 / 255).max() > 0.5
 
 
-def test_a_few_circles_blend_as_the_kernel_blends():
-    # up to canvas._FEW circles are blended on their box slices by numpy, with the kernel's float64 lerp: the same
-    # pixels as render2d's kernel, and within float32 rounding of the order-exact rasteriser
+def test_a_few_circles_blend_as_the_kernel_blends(monkeypatch):
+    # up to canvas._FEW circles are blended on their box slices by numpy (before ti.init: no kernels), with the
+    # kernel's float64 lerp: the same pixels as render2d's kernel, and within float32 rounding of the order-exact
+    # rasteriser; a circle drawn again (its coverage kept from the first time) blends the same
     import simgrad as ti
     from simgrad.gui import canvas, render2d
 
     ti.init(arch=ti.cpu)
+    monkeypatch.setattr(canvas, "_kernels", lambda: None)
     rng = np.random.default_rng(8)
     base = rng.random((W, H, 3)).astype(np.float32)
     base[5, 5] = np.nan
@@ -119,6 +121,9 @@ def test_a_few_circles_blend_as_the_kernel_blends():
     np.testing.assert_array_equal(few, kernel)
     assert np.nanmax(np.abs(few - general)) < 1e-6
     assert np.abs(few - base)[~np.isnan(base)].max() > 0.5
+    again = base.copy()
+    canvas._circles(again, c, r, rgb)
+    np.testing.assert_array_equal(again, kernel)
 
 
 def test_get_image_writes_one_buffer_again_as_taichi_does():

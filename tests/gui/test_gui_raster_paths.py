@@ -88,3 +88,27 @@ def test_one_tile_segments_without_pieces_match_tiled_pieces(monkeypatch):
         pictures.append(img)
     assert np.array_equal(pictures[0], pictures[1])
     assert (pictures[0] != 0.25).sum() > 1000
+
+
+def test_one_tile_segments_visit_every_covered_pixel(monkeypatch):
+    # the column-by-column path visits only pixels whose centre may lie within the half-width of the segment: many
+    # short random segments, ends on the pixel grid, on pixel centres and between them, any radius, must still give
+    # the tiled path's picture bit for bit
+    import simgrad as ti
+    from simgrad.gui import render2d
+
+    ti.init(arch=ti.cpu)
+    rng = np.random.default_rng(11)
+    n = 3000
+    a = rng.integers(-4, W + 4, (n, 2)) + rng.choice([0.0, 0.5, 0.25, 1e-9, -1e-9], (n, 2))
+    b = a + rng.integers(-9, 10, (n, 2)) + rng.choice([0.0, 0.5, 0.75], (n, 2))
+    r = rng.choice([0.25, 0.5, 0.5 + 1e-12, 0.7071067811865476, 1.0, 1.5, 3.0], n)
+    colors = rng.random((n, 3))
+    pictures = []
+    for one_tile in (False, True):
+        monkeypatch.setattr(render2d, "_one_tile", lambda n, one_tile=one_tile: one_tile)
+        img = np.full((W, H, 3), 0.25, np.float32)
+        render2d.lines(img, a, b, r, colors)
+        pictures.append(img)
+    assert np.array_equal(pictures[0], pictures[1])
+    assert (pictures[0] != 0.25).any(axis=-1).mean() > 0.3

@@ -61,6 +61,36 @@ def test_builder_from_a_kernel_builds_the_laplacian(dtype, fmt):
     assert builder.build().matrix.count_nonzero() == 0
 
 
+@pytest.mark.parametrize("fmt", ["col_major", "row_major"])
+def test_duplicate_triplets_sum_in_the_order_they_came(fmt):
+    # as Eigen's setFromTriplets (taichi 1.7.4 builds 1.0 from 1e8, 1, -1e8, 1 in f32): one by one in order,
+    # not pairwise (numpy's reduceat gives 0.0), long runs too
+    long_run = 69
+    cells = [(0, 1)] * 4 + [(1, 0)] * 9 + [(2, 2)] * long_run + [(0, 1)] * 4 + [(1, 2)]
+    vals = np.array([1e8, 1, -1e8, 1] + [0.1] * 9 + [0.5] * long_run + [1e8, 1, -1e8, 1] + [3.0], np.float32)
+    groups: dict = {}
+    for k, c in enumerate(cells):
+        groups.setdefault(c, []).append(k)
+    order = [g[d] for d in range(len(cells)) for g in groups.values() if d < len(g)]  # round robin: interleaved,
+    # each cell's triplets in their order
+    want = {}
+    for k in order:
+        want[cells[k]] = np.float32(want.get(cells[k], np.float32(0)) + vals[k])
+    builder = ti.linalg.SparseMatrixBuilder(3, 3, max_num_triplets=len(cells), dtype=ti.f32, storage_format=fmt)
+    t = builder._triplets
+    t.rows[:len(cells)] = [cells[k][0] for k in order]
+    t.cols[:len(cells)] = [cells[k][1] for k in order]
+    t.values[:len(cells)] = vals[order]
+    t.count[0] = len(cells)
+    A = builder.build()
+    dense = np.zeros((3, 3), np.float32)
+    for (i, j), v in want.items():
+        dense[i, j] = v
+    assert dense[0, 1] == 1.0  # 1e8, 1, -1e8, 1 twice, in f32: 1
+    np.testing.assert_array_equal(A.matrix.toarray(), dense)
+    assert A.matrix.nnz == len(want)
+
+
 def test_builder_accumulates_over_launches_and_prints_triplets(capsys):
     builder = ti.linalg.SparseMatrixBuilder(3, 2, max_num_triplets=4, dtype=ti.f32)
 
@@ -245,9 +275,19 @@ def _spd(n: int, seed: int) -> np.ndarray:
     return m @ m.T + np.eye(n)
 
 
+@pytest.fixture(params=["dense", "sparse"])
+def factorisation(request, monkeypatch):
+    """Both ways a SparseSolver factorises: LAPACK for small matrices, SuperLU for the rest (DENSE_MAX 0)."""
+    from simgrad.linalg import sparse_solver
+
+    if request.param == "sparse":
+        monkeypatch.setattr(sparse_solver, "DENSE_MAX", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("solver_type", ["LLT", "LDLT", "LU"])
 @pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
-def test_sparse_solver_matches_numpy(solver_type, dtype):
+def test_sparse_solver_matches_numpy(solver_type, dtype, factorisation):
     n = 12
     a = _spd(n, 1)
     A = _from_dense(a, dtype=dtype)
@@ -271,12 +311,23 @@ def test_sparse_solver_matches_numpy(solver_type, dtype):
     np.testing.assert_allclose(xn.to_numpy(), want, rtol=rtol)
 
 
-def test_sparse_solver_reports_failure():
+def test_sparse_solver_reports_failure(factorisation):
     indefinite = _from_dense(np.diag([-1.0, 2.0]))
     llt = ti.linalg.SparseSolver(dtype=ti.f64)
     llt.compute(indefinite)
     assert not llt.info()  # not positive definite, as Eigen's LLT
     assert np.isnan(llt.solve(np.ones(2))).all()
+    ldlt = ti.linalg.SparseSolver(dtype=ti.f64, solver_type="LDLT")
+    ldlt.compute(indefinite)
+    assert ldlt.info()  # Eigen's LDLT takes an indefinite matrix without a zero pivot
+    np.testing.assert_allclose(ldlt.solve(np.ones(2)), [-1.0, 0.5])
+    ldlt.compute(_from_dense(np.array([[0.0, 1.0], [1.0, 2.0]])))
+    # a zero leading pivot: taichi 1.7.4's info() is False (Eigen's LDLT does not pivot); SuperLU pivots and
+    # solves it, correctly
+    assert ldlt.info()
+    np.testing.assert_allclose(ldlt.solve(np.array([1.0, 4.0])), [2.0, 1.0])
+    ldlt.compute(_from_dense(np.array([[1.0, 1.0], [1.0, 1.0]])))
+    assert not ldlt.info()  # singular
     lu = ti.linalg.SparseSolver(dtype=ti.f64, solver_type="LU")
     lu.compute(indefinite)
     assert lu.info()
@@ -292,7 +343,7 @@ def test_sparse_solver_reports_failure():
         ti.linalg.SparseSolver().solve(np.ones(2))
 
 
-def test_llt_reads_the_lower_triangle():
+def test_llt_reads_the_lower_triangle(factorisation):
     """Eigen's LLT/LDLT take the matrix as symmetric from its lower triangle; LU uses all of it."""
     a = np.array([[4.0, 5.0], [1.0, 3.0]])
     A = _from_dense(a)

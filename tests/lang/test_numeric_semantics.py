@@ -493,3 +493,21 @@ def test_f16_min_max_updates_compile_and_match_numpy(threads):
     k()
     top = np.float16(np.float32(1.12) * np.float32(999))
     np.testing.assert_array_equal(f.to_numpy(), np.array([top, -top, xs.max(), xs.max()], np.float16))
+
+
+@pytest.mark.parametrize("t", [ti.f16, ti.f32, ti.f64, ti.i8, ti.i32, ti.i64, ti.u8, ti.u32, ti.u64, ti.u1])
+def test_python_scope_cast_matches_numpy(t):
+    """Python-scope ti.cast (and so vec3(1, 2, 3) and every typed Matrix) converts as numpy's astype does: the
+    plain-float and in-range-int shortcuts agree with it value for value and type for type."""
+    ti.init(arch=ti.cpu)
+    values = [v for vs in _CAST_VALUES.values() for v in vs] + [True, False, 2**53, -(2**53), 2**53 + 2]
+    for v in values:
+        with np.errstate(all="ignore"):
+            try:
+                want = np.array(v).astype(t.np).item()
+            except OverflowError:
+                continue  # numpy refuses ints past 64 bits; so do we (not this test's concern)
+            got = ti.cast(v, t)
+        assert type(got) is type(want), (v, t)
+        assert got == want or (got != got and want != want), (v, t, got, want)
+        assert math.copysign(1, got) == math.copysign(1, want) if isinstance(want, float) and want == 0 else True

@@ -140,3 +140,15 @@ def test_taichi_lang_ops_answers_under_its_taichi_name():
     k()
     assert x[6, 8].to_numpy().tolist() == [1, 10, 100]
     assert x[3, 3].to_numpy().tolist() == [7, 8, 9]
+
+
+def test_lazy_names_are_kept_in_the_module_after_first_use():
+    # ti.GUI, ti.Tape, ... load on first use (simgrad/__init__.py __getattr__) and are then plain attributes:
+    # `ti.GUI.LEFT` in a frame loop must not go through the loader each time
+    import simgrad.gui
+
+    assert ti.GUI is simgrad.gui.GUI and vars(ti)["GUI"] is simgrad.gui.GUI
+    assert ti.Tape is vars(ti)["Tape"]
+    with pytest.raises(AttributeError):
+        ti.no_such_name_anywhere  # noqa: B018
+    assert "no_such_name_anywhere" not in vars(ti)
