@@ -99,7 +99,8 @@ class CpuCodegen(KernelCodegen):
         t = FunctionText(self, tname, f"internal void @{tname}(ptr %clo, i64 %lo, i64 %hi, i32 %tid)", True)
         t.loop = s
         t.serial = serial
-        self.parallel_group(t)
+        if plan.independent:  # (a loop taichi would run in order at one thread keeps its order)
+            self.parallel_group(t)
         t.prologue.append("  %ctx = load ptr, ptr %clo")
         for v, (k, ty, by_value) in zip(captured, slots):
             q, val = t.tmp("cap"), t.tmp("capv")

@@ -479,9 +479,10 @@ class KernelCodegen:
             f.start_block(sdone)
 
     def parallel_group(self, f: FunctionText) -> None:
-        """Gives task f an access group and its loop the `llvm.loop.parallel_accesses` that names it: iterations of a
-        parallel loop share no field element but through atomics (Taichi's rule; simgrad's plain updates of owned
-        or private elements, the tape and locals are emitted outside the group). LLVM takes the loop as parallel
+        """Gives task f an access group and its loop the `llvm.loop.parallel_accesses` that names it, for a loop whose
+        iterations store to no element another one reads or stores (LoopStrategy.independent; other sharing is a
+        race by Taichi's rule, but at one thread taichi runs it in order). Updates (plain ones of owned or private
+        elements too), the tape and locals are emitted outside the group. LLVM takes the loop as parallel
         only when every memory access in it is in the group, so one of those leaves it to its own analysis; when
         all are, it needs no run-time overlap checks, which it could not build for a gather (diffmpm3d's g2p
         reads the grid at indices computed from particle positions: "cannot identify array bounds")."""

@@ -2,9 +2,9 @@
 `llvm.loop.parallel_accesses` names (codegen/llvm.py parallel_group): iterations share no element but through
 atomics, so LLVM needs no run-time overlap checks. Without it a G2P-style loop (reads of a grid at indices
 computed from particle positions, stores to the particles) was not vectorised ("cannot identify array
-bounds"): diffmpm3d's g2p 2.6 -> 1.6 ms. Updates (plain ones on one thread or into private copies too), the tape
-and locals stay outside the group, so a loop with any of them is left to LLVM's own analysis: the scatter
-below adds into colliding cells and must stay exact."""
+bounds"): diffmpm3d's g2p 2.6 -> 1.6 ms. Only a loop whose iterations store to no element another reads or
+stores gets it (LoopStrategy.independent; tests/lang/test_dependent_iterations.py); its updates (plain ones too),
+the tape and locals stay outside the group, so a loop with any of them is left to LLVM's own analysis."""
 
 import re
 
@@ -106,7 +106,30 @@ def test_colliding_updates_stay_exact(threads):
     np.add.at(expect, ids, vals)
     np.testing.assert_array_equal(acc.to_numpy(), expect)
     np.testing.assert_array_equal(out.to_numpy(), vals * 2)
-    text = scatter._instance_for((), "").llvm_text
+    # iterations share acc's elements: the loop is not independent (parallel_strategy.py), LLVM keeps its analysis
+    assert "llvm.loop.parallel_accesses" not in scatter._instance_for((), "").llvm_text
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_owned_updates_stay_outside_the_group(threads):
+    """An independent loop with an update of its own element: the loop has the group, the update's load and
+    store (a plain read-modify-write) do not carry it."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=threads, offline_cache=False)
+    n = 512
+    val = ti.field(ti.f32, shape=n)
+    out = ti.field(ti.f32, shape=n)
+
+    @ti.kernel
+    def own():
+        for i in val:
+            out[i] += val[i] * 2
+
+    vals = np.arange(n, dtype=np.float32)
+    val.from_numpy(vals)
+    out.from_numpy(vals)
+    own()
+    np.testing.assert_array_equal(out.to_numpy(), vals * 3)
+    text = own._instance_for((), "").llvm_text
     assert "llvm.loop.parallel_accesses" in text
-    updates = [line for line in text.splitlines() if "atomicrmw" in line]
-    assert updates and not any("access.group" in line for line in updates)
+    grouped = [line for line in text.splitlines() if "access.group" in line]
+    assert len(grouped) == 1 and "load" in grouped[0]  # val[i] only

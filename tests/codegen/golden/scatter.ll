@@ -1,11 +1,5 @@
 declare noalias ptr @calloc(i64, i64)
 declare void @free(ptr)
-!1000 = distinct !{}
-!1001 = distinct !{!1001, !1002}
-!1002 = !{!"llvm.loop.parallel_accesses", !1000}
-!1006 = distinct !{}
-!1007 = distinct !{!1007, !1008}
-!1008 = !{!"llvm.loop.parallel_accesses", !1006}
 !0 = !{}
 !900000 = distinct !{!900000, !"simgrad fields"}
 !900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
@@ -80,7 +74,7 @@ casdone.29:
   br label %latch.7
 latch.7:
   %inext.10 = add i32 %i.9, 1
-  br label %head.5, !llvm.loop !1001
+  br label %head.5
 done.8:
   %sum.53 = load float, ptr %red.3
   %ptr.54 = getelementptr inbounds i8, ptr %root.50, i64 0
@@ -147,7 +141,7 @@ body.20:
   br label %latch.21
 latch.21:
   %inext.24 = add i32 %i.23, 1
-  br label %head.19, !llvm.loop !1007
+  br label %head.19
 done.22:
   %sum.50 = load float, ptr %red.17
   %ptr.51 = getelementptr inbounds i8, ptr %root.47, i64 0
