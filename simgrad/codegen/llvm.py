@@ -623,11 +623,9 @@ def lower_check_index(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 def lower_global_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("g")
     ty = llvm_type(s.vtype)
-    # (an alias scope only on an element lower_access marked `scoped_load`, one LLVM cannot bound: with scopes on
-    # every plain load LLVM stopped vectorising vortex_rings' advect loop, 4.9 -> 9.8 ms, and P2G ran 5% slower)
-    p = s.operands[0]
-    md = g.module.facts.access(p, ty) if p.attrs.get("scoped_load") else ""
-    f.emit(f"{r} = load {ty}, ptr {f.v(p)}{md}")
+    # (no alias scope on a plain load: with them LLVM stopped vectorising vortex_rings' advect loop, 4.9 -> 9.8
+    # ms, and P2G ran 5% slower; the stores and plain updates keep theirs)
+    f.emit(f"{r} = load {ty}, ptr {f.v(s.operands[0])}")
     f.names[s] = r
 
 

@@ -23,11 +23,6 @@ in a SPARSE_ACTION.
   grid runs a copy of the cell loop that branches instead (inside the block: its cell, else the full walk from
   the root, as before). Diagonal neighbours branch that way in both. A short cell loop (UNROLL_CELLS,
   UNROLL_STMTS) is marked `unroll`: LLVM unrolls it whole and every cell's digits fold.
-- A parallel loop that loads a dense element whose offset is not affine in the loop index (a periodic
-  neighbour `phi[i, jp]` with `jp = j + 1 if j + 1 < n else 0`, a particle's grid node) outside inner serial
-  loops has those loads marked `scoped_load`, its affine ones too: codegen gives them alias scopes
-  (codegen/alias.py). LLVM cannot bound such an address for a run-time overlap check, so without scopes it
-  vectorised no such loop that also stores (snow_phaseField's get_rate).
 - Debug mode: each index is checked against its extent first (CHECK_INDEX: a located IndexError and
   index 0 instead of a wild access).
 Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LLVM gets nuw/nsw.
@@ -73,7 +68,6 @@ def _lower_block(block: Block, loop: Stmt | None, inside: set, before: list[Stmt
                 mine.copy_cell_loop(written)
             changed |= _lower_block(s.blocks[0], s, {id(x) for x in walk(s.blocks[0])} | {id(s)}, ahead, debug,
                                     written, mine)
-            _scope_loads(s)
             for x in ahead:
                 x.block = block
             out += ahead
@@ -468,7 +462,6 @@ def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, insi
     """The byte offset of a field element from its tree's root, level by level (dense levels only today)."""
     _tree, const, terms, shape = target.layout
     form = None if debug or loop is None else _affine_form(s, terms, loop, inside)
-    s.attrs["affine"] = form is not None
     if form is not None and loop is not None:  # affine in the loop index: LLVM can vectorise
         unit, shift, invariant = form
         off = _mul(b, _u64(b, loop), unit)
@@ -485,27 +478,6 @@ def _field_offset(b: Builder, s: Stmt, target: FieldRef, loop: Stmt | None, insi
         idx = [_checked(b, s, target.name, k, i, b.const(shape[k], dt.u64), text, offsets[k])
                for k, i in enumerate(idx)]
     return _terms_sum(b, b.const(const, dt.u64), terms, idx)
-
-
-def _scope_loads(loop: Stmt) -> None:
-    """Mark `scoped_load` the dense elements a parallel loop's body loads outside inner serial loops when one of
-    them is not affine in the loop index (codegen gives their loads alias scopes). LLVM cannot bound such an
-    address for a run-time overlap check, and a load without scope may alias one with, so all of them."""
-    ptrs = [x.operands[0] for x in walk(loop.blocks[0]) if x.op is Op.GLOBAL_LOAD
-            and x.operands[0].op is Op.GLOBAL_PTR and "affine" in x.operands[0].attrs and _outside_inner_loops(x, loop)]
-    if any(not p.attrs["affine"] for p in ptrs):
-        for p in ptrs:
-            p.attrs["scoped_load"] = True
-
-
-def _outside_inner_loops(s: Stmt, loop: Stmt) -> bool:
-    """Whether `s` is in the parallel loop's body but in no serial loop inside it."""
-    block = s.block
-    while block is not None and block.parent is not None and block.parent is not loop:
-        if block.parent.op in (Op.RANGE_FOR, Op.WHILE):
-            return False
-        block = block.parent.block
-    return block is not None and block.parent is loop
 
 
 def _array_offset(b: Builder, s: Stmt, arg: ArrayRef, debug: bool) -> Stmt:
