@@ -7,21 +7,27 @@ value back when c is false reads and writes nothing new (another thread writing 
 before). mpm's boundary conditions (`grid_v[i, j] += ...` then `if i < 3 and grid_v[i, j][0] < 0:
 grid_v[i, j][0] = 0`) are then one store per component, which LLVM merges with the earlier ones; left as
 branches they were masked scatters of their own in the vectorised grid loop (mpm128's grid update 0.031 ->
-0.022 ms).
+0.022 ms). The same holds without an earlier store when the condition is the same for the whole parallel loop
+and the element is in bounds and the iteration's own (`_uniform_own`): a kernel argument picking a vector's
+component.
 
 Both sides of an if/else storing the same element (`if c: x[p] = a else: x[p] = b`, the indices from outside the
 IF) store a local instead, and one store of the local follows the IF: LLVM merged a side's two adjacent zero
 stores (`v[i, j] = ti.Vector([0.0, 0.0])`) into a memset the loop vectoriser cannot predicate, so
 snow_phaseField's gradient loop never vectorised; with one unconditional store per element it does (the local
-becomes a phi, the branch a select or a masked block). Runs after autodiff (gradients see the program as written), on dense fields and ndarrays only
-(a sparse element's store activates, a quant one is a read-modify-write of its cell)."""
+becomes a phi, the branch a select or a masked block).
+
+Runs after autodiff (gradients see the program as written), on dense fields and ndarrays only (a sparse
+element's store activates, a quant one is a read-modify-write of its cell)."""
 
 from __future__ import annotations
 
+from simgrad.ir.bounds import in_bounds
 from simgrad.ir.builder import Builder
 from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, walk
 from simgrad.ir.ops import PURE, Op
+from simgrad.passes.parallel_strategy import injective_in
 
 
 def store_select(kernel: Kernel) -> bool:
@@ -57,7 +63,7 @@ def _in_block(block: Block) -> bool:
             stored.add(_key(s.operands[0]))
         elif s.op is Op.IF:
             one = _lone_store(s, stored)
-            if one is not None and _key(one[0].operands[0]) in stored:
+            if one is not None and (_key(one[0].operands[0]) in stored or _uniform_own(s, one[0])):
                 new = _rewrite(s, *one)
                 block.stmts[k:k + 1] = new
                 k += len(new)
@@ -71,6 +77,29 @@ def _in_block(block: Block) -> bool:
                 continue
         k += 1
     return changed
+
+
+def _uniform_own(s: Stmt, store: Stmt) -> bool:
+    """Whether the IF's condition is the same for every iteration of the parallel loop it is in (no serial loop
+    between) and the store's element is inside its field and written by no other iteration: then writing its
+    own value back where the condition is false changes nothing anyone sees. A kernel argument choosing a
+    vector's component (`v[i, j][k] = x`: one IF per component) is such a condition: its stores, kept
+    conditional, were masked scatters in the vectorised loop (four per field for snow_phaseField's
+    `phiRate[i, j][rk_loop]`), its selects are plain vector stores."""
+    loop = s.block.parent if s.block is not None else None
+    while loop is not None and loop.op is Op.IF:
+        loop = loop.block.parent if loop.block is not None else None
+    if loop is None or loop.op is not Op.RANGE_FOR or not loop.attrs.get("parallel"):
+        return False
+    inside = {id(x) for x in walk(loop.blocks[0])} | {id(loop)}
+    ptr = store.operands[0]
+    target = ptr.attrs.get("target")
+    if id(s.operands[0]) in inside or not isinstance(target, FieldRef) or any(target.offset or ()) \
+            or not in_bounds(ptr) or not injective_in(loop, ptr, inside):
+        return False
+    key = _key(ptr)
+    return all(_key(x.operands[0]) == key for x in walk(loop.blocks[0])
+               if x.op in (Op.GLOBAL_STORE, Op.ATOMIC) and x.operands[0].attrs.get("target") is target)
 
 
 def _lone_store(s: Stmt, stored: set) -> tuple[Stmt, int] | None:

@@ -194,3 +194,58 @@ def test_row_loop_split_runs_every_column_once():
     cols = np.arange(m)
     want = (np.where(cols + 1 < m, cols + 1, 0) * 2 + (cols >= 100) + 5 * (cols == 17)).astype(np.int32)
     np.testing.assert_array_equal(side.to_numpy(), np.broadcast_to(want, (n, m)))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_component_chosen_by_an_argument_is_stored_without_scatters(threads):
+    """`r[i, j][k] = v` with a kernel argument k is one IF per component; the element is the iteration's own
+    and in bounds, so each becomes a store of a select (passes/store_select.py `_uniform_own`): plain vector
+    stores, where the conditional stores were masked scatters. Components other than k keep their values."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=threads, default_fp=ti.f64, offline_cache=False)
+    n, m = 24, 80
+    x = ti.field(ti.f64, shape=(n, m))
+    r = ti.Vector.field(4, ti.f64, shape=(n, m))
+    other = ti.Vector.field(4, ti.f64, shape=(n, m))
+
+    @ti.kernel
+    def k(c: int):
+        for i, j in x:
+            r[i, j][c] = x[i, j] * 2.0
+            other[i, j][c] = r[i, j][c] + 1.0
+            if i > 0:  # another iteration's element of `other` too: not the iteration's own, stays a branch
+                other[i - 1, j][3] = 7.0
+
+    rng = np.random.default_rng(3)
+    xs = rng.random((n, m))
+    x.from_numpy(xs)
+    rs = rng.random((n, m, 4))
+    r.from_numpy(rs)
+    other.fill(-1.0)
+    want = rs.copy()
+    for c in range(4):
+        k(c)
+        want[..., c] = xs * 2.0
+    np.testing.assert_array_equal(r.to_numpy(), want)
+    o = other.to_numpy()
+    np.testing.assert_array_equal(o[..., :3], np.broadcast_to(xs[..., None] * 2.0 + 1.0, (n, m, 3)))
+    np.testing.assert_array_equal(o[:-1, :, 3], 7.0)
+    np.testing.assert_array_equal(o[-1, :, 3], xs[-1] * 2.0 + 1.0)
+    k(5)  # no such component: nothing stored
+    np.testing.assert_array_equal(r.to_numpy(), want)
+
+
+def test_component_store_loop_has_no_scatter():
+    ti.init(arch=ti.cpu, default_fp=ti.f64, offline_cache=False)
+    x = ti.field(ti.f64, shape=(32, 64))
+    r = ti.Vector.field(4, ti.f64, shape=(32, 64))
+
+    @ti.kernel
+    def k(c: int):
+        for i, j in x:
+            r[i, j][c] = x[i, j] * 2.0
+
+    body = _task(k, (1,))
+    assert re.search(r"<\d+ x double>", body)
+    # LLVM may version the loop per component (a strided store is a scatter with every lane on), but no store
+    # is masked by the condition
+    assert not re.search(r"masked\.scatter[^\n]*<\d+ x i1> (?!splat \(i1 true\))", body)
