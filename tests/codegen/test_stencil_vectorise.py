@@ -77,7 +77,7 @@ def _numpy(p: np.ndarray, t):
     flat = s < t(1e-8)
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = one / s
-    g = np.where(flat[..., None], t(0), np.stack([d0 * inv, d1 * inv], -1))
+        g = np.where(flat[..., None], t(0), np.stack([d0 * inv, d1 * inv], -1))
     norm = np.where(flat, t(0), s)
     v = t(2) * (((xm + ym) + xp) + yp) + (((np.roll(xm, 1, 1) + np.roll(xm, -1, 1)) + np.roll(xp, 1, 1))
                                           + np.roll(xp, -1, 1)) - t(12) * p
