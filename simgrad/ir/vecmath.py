@@ -9,7 +9,8 @@ f32: the argument is widened to f64 (exact), the result computed there with rang
 polynomials (error < 1e-12 relative) and rounded once: within 1 ulp of the exact value; sin/cos/tan reduce any
 f32 exactly by 2/pi (a table of 2/pi's bits per exponent, three 29-bit pieces whose products with the 24-bit
 significand are exact). f64: Cody-Waite reduction exact by fma for |x| < 2**30 and an atan(k/16) table with
-double-double corrections, exp by k ln2 + r; other lanes (huge, inf, NaN, atan2's subnormal ratios) call libm (`fallback`).
+double-double corrections, exp by k ln2 + r; other lanes (huge, inf, NaN, atan2's subnormal ratios) call libm
+(`fallback`).
 """
 
 from __future__ import annotations
