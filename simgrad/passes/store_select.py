@@ -152,7 +152,8 @@ def _side_stores(side: Block, inner: set) -> dict:
             continue
         target = ptr.attrs.get("target")
         later = [x for y in side.stmts[k + 1:] for x in (y, *_inner(y))]
-        if any(x.op in _UNSINKABLE or x.op is Op.GLOBAL_PTR and x.attrs.get("target") is target for x in later):
+        if any(x.op in _UNSINKABLE or any(o.op is Op.GLOBAL_PTR and o.attrs.get("target") is target
+                                          for o in (x, *x.operands)) for x in later):
             continue
         key = _key(ptr)
         found[key] = None if key in found else s  # stored twice: not moved

@@ -176,11 +176,12 @@ def test_f64_atan2_of_two_zeros_stays_in_the_vector_path(monkeypatch):
     assert (got.view(np.int64) == np.arctan2(y, x).view(np.int64)).all()
 
 
-def test_row_loop_split_runs_every_column_once():
-    """The edge columns and the middle ones, every chunk boundary (2 threads, rows cut mid-way by a count
-    that is no multiple of the row), each column written once: a counter per element."""
-    ti.init(arch=ti.cpu, cpu_max_num_threads=2, offline_cache=False)
-    n, m = 37, 203
+@pytest.mark.parametrize("threads,n", [(2, 37), (2, 301), (1, 1500)])
+def test_row_loop_split_runs_every_column_once(threads, n):
+    """The edge columns and the middle ones, every chunk boundary (2 threads; one thread's chunks of 2**18
+    iterations cut row 1291 at column 71), each column written once: a counter per element."""
+    ti.init(arch=ti.cpu, cpu_max_num_threads=threads, offline_cache=False)
+    m = 203
     hits = ti.field(ti.i32, shape=(n, m))
     side = ti.field(ti.i32, shape=(n, m))
 
@@ -211,11 +212,11 @@ def test_component_chosen_by_an_argument_is_stored_without_scatters(threads):
     other = ti.Vector.field(4, ti.f64, shape=(n, m))
 
     @ti.kernel
-    def k(c: int):
+    def k(c: int, f: int):
         for i, j in x:
             r[i, j][c] = x[i, j] * 2.0
             other[i, j][c] = r[i, j][c] + 1.0
-            if i > 0:  # another iteration's element of `other` too: not the iteration's own, stays a branch
+            if f == 1 and i > 0:  # another iteration's element of other[3]: not the own, its store stays a branch
                 other[i - 1, j][3] = 7.0
 
     rng = np.random.default_rng(3)
@@ -225,15 +226,15 @@ def test_component_chosen_by_an_argument_is_stored_without_scatters(threads):
     r.from_numpy(rs)
     other.fill(-1.0)
     want = rs.copy()
-    for c in range(4):
-        k(c)
+    for c in (3, 0, 1, 2):
+        k(c, int(c != 3))  # other[i, j][3] from its own iteration, then from the next one's
         want[..., c] = xs * 2.0
     np.testing.assert_array_equal(r.to_numpy(), want)
     o = other.to_numpy()
     np.testing.assert_array_equal(o[..., :3], np.broadcast_to(xs[..., None] * 2.0 + 1.0, (n, m, 3)))
     np.testing.assert_array_equal(o[:-1, :, 3], 7.0)
     np.testing.assert_array_equal(o[-1, :, 3], xs[-1] * 2.0 + 1.0)
-    k(5)  # no such component: nothing stored
+    k(5, 0)  # no such component: nothing stored
     np.testing.assert_array_equal(r.to_numpy(), want)
 
 
@@ -252,3 +253,32 @@ def test_component_store_loop_has_no_scatter():
     # LLVM may version the loop per component (a strided store is a scatter with every lane on), but no store
     # is masked by the condition
     assert not re.search(r"masked\.scatter[^\n]*<\d+ x i1> (?!splat \(i1 true\))", body)
+
+
+def test_paired_stores_move_only_where_nothing_on_the_side_reads_them_after():
+    """Both sides store x[i] and y[i]; the first side reads x[i] back after storing it, so that store stays
+    on its side, and y's pair becomes one store after the IF."""
+    ti.init(arch=ti.cpu, offline_cache=False)
+    n = 100
+    c = ti.field(ti.i32, shape=n)
+    x = ti.field(ti.f32, shape=n)
+    y = ti.field(ti.f32, shape=n)
+
+    @ti.kernel
+    def k():
+        for i in c:
+            if c[i] > 0:
+                x[i] = 1.0
+                y[i] = x[i] + 1.0
+            else:
+                x[i] = 2.0
+                y[i] = 5.0
+
+    cs = (np.arange(n) % 3 == 0).astype(np.int32)
+    c.from_numpy(cs)
+    x.fill(-1.0)
+    k()
+    np.testing.assert_array_equal(x.to_numpy(), np.where(cs > 0, 1.0, 2.0))
+    np.testing.assert_array_equal(y.to_numpy(), np.where(cs > 0, 2.0, 5.0))
+    text = k._instance_for((), "").llvm_text
+    assert text.count("alloca float") >= 1  # y's local
