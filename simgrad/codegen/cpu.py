@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
 from simgrad.codegen.privatize import emit_private_launch, emit_runs_alone, region_bytes, slice_shift
-from simgrad.ir.nodes import Stmt, walk
+from simgrad.ir.nodes import Stmt, offset_form, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import PRIVATE, LoopStrategy
 from simgrad.passes.privatize import Region
@@ -162,25 +162,133 @@ class CpuCodegen(KernelCodegen):
         t.emit(f"{left} = sub nsw {ty} {hi}, {base}")
         t.emit(f"{short} = icmp slt {ty} {left}, {n}")
         t.emit(f"{end} = select i1 {short}, {ty} {left}, {ty} {n}")
-        t.emit(f"br label %{ihead}")
-        t.start_block(ihead)
-        t.emit(f"{r} = phi {ty} [{rs}, %{obody}], [{rn}, %{ilatch}]")
-        t.emit(f"{c} = icmp slt {ty} {r}, {end}")
-        t.emit(f"br i1 {c}, label %{ibody}, label %{olatch}")
-        t.start_block(ibody)
-        t.emit(f"{i} = add nuw nsw {ty} {base}, {r}")
-        t.names[s], t.names[mod] = i, r
-        t.bound.add(id(mod))
         if div is not None:
             t.names[div] = q
             t.bound.add(id(div))
+        t.bound.add(id(mod))
+        middle = _column_split(s, mod, extent)
+        after = ihead  # where the edge loop's latch goes
+        if middle is None:
+            t.emit(f"br label %{ihead}")
+            t.start_block(ihead)
+            t.emit(f"{r} = phi {ty} [{rs}, %{obody}], [{rn}, %{ilatch}]")
+            t.emit(f"{c} = icmp slt {ty} {r}, {end}")
+            t.emit(f"br i1 {c}, label %{ibody}, label %{olatch}")
+        else:  # r runs [rs, A) and [B, end) here, and [A, B) in the inner loop that `edge` leaves to
+            a, b, facts = middle
+            stop, second, rb, sb, secb = (t.tmp(x) for x in ("stop", "second", "rb", "sb", "secb"))
+            eback = t.label("edgeback")
+            edge, mhead, mbody, mlatch, mdone = (t.label(x) for x in ("edge", "midhead", "midbody", "midlatch",
+                                                                       "middone"))
+            e1, m0, m1, s3 = (t.tmp(x) for x in ("e1", "m0", "m1", "s3"))
+            for fn in ("smin", "smax"):
+                self.module.declare(f"declare {ty} @llvm.{fn}.{ty}({ty}, {ty})")
+            t.emit(f"{e1} = call {ty} @llvm.smin.{ty}({ty} {end}, {ty} {a})")
+            t.emit(f"{m0} = call {ty} @llvm.smax.{ty}({ty} {rs}, {ty} {a})")
+            t.emit(f"{m1} = call {ty} @llvm.smin.{ty}({ty} {end}, {ty} {b})")
+            t.emit(f"{s3} = call {ty} @llvm.smax.{ty}({ty} {rs}, {ty} {b})")
+            t.emit(f"br label %{ihead}")
+            t.start_block(ihead)
+            t.emit(f"{r} = phi {ty} [{rs}, %{obody}], [{rb}, %{eback}]")
+            t.emit(f"{stop} = phi {ty} [{e1}, %{obody}], [{sb}, %{eback}]")
+            t.emit(f"{second} = phi i1 [false, %{obody}], [{secb}, %{eback}]")
+            t.emit(f"{c} = icmp slt {ty} {r}, {stop}")
+            t.emit(f"br i1 {c}, label %{ibody}, label %{edge}")
+            t.start_block(edge)
+            t.emit(f"br i1 {second}, label %{olatch}, label %{mhead}")
+            rm, rmn, cm, im = (t.tmp(x) for x in ("rm", "rmnext", "cm", "im"))
+            t.start_block(mhead)
+            t.emit(f"{rm} = phi {ty} [{m0}, %{edge}], [{rmn}, %{mlatch}]")
+            t.emit(f"{cm} = icmp slt {ty} {rm}, {m1}")
+            t.emit(f"br i1 {cm}, label %{mbody}, label %{mdone}")
+            t.start_block(mbody)
+            t.emit(f"{im} = add nuw nsw {ty} {base}, {rm}")
+            t.names[s], t.names[mod] = im, rm
+            for x, value in facts:  # the comparisons of r that are constant on [A, B)
+                t.names[x] = str(value)
+                t.bound.add(id(x))
+            self.loop_body(t, s, done, mlatch)
+            for x, _value in facts:
+                t.bound.discard(id(x))
+            t.emit(f"{rmn} = add nuw nsw {ty} {rm}, 1")
+            t.emit(f"br label %{mhead}{self.parallel_loop(t) if s is t.loop else ''}")
+            t.start_block(mdone)
+            # the edge columns are few: their loop is not vectorised (nor unrolled), only the middle one
+            k = 1000 + 2 * len(self.module.globals)
+            self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}, !{k + 2}}}",
+                                    f'!{k + 1} = !{{!"llvm.loop.vectorize.enable", i1 false}}',
+                                    f'!{k + 2} = !{{!"llvm.loop.unroll.disable"}}']
+            t.emit(f"br label %{eback}")
+            t.start_block(eback)
+            t.emit(f"{rb} = phi {ty} [{rn}, %{ilatch}], [{s3}, %{mdone}]")
+            t.emit(f"{sb} = phi {ty} [{stop}, %{ilatch}], [{end}, %{mdone}]")
+            t.emit(f"{secb} = phi i1 [{second}, %{ilatch}], [true, %{mdone}]")
+            t.emit(f"br label %{ihead}, !llvm.loop !{k}")
+            after = eback
+        t.start_block(ibody)
+        t.emit(f"{i} = add nuw nsw {ty} {base}, {r}")
+        t.names[s], t.names[mod] = i, r
         self.loop_body(t, s, done, ilatch)
         t.emit(f"{rn} = add nuw nsw {ty} {r}, 1")
-        t.emit(f"br label %{ihead}{self.parallel_latch(t, s)}")
+        # (split: the edge loop's latch goes to `eback`, whose branch carries its no-vectorise metadata)
+        t.emit(f"br label %{after}{self.parallel_latch(t, s) if middle is None else ''}")
         t.start_block(olatch)
         t.emit(f"{qn} = add nuw nsw {ty} {q}, 1")
         t.emit(f"br label %{ohead}")
         t.start_block(done)
+
+
+#: comparison -> whether `r + c op k` holds, and the r from which on it changes (a < b: the first r >= k - c)
+_MONOTONE = {Op.LT: (lambda a, b: a < b, 0), Op.LE: (lambda a, b: a <= b, 1), Op.GT: (lambda a, b: a > b, 1),
+             Op.GE: (lambda a, b: a >= b, 0)}
+_SWAPPED = {Op.LT: Op.GT, Op.LE: Op.GE, Op.GT: Op.LT, Op.GE: Op.LE}
+#: what a body holding them is not emitted twice for (each is one place in the program or the function)
+_ONCE = {Op.RANGE_FOR, Op.WHILE, Op.PRINT, Op.ASSERT, Op.CALL, Op.TAPE_PUSH, Op.TAPE_POP, Op.TAPE_RESET,
+         Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION, Op.CHECK_INDEX}
+#: the shortest middle worth a second copy of the body
+MIN_MIDDLE = 16
+
+
+def _column_split(loop: Stmt, mod: Stmt, extent: Stmt) -> tuple[int, int, list[tuple[Stmt, int]]] | None:
+    """(A, B, facts) when the body compares the column r = i % n plus a constant with constants (a periodic
+    neighbour `jp = j + 1 if j + 1 < n else 0`, a boundary test `if 0 < j < n - 1`): on [A, B), the longest
+    stretch of [0, n) that no comparison changes on, each is the constant in facts. The row loop then runs
+    those columns with the comparisons folded, a second copy of the body whose neighbour addresses are
+    affine in r: LLVM loads them as vectors, where the selects made it gather each (snow_phaseField's
+    get_rate), and vectorises loops the branches kept it from. None when there is no such comparison,
+    the stretch is short or the body may not be emitted twice."""
+    if extent.op is not Op.CONST:
+        return None
+    n = int(extent.attrs["value"])
+    cmps: list[tuple[Stmt, Op, int, int]] = []  # (statement, op, c, k): r + c op k
+    for x in walk(loop.blocks[0]):
+        if x.op in _ONCE:
+            return None
+        if x.op not in _MONOTONE and x.op not in (Op.EQ, Op.NE):
+            continue
+        for side, other, op in ((0, 1, x.op), (1, 0, _SWAPPED.get(x.op, x.op))):
+            base, c = offset_form(x.operands[side])
+            if base is mod and x.operands[other].op is Op.CONST and x.operands[side].type.is_signed:
+                k = int(x.operands[other].attrs["value"])
+                if abs(c) < 2 ** 30 and abs(k) < 2 ** 30:
+                    cmps.append((x, op, c, k))
+                break
+    if not cmps:
+        return None
+    points = {0, n}
+    for _x, op, c, k in cmps:
+        for p in ((k - c + _MONOTONE[op][1],) if op in _MONOTONE else (k - c, k - c + 1)):
+            if 0 < p < n:
+                points.add(p)
+    edges = sorted(points)
+    a, b = max(zip(edges, edges[1:]), key=lambda e: e[1] - e[0])
+    if b - a < MIN_MIDDLE:
+        return None
+    facts = []
+    for x, op, c, k in cmps:
+        holds = _MONOTONE[op][0](a + c, k) if op in _MONOTONE else (a + c == k) == (op is Op.EQ)
+        facts.append((x, int(holds)))
+    return a, b, facts
 
 
 def _needs_atomics(loop: Stmt, copied: bool = True) -> bool:

@@ -492,6 +492,16 @@ class KernelCodegen:
         f.access_group = f"!{k}"
         f.parallel_loop_md = f"!{k + 1}"
 
+    def parallel_loop(self, f: FunctionText) -> str:
+        """The `!llvm.loop` of a second loop over task f's iterations (codegen/cpu.py's column split), naming f's
+        access group in a loop ID of its own, or '' when f has no group."""
+        if not f.access_group:
+            return ""
+        k = 1000 + 2 * len(self.module.globals)
+        self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}",
+                                f'!{k + 1} = !{{!"llvm.loop.parallel_accesses", {f.access_group}}}']
+        return f", !llvm.loop !{k}"
+
     def parallel_latch(self, f: FunctionText, s: Stmt) -> str:
         """The `!llvm.loop` of the latch of the loop running task f's iterations of `s`, or ''."""
         return f", !llvm.loop {f.parallel_loop_md}" if f.access_group and s is f.loop else ""

@@ -142,8 +142,13 @@ class _Variants:
             args = ", ".join(f"{vt} %a{i}" for i in range(arity))
             self.functions.append("\n".join([f"define internal {vt} @{base}_v{w}({params}) nounwind {{", "entry:",
                                              *be.lines, f"  ret {vt} {r.h}", "}"]))
+            # masked: nothing computed when no lane is on (a vectorised branch its loop rarely takes, the else
+            # side of snow_phaseField's `if gradNorm < 1e-8` on a mostly flat field); off lanes are don't-care
             self.functions.append(f"define internal {vt} @{base}_m{w}({params}, <{w} x i1> %m) nounwind {{\n"
-                                  f"  %r = call {vt} @{base}_v{w}({args})\n  ret {vt} %r\n}}")
+                                  f"entry:\n  %bits = bitcast <{w} x i1> %m to i{w}\n"
+                                  f"  %none = icmp eq i{w} %bits, 0\n  br i1 %none, label %off, label %on\n"
+                                  f"on:\n  %r = call {vt} @{base}_v{w}({args})\n  ret {vt} %r\n"
+                                  f"off:\n  ret {vt} %a0\n}}")
             self.decls |= be.decls
             self.tables |= be.tables
             slow |= be.slow

@@ -9,7 +9,8 @@ f32: the argument is widened to f64 (exact), the result computed there with rang
 polynomials (error < 1e-12 relative) and rounded once: within 1 ulp of the exact value; sin/cos/tan reduce any
 f32 exactly by 2/pi (a table of 2/pi's bits per exponent, three 29-bit pieces whose products with the 24-bit
 significand are exact). f64: Cody-Waite reduction exact by fma for |x| < 2**30 and an atan(k/16) table with
-double-double corrections, exp by k ln2 + r; other lanes (huge, inf, NaN, zeros) call libm (`fallback`).
+double-double corrections, exp by k ln2 + r; other lanes (huge, inf, NaN, atan2's subnormal ratios) call libm
+(`fallback`).
 """
 
 from __future__ import annotations
@@ -401,7 +402,7 @@ def _cos64(x: V) -> V:
 def _atan2_64(y: V, x: V) -> V:
     """t = min/max of |x|, |y| (with its rounding error tl); atan t = atan(k/16) + atan u, u = (t - c)/(1 + t c)
     with c = k/16 nearest t (|u| <= 1/32), u and the sums kept as double-doubles; then pi/2 - a, pi - a.
-    libm for inf, NaN, two zeros and extreme magnitudes (subnormal ratios)."""
+    libm for inf, NaN and extreme magnitudes (subnormal ratios)."""
     ax, ay = x.abs(), y.abs()
     swap = ay.cmp("ogt", ax)
     num, den = select(swap, ax, ay), select(swap, ay, ax)
@@ -424,8 +425,12 @@ def _atan2_64(y: V, x: V) -> V:
         h2, lo2 = _fast_two_sum(s, e + (lo * -1.0 + cl))
         h, lo = select(cond, h2, h), select(cond, lo2, lo)
     v = (h + lo).copysign(y)
-    ok = ax.cmp("olt", 2.0 ** 990) & ay.cmp("olt", 2.0 ** 990) & den.cmp("ogt", 2.0 ** -900) \
-        & (t.cmp("ogt", 2.0 ** -900) | num.cmp("oeq", 0.0))
+    # two zeros: +-0 for x = +0, +-pi for x = -0 (C's values; a zero gradient's angle, where snow_phaseField's
+    # field is flat, is the common case: each such lane calling libm made its vector loop 2x slower)
+    zeros = den.cmp("oeq", 0.0)
+    v = select(zeros, select(x.to("bitcast", "i64").cmp("slt", 0), PI, 0.0).copysign(y), v)
+    ok = ax.cmp("olt", 2.0 ** 990) & ay.cmp("olt", 2.0 ** 990) & (zeros | den.cmp("ogt", 2.0 ** -900)
+                                                                 & (t.cmp("ogt", 2.0 ** -900) | num.cmp("oeq", 0.0)))
     return x.be.fallback(ok ^ True, "atan2", [y, x], v)
 
 
