@@ -211,7 +211,7 @@ class CpuCodegen(KernelCodegen):
             for x, _value in facts:
                 t.bound.discard(id(x))
             t.emit(f"{rmn} = add nuw nsw {ty} {rm}, 1")
-            t.emit(f"br label %{mhead}{self.parallel_loop(t) if s is t.loop else ''}")
+            t.emit(f"br label %{mhead}{self.parallel_loop_id(t) if s is t.loop else ''}")
             t.start_block(mdone)
             # the edge columns are few: their loop is not vectorised (nor unrolled), only the middle one
             k = 1000 + 2 * len(self.module.globals)

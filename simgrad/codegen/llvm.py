@@ -492,7 +492,7 @@ class KernelCodegen:
         f.access_group = f"!{k}"
         f.parallel_loop_md = f"!{k + 1}"
 
-    def parallel_loop(self, f: FunctionText) -> str:
+    def parallel_loop_id(self, f: FunctionText) -> str:
         """The `!llvm.loop` of a second loop over task f's iterations (codegen/cpu.py's column split), naming f's
         access group in a loop ID of its own, or '' when f has no group."""
         if not f.access_group:
