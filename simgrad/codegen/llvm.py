@@ -487,20 +487,21 @@ class KernelCodegen:
         all are, it needs no run-time overlap checks, which it could not build for a gather (diffmpm3d's g2p
         reads the grid at indices computed from particle positions: "cannot identify array bounds")."""
         k = 1000 + 2 * len(self.module.globals)
-        self.module.globals += [f"!{k} = distinct !{{}}", f"!{k + 1} = distinct !{{!{k + 1}, !{k + 2}}}",
-                                f'!{k + 2} = !{{!"llvm.loop.parallel_accesses", !{k}}}']
+        self.module.globals.append(f"!{k} = distinct !{{}}")
         f.access_group = f"!{k}"
-        f.parallel_loop_md = f"!{k + 1}"
+        f.parallel_loop_md = self._parallel_loop(f.access_group)
 
     def parallel_loop_id(self, f: FunctionText) -> str:
         """The `!llvm.loop` of a second loop over task f's iterations (codegen/cpu.py's column split), naming f's
         access group in a loop ID of its own, or '' when f has no group."""
-        if not f.access_group:
-            return ""
+        return f", !llvm.loop {self._parallel_loop(f.access_group)}" if f.access_group else ""
+
+    def _parallel_loop(self, group: str) -> str:
+        """A new loop ID whose `llvm.loop.parallel_accesses` names the access group `group`."""
         k = 1000 + 2 * len(self.module.globals)
         self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}",
-                                f'!{k + 1} = !{{!"llvm.loop.parallel_accesses", {f.access_group}}}']
-        return f", !llvm.loop !{k}"
+                                f'!{k + 1} = !{{!"llvm.loop.parallel_accesses", {group}}}']
+        return f"!{k}"
 
     def parallel_latch(self, f: FunctionText, s: Stmt) -> str:
         """The `!llvm.loop` of the latch of the loop running task f's iterations of `s`, or ''."""

@@ -1,6 +1,6 @@
 !1000 = distinct !{}
-!1001 = distinct !{!1001, !1002}
-!1002 = !{!"llvm.loop.parallel_accesses", !1000}
+!1002 = distinct !{!1002, !1003}
+!1003 = !{!"llvm.loop.parallel_accesses", !1000}
 !0 = !{}
 !900000 = distinct !{!900000, !"simgrad fields"}
 !900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
@@ -34,7 +34,7 @@ body.7:
   br label %latch.8
 latch.8:
   %inext.11 = add i32 %i.10, 1
-  br label %head.6, !llvm.loop !1001
+  br label %head.6, !llvm.loop !1002
 done.9:
   ret void
 }
