@@ -158,12 +158,15 @@ def _shared_targets(loop: Stmt, inside: set) -> set[int]:
     for x in walk(loop.blocks[0]):
         if x.op in (Op.ATOMIC, Op.GLOBAL_STORE) and x.operands[0].op is Op.GLOBAL_PTR:
             writes.setdefault(id(x.operands[0].attrs["target"]), []).append(x.operands[0])
-    shared = set()
-    for tid, ptrs in writes.items():
-        if not all(injective_in(loop, p, inside) for p in ptrs) \
-                or len({_varying(p, loop, inside) for p in ptrs}) > 1:
-            shared.add(tid)
-    return shared
+    return {tid for tid, ptrs in writes.items() if not _owned(ptrs, ptrs, loop, inside)}
+
+
+def _owned(written: list[Stmt], accessed: list[Stmt], loop: Stmt, inside: set) -> bool:
+    """Whether each written element is an injective function of the loop index and every accessed one (the
+    written among them) agrees with it on each index that varies with the iteration: no two iterations then
+    touch one element."""
+    return all(injective_in(loop, p, inside) for p in written) \
+        and len({_varying(p, loop, inside) for p in accessed}) <= 1
 
 
 def _independent(loop: Stmt, inside: set) -> bool:
@@ -180,11 +183,7 @@ def _independent(loop: Stmt, inside: set) -> bool:
             t = p.attrs["target"]
             key = id(t) if isinstance(t, FieldRef) else 0  # every ndarray the same array
             (reads if x.op is Op.GLOBAL_LOAD else stores).setdefault(key, []).append(p)
-    for key, ptrs in stores.items():
-        if not all(injective_in(loop, p, inside) for p in ptrs) \
-                or len({_varying(p, loop, inside) for p in ptrs + reads.get(key, [])}) > 1:
-            return False
-    return True
+    return all(_owned(ptrs, ptrs + reads.get(key, []), loop, inside) for key, ptrs in stores.items())
 
 
 def _varying(ptr: Stmt, loop: Stmt, inside: set) -> tuple:
