@@ -306,17 +306,27 @@ class ScalarField(Field):
             return tuple(k + o for k, o in zip(key, self.offset))
         return key
 
+    def _materialised(self) -> bool:
+        """Its memory can be read directly: a strided view or a gather index (both dropped when its program is
+        released or its tree destroyed; sparse and quant fields have neither)."""
+        return self._view is not None or self.gather is not None
+
+    def _direct(self, key) -> bool:
+        """Whether `f[key]` needs none of the general index work: the memory is there, no offset, and the key is
+        integers, one per axis, inside the shape (`f[i]`, `f[i, j]`: the common Python-scope access)."""
+        if self.offset or not self._materialised():
+            return False
+        shape = self._shape  # (known once materialised)
+        if type(key) is int:
+            return len(shape) == 1 and 0 <= key < shape[0]
+        return type(key) is tuple and _plain_index(key, shape)
+
     def __getitem__(self, key):
         view = self.view
-        if view is not None:
-            if type(key) is int and view.ndim == 1 and not self.offset and 0 <= key < view.shape[0]:
-                v = view[key].item()  # (the common f[i] of a dense 1-D field, without the general checks)
-                return int(v) if self.dtype is dt.u1 else v
-        elif self.gather is None:  # (a gathered layout is materialised and alive while it has its indices)
+        if view is None and self.gather is None:
             self._ensure()
             view = self._view
-        if type(key) is tuple and not self.offset and (view is not None or self.gather is not None) \
-                and _plain_index(key, self._shape):  # f[i, j]: the same, for any layout
+        if self._direct(key):
             v = view[key].item() if view is not None else self._flat[self.gather[key]].item()
             return int(v) if self.dtype is dt.u1 else v
         key = self._shift(_norm_index(key, len(self.shape), self.name))
@@ -335,9 +345,7 @@ class ScalarField(Field):
         if view is None and self.gather is None:
             self._ensure()
             view = self._view
-        if (view is not None or self.gather is not None) and not self.offset and self.quant_type is None and (
-                type(key) is tuple and _plain_index(key, self._shape)
-                or type(key) is int and _plain_index((key,), self._shape)):  # (sparse fields have neither)
+        if self._direct(key):
             _check_value(value, self.dtype, self.name)
             if view is not None:
                 view[key] = value

@@ -178,7 +178,7 @@ class StructField(Field):
         if comps is None:  # (the members never change once the field is made)
             comps = self._components()
             object.__setattr__(self, "_comps", comps)
-        return all(c._view is not None or c.gather is not None for c in comps)
+        return all(c._materialised() for c in comps)
 
     def placeable(self) -> list[Field]:
         """The ordinary fields to place: every member's (nested structs flattened)."""
