@@ -316,7 +316,8 @@ class ScalarField(Field):
         integers, one per axis, inside the shape (`f[i]`, `f[i, j]`: the common Python-scope access)."""
         if self.offset or not self._materialised():
             return False
-        shape = self._shape  # (known once materialised)
+        shape = self._shape
+        assert shape is not None  # (known once materialised)
         if type(key) is int:
             return len(shape) == 1 and 0 <= key < shape[0]
         return type(key) is tuple and _plain_index(key, shape)
