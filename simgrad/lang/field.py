@@ -35,7 +35,7 @@ Layout = tuple[int, int, tuple["AccessTerm", ...], tuple[int, ...]]
 def _plain_index(key: tuple, shape) -> bool:
     """Integers, one per axis, each inside the shape: an index that needs none of _norm_index's and
     _check_bounds's work."""
-    return shape is not None and len(key) == len(shape) and all(
+    return len(key) == len(shape) and all(
         type(k) is int and 0 <= k < n for k, n in zip(key, shape))
 
 

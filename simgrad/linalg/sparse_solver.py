@@ -3,15 +3,17 @@
 Taichi factorises with Eigen: SimplicialLLT / SimplicialLDLT (which read only the lower triangle of the
 matrix, taking it as symmetric) and SparseLU. simgrad does all three with scipy.sparse.linalg.splu:
 - "LU": splu of the matrix (partial pivoting).
-- "LLT" and "LDLT": splu of the symmetric matrix the lower triangle defines, with a symmetric ordering and
-  no pivoting, so U's diagonal holds the LDLᵀ pivots: LDLT fails (info() False) on a zero pivot, LLT on any
-  pivot that is not positive (the matrix is not positive definite), as Eigen's do.
+- "LLT" and "LDLT": splu of the symmetric matrix the lower triangle defines, with a symmetric ordering and a
+  zero pivot threshold, so U's diagonal holds the LDLᵀ pivots: LDLT fails (info() False) on a singular matrix,
+  LLT on any pivot that is not positive (the matrix is not positive definite), as Eigen's do. Unlike Eigen's,
+  SuperLU still pivots around a zero leading diagonal entry of a nonsingular LDLT matrix and solves it, where
+  taichi reports failure (tests/lang/test_linalg_sparse.py).
 The ordering "AMD" is SuperLU's minimum degree on AᵀA+A ("MMD_AT_PLUS_A"), "COLAMD" its COLAMD. A failed
 factorisation makes solve() return NaNs.
 
 A matrix of at most DENSE_MAX rows is factorised dense (LAPACK through scipy.linalg), where SuperLU's set-up costs
 ~10x the arithmetic (72 x 72: 160 -> 12 us): LLT and LDLT by Cholesky of the same symmetric matrix, and an LDLT
-whose matrix is not positive definite by the sparse path above, so that it fails where Eigen's does; LU by LAPACK's
+whose matrix is not positive definite by the sparse path above, so that both paths agree; LU by LAPACK's
 partial pivoting, as SuperLU's."""
 
 from __future__ import annotations
