@@ -220,7 +220,16 @@ def composite(img, i, j, alpha, rgb):
         pix, alpha, ref = pix[hit], alpha[hit], ref[hit]
     alpha = np.minimum(alpha, 1.0)
     opaque = alpha >= 1.0
-    if opaque.any():
+    if opaque.any() and pix.size * 4 < flat.shape[0]:
+        # few samples (a text, a small shape): hidden samples found within each pixel's run, not through an
+        # array the size of the image (allocating it cost a 16 x 16 text 30 us on a 256 x 512 canvas)
+        order = np.argsort(pix, kind="stable")
+        pix, alpha, ref, opaque = pix[order], alpha[order], ref[order], opaque[order]
+        seq = np.arange(pix.size, dtype=np.int64)
+        starts, _ends, run = _runs(pix)
+        keep = seq >= np.maximum.reduceat(np.where(opaque, seq, -1), starts)[run]
+        pix, alpha, ref = pix[keep], alpha[keep], ref[keep]
+    elif opaque.any():
         seq = np.arange(pix.size, dtype=np.int64)
         last_opaque = np.full(flat.shape[0], -1, dtype=np.int64)
         if opaque.all():  # only the last sample drawn on each pixel matters

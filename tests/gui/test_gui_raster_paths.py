@@ -112,3 +112,25 @@ def test_one_tile_segments_visit_every_covered_pixel(monkeypatch):
         pictures.append(img)
     assert np.array_equal(pictures[0], pictures[1])
     assert (pictures[0] != 0.25).any(axis=-1).mean() > 0.3
+
+
+def test_composite_matches_sequential_blending_on_both_paths():
+    # raster.composite drops samples hidden by a later opaque one through an image-sized array when the samples
+    # are many, and within each pixel's sorted run when they are few (texts): both equal drawing the samples one
+    # after another with lerp(alpha, dest, rgb)
+    from simgrad.gui import raster
+
+    rng = np.random.default_rng(11)
+    for w, h in ((6, 5), (64, 48)):  # 30 pixels: many samples each; 3072: the few-samples path
+        n = 120
+        i, j = rng.integers(0, 6, n), rng.integers(0, 5, n)
+        alpha = np.where(rng.random(n) < 0.4, rng.choice([1.0, 1.5], n), rng.uniform(-0.2, 0.99, n))
+        rgb = rng.random((n, 3))
+        img = rng.random((w, h, 3)).astype(np.float32)
+        want = img.astype(np.float64)
+        for k in range(n):
+            a = min(alpha[k], 1.0)
+            if a > 0:
+                want[i[k], j[k]] = want[i[k], j[k]] * (1 - a) + rgb[k] * a
+        raster.composite(img, i, j, alpha, rgb)
+        assert np.abs(img - want).max() < 1e-5, (w, h)
