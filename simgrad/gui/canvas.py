@@ -481,25 +481,31 @@ def _circle_in_box(img, cx, cy, r, rgb) -> None:
     j0, j1 = max(math.ceil(cy - r), 0), min(math.floor(cy + r), H - 1)
     if i0 > i1 or j0 > j1:
         return
-    part, ap, keep, full = _circle_cover(cx, cy, r, i0, i1, j0, j1)
-    box = img[i0:i1 + 1, j0:j1 + 1]
+    part, ap, keep, full = _circle_cover(cx, cy, r, i0, i1, j0, j1, H)
+    flat = img.reshape(-1)  # C-contiguous (ImageCanvas._pixels): the pixels' channels by flat index
     col = np.asarray(rgb, np.float64)
-    box[part] = box[part] * keep + col * ap
-    box[full] = col
+    flat[part] = flat[part] * keep + col * ap
+    flat[full] = col
 
 
 @functools.lru_cache(maxsize=16)
-def _circle_cover(cx, cy, r, i0, i1, j0, j1):
-    """(partly covered pixels, their coverage a and 1 - a as columns, fully covered pixels) of a circle's box:
-    kept for the circles drawn again in the next frame (a cursor, a marker), the geometry being most of the
-    work."""
+def _circle_cover(cx, cy, r, i0, i1, j0, j1, H):
+    """(partly covered pixels, their coverage a and 1 - a as columns, fully covered pixels) of a circle's box in
+    an image of height H, the pixels as (n, 3) flat indices of their channels (boolean masks of the box's view
+    cost a radius-8 circle 9 us, these 5): kept for the circles drawn again in the next frame (a cursor, a
+    marker), the geometry being most of the work."""
     dx = cx - np.arange(i0, i1 + 1, dtype=np.float64)
     dy = cy - np.arange(j0, j1 + 1, dtype=np.float64)
     d2 = np.add.outer(dx * dx, dy * dy)
     a = r - np.sqrt(d2, out=d2)
     part = (a > 0.0) & (a < 1.0)
     ap = a[part][:, None]
-    cover = (part, ap, 1.0 - ap, a >= 1.0)
+
+    def channels(mask):
+        i, j = np.nonzero(mask)
+        return ((i + i0) * H + (j + j0))[:, None] * 3 + np.arange(3)
+
+    cover = (channels(part), ap, 1.0 - ap, channels(a >= 1.0))
     for x in cover:
         x.flags.writeable = False  # shared by later calls
     return cover
@@ -574,21 +580,28 @@ class _Rows(_Batch):
         if len(self.parts) > _FEW:
             return super().bounds(res)
         boxes = []  # a few rows: their boxes in Python (numpy's set-up would cost more), padded as _Batch pads
+        W, H = res
         for row in self.parts:
             if self.key[0] is _circles:
-                x, y, r = row[:3]
-                lo, hi = (x - r, y - r), (x + r, y + r)
+                x, y, r = row[0], row[1], row[2]
+                lx, ly, hx, hy = x - r, y - r, x + r, y + r
             else:
-                ax, ay, bx, by, r = row[:5]
-                lo, hi = (min(ax, bx) - r, min(ay, by) - r), (max(ax, bx) + r, max(ay, by) + r)
-            if any(math.isnan(v) for v in lo + hi):
+                ax, ay, bx, by, r = row[0], row[1], row[2], row[3], row[4]
+                lx, ly, hx, hy = min(ax, bx) - r, min(ay, by) - r, max(ax, bx) + r, max(ay, by) + r
+            if lx != lx or ly != ly or hx != hx or hy != hy:  # NaN
                 return None
-            x0, y0 = (min(max(math.floor(v) - 1, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
-                      for v, n in zip(lo, res))
-            x1, y1 = (min(max(math.ceil(v) + 2, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
-                      for v, n in zip(hi, res))
-            boxes.append((x0, x1, y0, y1))
+            boxes.append((_box_lo(lx, W), _box_hi(hx, W), _box_lo(ly, H), _box_hi(hy, H)))
         return boxes
+
+
+def _box_lo(v: float, n: int) -> int:
+    """floor(v) - 1 clipped to [0, n] (v not NaN, maybe infinite)."""
+    return 0 if v < 1.0 else n if v >= n + 1 else math.floor(v) - 1
+
+
+def _box_hi(v: float, n: int) -> int:
+    """ceil(v) + 2 clipped to [0, n] (v not NaN, maybe infinite)."""
+    return 0 if v <= -2.0 else n if v > n - 2 else math.ceil(v) + 2
 
 
 def _union_extent(draw, *arrays):

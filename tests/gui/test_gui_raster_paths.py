@@ -134,3 +134,25 @@ def test_composite_matches_sequential_blending_on_both_paths():
                 want[i[k], j[k]] = want[i[k], j[k]] * (1 - a) + rgb[k] * a
         raster.composite(img, i, j, alpha, rgb)
         assert np.abs(img - want).max() < 1e-5, (w, h)
+
+
+def test_few_row_boxes_clip_as_floor_and_ceil():
+    # _Rows.bounds clips a few rows' boxes without isfinite/floor per side: the same integers as clipping
+    # floor(v) - 1 and ceil(v) + 2 to [0, n], infinities at the ends
+    import math
+
+    from simgrad.gui.canvas import _box_hi, _box_lo
+
+    def lo(v, n):
+        return min(max(math.floor(v) - 1, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
+
+    def hi(v, n):
+        return min(max(math.ceil(v) + 2, 0), n) if math.isfinite(v) else (0 if v < 0 else n)
+
+    rng = np.random.default_rng(5)
+    edges = [math.inf, -math.inf, 0.0, -0.0, 1.0, 0.999, 1.0001, 2.0, -2.0, -1.99, -2.01, 1e300, -1e300]
+    values = edges + [n + d for n in (1, 64) for d in (-3, -2.5, -2, -1.5, -1, 0, 0.5, 1, 1.5, 2)]
+    values += list(rng.uniform(-10, 80, 5000)) + list(rng.integers(-5, 70, 500).astype(float))
+    for n in (1, 64):
+        for v in values:
+            assert (_box_lo(v, n), _box_hi(v, n)) == (lo(v, n), hi(v, n)), (v, n)
