@@ -31,6 +31,11 @@ def draw_frame(gui, rng, kind):
     elif kind == 3:
         gui.set_image(rng.random((W, H, 3)).astype(np.float32))
         gui.circle((0.5, 0.5), 0xFF0000, 3)
+    elif kind == 5:  # 5 to 16 one-primitive calls of a kind: their boxes found row by row in Python
+        for _ in range(10):
+            gui.line(rng.random(2), rng.random(2), radius=float(rng.uniform(0.5, 3)), color=0x33CC99)
+        for _ in range(6):
+            gui.circle(tuple(rng.random(2) * 1.4 - 0.2), 0xFFFFFF, float(rng.uniform(0.5, 9)))
     else:  # a primitive with no place: the canvas cannot say where it drew, so the next clear fills everything
         gui.circle((float("nan"), 0.5), 0xFFFFFF, 4)
         gui.line((0.1, 0.1), (0.9, 0.8), radius=2, color=0x00FFFF)
@@ -39,8 +44,8 @@ def draw_frame(gui, rng, kind):
 def test_frames_after_clears_are_the_pictures_of_fresh_canvases():
     rng = np.random.default_rng(11)
     gui = new_gui(0x102030)
-    kinds = [0, 0, 1, 2, 0, 3, 0, 4, 1, 2, 2, 0]
-    backgrounds = [0x102030] * 6 + [0x000000, 0x000000, 0x102030, 0x102030, 0xFFFFFF, 0xFFFFFF]
+    kinds = [0, 0, 1, 2, 0, 3, 0, 4, 1, 2, 2, 0, 5, 5, 0, 5]
+    backgrounds = [0x102030] * 6 + [0x000000, 0x000000, 0x102030, 0x102030, 0xFFFFFF, 0xFFFFFF] + [0x102030] * 4
     for kind, background in zip(kinds, backgrounds):
         state = rng.bit_generator.state
         gui.clear(background)
