@@ -61,6 +61,8 @@ else:
 #: counting sort) costs more than drawing small primitives, so tiles lost even on two threads (200k circles of
 #: radius 1.5: 42 ms tiled on two threads, 16 ms as one tile)
 SERIAL_MAX = 256
+#: the narrowest band of columns a thread draws (_bands)
+BAND_MIN = 32
 
 
 def _one_tile(n: int) -> bool:
@@ -68,6 +70,13 @@ def _one_tile(n: int) -> bool:
     from simgrad.lang.program import get_program
 
     return n <= SERIAL_MAX or not get_program().on_gpu
+
+
+def _bands(img) -> int:
+    """Column bands a CPU draws in parallel: one a thread, none narrower than BAND_MIN columns."""
+    from simgrad.lang.program import get_program
+
+    return max(1, min(get_program().config.num_threads, img.shape[0] // BAND_MIN))
 
 
 def bin_boxes(x0, y0, x1, y1, res):
@@ -160,32 +169,37 @@ def _finite(x):
 
 
 @ti.kernel
-def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I32):
-    """Every circle in call order on one thread, its pixel box computed here as numpy computes it for the
-    tiles (the one-tile case needs no numpy boxes: at 200k circles a frame they cost as much as drawing).
+def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I32, bands: _I32):
+    """Every circle in call order, in ``bands`` bands of columns as _lines_in_order, its pixel box computed here
+    as numpy computes it for the tiles (the one-tile case needs no numpy boxes: at 200k circles a frame they cost
+    as much as drawing).
     Circle p takes colour ``colors[p * each]`` (``each`` 0: one colour for all)."""
     w = ti.cast(img.shape[0], ti.f64)
     h = ti.cast(img.shape[1], ti.f64)
-    ti.loop_config(serialize=True)
-    for p in range(centers.shape[0]):
-        cx = centers[p, 0]
-        cy = centers[p, 1]
-        r = radii[p]
-        if _finite(cx) and _finite(cy) and _finite(r) and r > 0.0:
-            i0 = ti.cast(ti.min(ti.max(ti.ceil(cx - r), 0.0), w), ti.i32)
-            i1 = ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32)
-            j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
-            j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
-            c = colors[p * each]
-            if i1 - i0 <= 1 and j1 - j0 <= 1:  # at most 2 x 2 pixels (a particle): no loops to set up
-                for di in ti.static(range(2)):
-                    for dj in ti.static(range(2)):
-                        i = i0 + di
-                        j = j0 + dj
-                        if i <= i1 and j <= j1:
-                            _circle_pixel(img, i, j, cx, cy, r, c)
-            else:
-                _circle(img, i0, i1, j0, j1, cx, cy, r, c)
+    ti.loop_config(block_dim=1)  # a band a task
+    for band in range(bands):
+        width = (img.shape[0] + bands - 1) // bands
+        first = band * width
+        last = ti.min(first + width, img.shape[0]) - 1
+        for p in range(centers.shape[0]):
+            cx = centers[p, 0]
+            cy = centers[p, 1]
+            r = radii[p]
+            if _finite(cx) and _finite(cy) and _finite(r) and r > 0.0:
+                i0 = ti.max(ti.cast(ti.min(ti.max(ti.ceil(cx - r), 0.0), w), ti.i32), first)
+                i1 = ti.min(ti.cast(ti.min(ti.max(ti.floor(cx + r), -1.0), w - 1.0), ti.i32), last)
+                j0 = ti.cast(ti.min(ti.max(ti.ceil(cy - r), 0.0), h), ti.i32)
+                j1 = ti.cast(ti.min(ti.max(ti.floor(cy + r), -1.0), h - 1.0), ti.i32)
+                c = colors[p * each]
+                if i1 - i0 <= 1 and j1 - j0 <= 1:  # at most 2 x 2 pixels (a particle): no loops to set up
+                    for di in ti.static(range(2)):
+                        for dj in ti.static(range(2)):
+                            i = i0 + di
+                            j = j0 + dj
+                            if i <= i1 and j <= j1:
+                                _circle_pixel(img, i, j, cx, cy, r, c)
+                else:
+                    _circle(img, i0, i1, j0, j1, cx, cy, r, c)
 
 
 @ti.kernel
@@ -278,66 +292,72 @@ def _near(p, a, d, pad):
 
 
 @ti.kernel
-def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32):
-    """Every segment in call order on one thread (the CPU's one tile). ``ends`` rows: start x, y, end x, y and
-    half-width in pixels; ``colouring`` 2: per-vertex colours ``c0`` to ``c1``, 1: ``c0`` per segment, 0: ``c0``'s
-    one row for all. Each segment is clipped as raster.clip_segments clips it and shaded as ``_lines``
-    shades (the same float64 operations, so the same pixels), but without pieces: each column of pixels visits
-    only the run of rows near the part of the segment within ``r`` of it, each pixel once. Runs go along the
-    image's contiguous axis, whatever the segment's direction: a loop across columns did not vectorise."""
+def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, bands: _I32):
+    """Every segment in call order, the image's columns cut into ``bands`` bands drawn in parallel (each pixel in
+    one band, so its segments land on it in call order; no binning: every band looks at every segment). ``ends``
+    rows: start x, y, end x, y and half-width in pixels; ``colouring`` 2: per-vertex colours ``c0`` to ``c1``,
+    1: ``c0`` per segment, 0: ``c0``'s one row for all. Each segment is clipped as raster.clip_segments clips it
+    and shaded as ``_lines`` shades (the same float64 operations, so the same pixels), but without pieces: each
+    column of pixels visits only the run of rows near the part of the segment within ``r`` of it, each pixel once.
+    Runs go along the image's contiguous axis, whatever the segment's direction: a loop across columns did not
+    vectorise, and rows first for mostly horizontal segments (scalar) was slower (7 full-width lines 81 -> 97 us)."""
     w = ti.cast(img.shape[0], ti.f64)
     h = ti.cast(img.shape[1], ti.f64)
-    ti.loop_config(serialize=True)
-    for o in range(ends.shape[0]):
-        ax0 = ends[o, 0]
-        ay0 = ends[o, 1]
-        r = ends[o, 4]
-        dx0 = ends[o, 2] - ax0
-        dy0 = ends[o, 3] - ay0
-        if _finite(ax0) and _finite(ay0) and _finite(ends[o, 2]) and _finite(ends[o, 3]) and _finite(r) and r > 0.0:
-            pad = r + 1.0
-            ta = ti.cast(0.0, ti.f64)
-            tb = ti.cast(1.0, ti.f64)
-            for axis in ti.static(range(2)):
-                a = ax0 if axis == 0 else ay0
-                d = dx0 if axis == 0 else dy0
-                hi = (w if axis == 0 else h) + pad
-                if d != 0.0:
-                    t_lo = (-pad - a) / d
-                    t_hi = (hi - a) / d
-                    ta = ti.max(ta, ti.min(t_lo, t_hi))
-                    tb = ti.min(tb, ti.max(t_lo, t_hi))
-                elif a < -pad or a > hi:
-                    tb = -1.0
-            if tb >= ta:
-                span = tb - ta
-                ax = ax0 + dx0 * ta
-                ay = ay0 + dy0 * ta
-                dx = dx0 * span
-                dy = dy0 * span
-                l2 = dx * dx + dy * dy
-                ca = c0[o * ti.min(colouring, 1)]  # colouring 0: one colour for all (c0 has one row)
-                cb = c1[o * ti.min(colouring, 1)]
-                per_vertex = ti.cast(colouring == 2, ti.i32)
-                # a pixel is covered only when its centre lies within r of the segment, so columns and rows
-                # are visited within r (and a rounding margin) of it: pixel centres sit at +0.5
-                near = r + NEAR_MARGIN
-                i0 = ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - near - 0.5), 0.0), ti.i32)
-                i1 = ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + near - 0.5), w - 1.0), ti.i32)
-                for i in range(i0, i1 + 1):
-                    s0, s1 = _near(i + 0.5, ax, dx, near)
-                    if s0 <= s1:
-                        y0 = ay + s0 * dy
-                        y1 = ay + s1 * dy
-                        j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - near - 0.5), 0.0), ti.i32)
-                        j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + near - 0.5), h - 1.0), ti.i32)
-                        # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
-                        # written back unchanged), so short runs take the vector loop too
-                        n = (j1 - j0 + RUN) // RUN * RUN
-                        j1 = ti.min(j0 + n - 1, img.shape[1] - 1)
-                        j0 = ti.max(j1 - n + 1, 0)
-                        for j in range(j0, j1 + 1):
-                            _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
+    ti.loop_config(block_dim=1)  # a band a task
+    for band in range(bands):
+        width = (img.shape[0] + bands - 1) // bands
+        first = band * width
+        last = ti.min(first + width, img.shape[0]) - 1
+        for o in range(ends.shape[0]):
+            ax0 = ends[o, 0]
+            ay0 = ends[o, 1]
+            r = ends[o, 4]
+            dx0 = ends[o, 2] - ax0
+            dy0 = ends[o, 3] - ay0
+            if _finite(ax0) and _finite(ay0) and _finite(ends[o, 2]) and _finite(ends[o, 3]) and _finite(r) and r > 0.0:
+                pad = r + 1.0
+                ta = ti.cast(0.0, ti.f64)
+                tb = ti.cast(1.0, ti.f64)
+                for axis in ti.static(range(2)):
+                    a = ax0 if axis == 0 else ay0
+                    d = dx0 if axis == 0 else dy0
+                    hi = (w if axis == 0 else h) + pad
+                    if d != 0.0:
+                        t_lo = (-pad - a) / d
+                        t_hi = (hi - a) / d
+                        ta = ti.max(ta, ti.min(t_lo, t_hi))
+                        tb = ti.min(tb, ti.max(t_lo, t_hi))
+                    elif a < -pad or a > hi:
+                        tb = -1.0
+                if tb >= ta:
+                    span = tb - ta
+                    ax = ax0 + dx0 * ta
+                    ay = ay0 + dy0 * ta
+                    dx = dx0 * span
+                    dy = dy0 * span
+                    l2 = dx * dx + dy * dy
+                    ca = c0[o * ti.min(colouring, 1)]  # colouring 0: one colour for all (c0 has one row)
+                    cb = c1[o * ti.min(colouring, 1)]
+                    per_vertex = ti.cast(colouring == 2, ti.i32)
+                    # a pixel is covered only when its centre lies within r of the segment, so columns and rows
+                    # are visited within r (and a rounding margin) of it: pixel centres sit at +0.5
+                    near = r + NEAR_MARGIN
+                    i0 = ti.max(ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - near - 0.5), 0.0), ti.i32), first)
+                    i1 = ti.min(ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + near - 0.5), w - 1.0), ti.i32), last)
+                    for i in range(i0, i1 + 1):
+                        s0, s1 = _near(i + 0.5, ax, dx, near)
+                        if s0 <= s1:
+                            y0 = ay + s0 * dy
+                            y1 = ay + s1 * dy
+                            j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - near - 0.5), 0.0), ti.i32)
+                            j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + near - 0.5), h - 1.0), ti.i32)
+                            # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
+                            # written back unchanged), so short runs take the vector loop too
+                            n = (j1 - j0 + RUN) // RUN * RUN
+                            j1 = ti.min(j0 + n - 1, img.shape[1] - 1)
+                            j0 = ti.max(j1 - n + 1, 0)
+                            for j in range(j0, j1 + 1):
+                                _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
 
 
 @ti.func
@@ -420,7 +440,7 @@ def circles(img, centers, radii, colors):
     if _one_tile(len(c)):
         if len(c):
             table, each = _colour_table(colors)
-            _circles_in_order(img, np.ascontiguousarray(c), np.ascontiguousarray(r), table, each)
+            _circles_in_order(img, np.ascontiguousarray(c), np.ascontiguousarray(r), table, each, _bands(img))
         return
     ok = np.isfinite(c).all(axis=1) & np.isfinite(r) & (r > 0)
     lo, hi = raster.empty_invalid(ok, np.ceil(c - r[:, None]), np.floor(c + r[:, None]))
@@ -444,7 +464,7 @@ def lines(img, A, B, radius, colors, vertex_colors=None):
         c1 = c0
     if _one_tile(len(A)):
         if len(A):
-            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1, colouring)
+            _lines_in_order(img, np.ascontiguousarray(np.column_stack([A, B, r])), c0, c1, colouring, _bands(img))
         return
     if colouring == 0:  # the tiles index a colour per segment
         c0 = c1 = np.ascontiguousarray(np.broadcast_to(c0, (len(A), 3)))

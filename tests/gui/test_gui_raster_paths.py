@@ -62,6 +62,32 @@ def test_tiled_and_one_tile_kernel_drawing_agree(monkeypatch):
     assert np.abs(pictures[0]).max() > 0.1
 
 
+def test_column_bands_draw_what_one_band_draws(monkeypatch):
+    # the CPU's one tile cuts the columns into a band a thread; each pixel lies in one band, which draws every
+    # primitive in call order, so the picture is bit-identical to one band's (overlaps, band edges inside
+    # primitives, more bands than a 64-pixel image has threads)
+    import simgrad as ti
+    from simgrad.gui import render2d
+
+    ti.init(arch=ti.cpu, cpu_max_num_threads=2)
+    rng = np.random.default_rng(8)
+    n = 500
+    c = rng.random((n, 2)) * [W + 8, H + 8] - 4
+    a, b = rng.random((n, 2)) * [W, H], rng.random((n, 2)) * [W, H]
+    colors = rng.random((n, 3))
+    vertex_colors = rng.random((40, 2, 3))
+    pictures = []
+    for bands in (1, 2, 5):
+        monkeypatch.setattr(render2d, "_bands", lambda img, bands=bands: bands)
+        img = np.zeros((W, H, 3), np.float32)
+        render2d.circles(img, c, np.linspace(0.3, 6, n), colors)
+        render2d.lines(img, a, b, np.linspace(0.5, 3, n), colors)
+        render2d.lines(img, a[:40], b[:40], np.full(40, 2.0), colors[:40], vertex_colors=vertex_colors)
+        pictures.append(img)
+    assert np.array_equal(pictures[0], pictures[1]) and np.array_equal(pictures[0], pictures[2])
+    assert np.abs(pictures[0]).max() > 0.1
+
+
 def test_one_tile_segments_without_pieces_match_tiled_pieces(monkeypatch):
     # on the CPU a segment is drawn column by column (the rows near it, each pixel once) instead of as padded
     # pieces: the awkward segments (clipped far off the canvas, axis-aligned, zero-length, not finite, wide, per-vertex
