@@ -27,7 +27,17 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars); `lanes` > 1: parallel loops of while loops run that many iterations in lock
     step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold."""
-    from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
+    from simgrad.passes import (
+        accumulate,
+        hoist,
+        lower_access,
+        parallel_strategy,
+        promote,
+        quant,
+        reciprocal,
+        simplify,
+        verify,
+    )
     from simgrad.passes import lanes as simt
     from simgrad.passes import store_select as stores
 
@@ -37,6 +47,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         ("simplify", simplify.simplify)]  # constant folding, algebraic identities, CSE, DCE
     if transform is not None:  # e.g. the reverse-mode adjoint, then a clean-up of what it produced
         steps += [(getattr(transform, "__name__", "transform"), transform), ("simplify", simplify.simplify)]
+    if fast_math:  # a / c -> a * (1 / c), as taichi's fast_math
+        steps.append(("reciprocal", reciprocal.reciprocal))
     # loop-invariant index arithmetic out of parallel loops, then merged where it became common
     steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
     steps.append(("store_select", stores.store_select))  # `if c: x[p] = v` after a store to x[p]: a select
