@@ -344,6 +344,16 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, ban
                     near = r + NEAR_MARGIN
                     i0 = ti.max(ti.cast(ti.max(ti.floor(ti.min(ax, ax + dx) - near - 0.5), 0.0), ti.i32), first)
                     i1 = ti.min(ti.cast(ti.min(ti.ceil(ti.max(ax, ax + dx) + near - 0.5), w - 1.0), ti.i32), last)
+                    jb = ti.cast(ti.max(ti.floor(ti.min(ay, ay + dy) - near - 0.5), 0.0), ti.i32)
+                    je = ti.cast(ti.min(ti.ceil(ti.max(ay, ay + dy) + near - 0.5), h - 1.0), ti.i32)
+                    if je - jb < RUN and img.shape[1] >= RUN:
+                        # a short segment: every column visits the same RUN rows from the box's top, a loop of
+                        # constant trip count (no per-column range, no run-time checks before the vector code)
+                        jb = ti.min(jb, img.shape[1] - RUN)
+                        for i in range(i0, i1 + 1):
+                            for dj in range(RUN):
+                                _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
+                        i1 = i0 - 1
                     for i in range(i0, i1 + 1):
                         s0, s1 = _near(i + 0.5, ax, dx, near)
                         if s0 <= s1:
