@@ -47,6 +47,8 @@ def _norm_index(key, ndim: int, name: str = "") -> tuple:
     if len(key) != ndim:
         raise SimgradOutOfBoundError(f"field {name} has {ndim} indices, got {len(key)} (Slicing is not supported "
                                      "on ti.field)", caller_loc())
+    if any(isinstance(k, (bool, np.bool_)) for k in key):  # an int 0 or 1 to Taichi; a mask to numpy
+        key = tuple(int(k) if isinstance(k, (bool, np.bool_)) else k for k in key)
     return key
 
 
@@ -327,6 +329,17 @@ class ScalarField(Field):
         if view is None and self.gather is None:
             self._ensure()
             view = self._view
+        if type(key) is tuple and not self.offset:  # `f[i, j]`: numpy's item() checks the indices' types and
+            try:  # upper bounds (0.3 us instead of 1.0); anything else it refuses takes the general path below
+                if view is not None:
+                    if len(key) == view.ndim and min(key) >= 0:
+                        v = view.item(key)
+                        return int(v) if self.dtype is dt.u1 else v
+                elif self.gather is not None and len(key) == self.gather.ndim and min(key) >= 0:
+                    v = self._flat.item(self.gather.item(key))
+                    return int(v) if self.dtype is dt.u1 else v
+            except (TypeError, IndexError, ValueError):
+                pass
         if self._direct(key):
             v = view[key].item() if view is not None else self._flat[self.gather[key]].item()
             return int(v) if self.dtype is dt.u1 else v

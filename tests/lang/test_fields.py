@@ -364,6 +364,33 @@ def test_runtime_index_into_vector_and_matrix_elements():
     assert read(3, 2) == 32.5 + 99000
 
 
+def test_python_scope_multi_index_reads_on_every_layout():
+    """`f[i, j]` reads (numpy's item() on the field's view or gather index) equal to_numpy on a dense, a nested
+    (gathered) and a u1 field; a negative, float, short or out-of-range index is still refused; a bool is 0 or 1,
+    as in Taichi (numpy took it for a mask)."""
+    rng = np.random.default_rng(6)
+    dense = ti.field(ti.f32, shape=(4, 8))
+    nested = ti.field(ti.i32)
+    ti.root.dense(ti.ij, (1, 2)).dense(ti.ij, 2).dense(ti.ij, 2).place(nested)
+    flags = ti.field(ti.u1, shape=(3, 5))
+    dense.from_numpy(rng.random((4, 8)).astype(np.float32))
+    nested.from_numpy(rng.integers(-100, 100, (4, 8)).astype(np.int32))
+    flags.from_numpy(rng.integers(0, 2, (3, 5)).astype(bool))
+    for f in (dense, nested, flags):
+        want = f.to_numpy()
+        for i, j in np.ndindex(*want.shape):
+            got = f[i, j]
+            assert got == want[i, j] and type(got) is (float if f is dense else int), (f, i, j)
+            assert f[np.int64(i), np.int32(j)] == want[i, j]
+        n, m = want.shape
+        for bad in ((n, 0), (0, m), (-1, 0), (0, -1), (0,), (0, 0, 0)):
+            with pytest.raises(IndexError):
+                f[bad]
+        with pytest.raises((IndexError, TypeError)):
+            f[0.5, 0]
+        assert f[True, 0] == want[1, 0] and f[np.True_, False] == want[1, 0]  # Taichi's 1 and 0
+
+
 def test_python_scope_misuse_of_fields_is_loud():
     x = ti.field(ti.i32, shape=(1, 2, 3))
     with pytest.raises(AssertionError, match="Slicing is not supported on ti.field"):
