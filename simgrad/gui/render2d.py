@@ -164,6 +164,14 @@ def _circle_pixel(img, i, j, cx, cy, r, c):
 
 
 @ti.func
+def _band_columns(img, band, bands):
+    """The first and last column of band `band` of `bands` (see _bands)."""
+    width = (img.shape[0] + bands - 1) // bands
+    first = band * width
+    return first, ti.min(first + width, img.shape[0]) - 1
+
+
+@ti.func
 def _finite(x):
     return ti.abs(x) <= 1.7976931348623157e308  # false for NaN and +-inf
 
@@ -178,9 +186,7 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
     h = ti.cast(img.shape[1], ti.f64)
     ti.loop_config(block_dim=1)  # a band a task
     for band in range(bands):
-        width = (img.shape[0] + bands - 1) // bands
-        first = band * width
-        last = ti.min(first + width, img.shape[0]) - 1
+        first, last = _band_columns(img, band, bands)
         for p in range(centers.shape[0]):
             cx = centers[p, 0]
             cy = centers[p, 1]
@@ -305,9 +311,7 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, ban
     h = ti.cast(img.shape[1], ti.f64)
     ti.loop_config(block_dim=1)  # a band a task
     for band in range(bands):
-        width = (img.shape[0] + bands - 1) // bands
-        first = band * width
-        last = ti.min(first + width, img.shape[0]) - 1
+        first, last = _band_columns(img, band, bands)
         for o in range(ends.shape[0]):
             ax0 = ends[o, 0]
             ay0 = ends[o, 1]
