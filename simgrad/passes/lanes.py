@@ -215,7 +215,10 @@ def _updatable(x: Stmt) -> bool:
 
 # -- the rewrite ---------------------------------------------------------------------------------------------
 class _Rewrite:
-    """Builds the group loop's body from the parts (see the module's doc)."""
+    """Builds the group loop's body from the parts (see the module's doc); the loop is marked with attrs[mark] = W
+    (passes/fission.py's two lane-loop parts: `fission`)."""
+
+    mark = "simt"
 
     def __init__(self, loop: Stmt, parts: list, width: int, vector_bits: int, outer: Block):
         self.loop = loop
@@ -237,12 +240,14 @@ class _Rewrite:
                 for o in x.operands:
                     self._need(o, k)
         self.slot: dict[int, Stmt] = {}
-        if width < 0:  # the host's: vector registers' worth of the widest value that has lane slots
-            slots = [o.vtype for o in self.crossing.values()] + [
-                x.vtype for x in walk(loop.blocks[0]) if x.op is Op.ALLOCA and id(x) in self.lane_local]
-            widest = max([32] + [max(t.bits, 8) for t in slots])
-            width = min(64, max(8, REGISTERS * vector_bits // widest))
-        self.width = width
+        self.width = width if width > 0 else self._auto_width(vector_bits)
+
+    def _auto_width(self, vector_bits: int) -> int:
+        """The host's width: vector registers' worth of the widest value that has lane slots."""
+        slots = [o.vtype for o in self.crossing.values()] + [
+            x.vtype for x in walk(self.loop.blocks[0]) if x.op is Op.ALLOCA and id(x) in self.lane_local]
+        widest = max([32] + [max(t.bits, 8) for t in slots])
+        return min(64, max(8, REGISTERS * vector_bits // widest))
 
     def _need(self, o: Stmt, k: int) -> None:
         """Part k uses o: give o a lane slot if it comes from another part."""
@@ -268,7 +273,8 @@ class _Rewrite:
         loop.operands = (b.const(0, self.ity), ngroups)
         plan = loop.attrs["strategy"]
         plan.grain = max(1, -(-plan.grain // w))  # the same work per chunk, counted in groups
-        loop.attrs["simt"] = w
+        plan.weight *= w  # updates per group (the private copies' pay-off, codegen/privatize.py)
+        loop.attrs[self.mark] = w
         body = Block(loop)
         b = Builder(body)
         b.loc = loop.loc
@@ -285,11 +291,12 @@ class _Rewrite:
                 body.stmts.append(a)
         for key, o in self.crossing.items():
             self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": w})
-        self.act = b.emit(Op.ALLOCA, dt.i32, (), {"lanes": w})
-        self.any = b.emit(Op.ALLOCA, dt.i32)
+        if any(not isinstance(p, list) for p in self.parts):  # lock-step whiles: which lanes still run
+            self.act = b.emit(Op.ALLOCA, dt.i32, (), {"lanes": w})
+            self.any = b.emit(Op.ALLOCA, dt.i32)
         for k, p in enumerate(self.parts):
             if isinstance(p, list):
-                self._segment(k, p, followed=k + 1 < len(self.parts))
+                self._segment(k, p, followed=k + 1 < len(self.parts) and not isinstance(self.parts[k + 1], list))
             else:
                 self._step(k, p)
         loop.blocks = (body,)
