@@ -727,6 +727,8 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         # an f16 min/max kept in memory (volatile): LLVM 22's loop vectoriser aborts on a half minnum/maxnum
         # reduction ("VPlan cost model and legacy cost model disagreed"; taichi's test_atomic_max_f16)
         vol = "volatile " if ty == "half" and op in ("fmin", "fmax") else ""
+        # in a parallel lane loop (passes/fission.py) an update of the iteration's own element is in its group
+        md += group(f) if f.lane_group and s.attrs.get("strategy") == PLAIN and p.op is Op.GLOBAL_PTR else ""
         f.emit(f"{r} = load {vol}{ty}, ptr {f.v(p)}{md}")
         n = f.tmp("new")
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.float_flags(s)))

@@ -259,3 +259,93 @@ def test_gradients_of_a_split_adjoint_match_finite_differences():
         down[pick] -= h
         fd = (f(up) - f(down)) / (2 * h)
         np.testing.assert_allclose(ggrad[pick], fd, rtol=1e-6, atol=1e-9)
+
+
+def _scatter_loop(reads_grid=False, reads_array=False, total=False):
+    """A small P2G-shaped loop over ndarray arguments or fields: enough float work for the split to be worth it,
+    variants that must not be split."""
+    n, m = 301, 16
+    x = ti.field(ti.f32, shape=n)
+    grid = ti.field(ti.f32, shape=m)
+    s = ti.field(ti.f32, shape=())
+
+    @ti.kernel
+    def k(a: ti.types.ndarray(), g: ti.types.ndarray()):
+        for p in x:
+            y = x[p]
+            for _ in ti.static(range(6)):
+                y = y * 0.9 + ti.sqrt(y * y + 1.0) * 0.1 - 0.05
+            if ti.static(reads_grid):
+                y += grid[p % m] * 0.5  # part 0 reads what part 1 updates
+            if ti.static(reads_array):
+                y += a[p] * 0.5  # an ndarray argument may be the one scattered into
+            if ti.static(total):
+                s[None] += y  # a per-thread float sum, added once per chunk
+            b = ti.cast(y * 4, ti.i32) % m
+            for d in ti.static(range(3)):
+                grid[(b + d) % m] += y * (d + 1)
+                g[(b + 2 * d) % m] += y - d
+
+    x.from_numpy(np.linspace(0.1, 3, n, dtype=np.float32))
+    a = ti.ndarray(ti.f32, shape=n)
+    a.from_numpy(np.linspace(0, 1, n, dtype=np.float32))
+    g = ti.ndarray(ti.f32, shape=m)
+    k(a, g)
+    return [grid.to_numpy(), g.to_numpy(), s.to_numpy()], k, (a, g)
+
+
+def test_field_and_ndarray_scatters_are_split():
+    _, kernel, args = _both(_scatter_loop)
+    assert len(_split_loops(kernel, args)) == 1
+
+
+@pytest.mark.parametrize("variant", ["reads_grid", "reads_array", "total"])
+def test_loops_that_must_not_be_split_are_left_alone(variant):
+    """Part 0 reading what part 1 updates (a field, or an ndarray argument while another is scattered into: one
+    array may be passed twice) would read before other iterations' updates; a per-thread float sum's rounding
+    follows the chunks, counted in groups when split."""
+    _, kernel, args = _both(lambda: _scatter_loop(**{variant: True}))
+    assert not _split_loops(kernel, args)
+
+
+def _task(kernel, args):
+    text = kernel._instance_for(args, "").llvm_text
+    opt = str(get_jit()._optimized(text, 0))
+    return opt.split("define internal void @sg_kernel_task1_private(")[1].split("\n}")[0]
+
+
+@pytest.mark.parametrize("which", ["2d", "3d"])
+def test_part_0_is_vector_code(which):
+    """mpm99's P2G (conditional stores of F[p]) and diffmpm3d's p2g (one tree for particles and grid, F[f + 1, p]
+    stored): their computing part runs as <W x float> arithmetic, which the unsplit loop never does."""
+    for width in (0, -1):
+        ti.init(arch=ti.cpu, fission_lanes=width)
+        _, kernel, args = _p2g_2d() if which == "2d" else _p2g_3d()
+        task = _task(kernel, args)
+        wide = sum(task.count(f"fmul nsz <{w} x float>") for w in (8, 16))  # SLP makes a few of its own
+        assert (wide >= 40) == bool(width), wide
+
+
+def test_default_width_fits_the_slots_in_l1():
+    from simgrad.passes.fission import SLOT_BYTES
+
+    ti.init(arch=ti.cpu)
+    _, kernel, args = _p2g_3d(n=64, n_grid=8)
+    (loop,) = _split_loops(kernel, args)
+    w = loop.attrs["fission"]
+    assert 8 <= w <= 64 and w * (27 * 4 + 3) * 4 <= SLOT_BYTES
+
+
+def test_width_is_checked():
+    with pytest.raises(ValueError, match="fission_lanes"):
+        ti.init(arch=ti.cpu, fission_lanes=6)
+
+
+def test_not_on_the_simulated_gpu_nor_in_debug_mode(monkeypatch):
+    ti.init(arch=ti.cpu, debug=True)
+    _, kernel, args = _p2g_2d(n=40)
+    assert not _split_loops(kernel, args)
+    monkeypatch.setenv("SIMGRAD_GPU_SIM", "1")
+    ti.init(arch=ti.cuda)
+    _, kernel, args = _p2g_2d(n=40)
+    assert not _split_loops(kernel, args)
