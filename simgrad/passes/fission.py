@@ -47,11 +47,10 @@ _REFUSED = {Op.CALL, Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION, Op.TAPE_RESE
 #: float arithmetic part 0 must hold for the split to pay: a few values computed and scattered gain nothing from
 #: a vectorised part 0 and pay for the slots
 MIN_FLOAT_OPS = 16
-#: float operations of part 0 per scatter below which the split is left out: the unsplit loop overlaps its scalar
-#: compute with the scatters' read-modify-writes (cache misses on a grid larger than L2); split, the scatters run
-#: back to back after a vectorised part 0 and their misses show. diffmpm3d's p2g (7.2 per scatter, 108 scatters
-#: into a 7 MB grid just cleared) went 1.6 -> 2.2 ms split; mpm99's P2G (13.8) 0.78 -> 0.24 ms, diffmpm3d's
-#: g2p.grad (31, its grid gathers in part 0) 6.0 -> 2.9 ms
+#: float operations of part 0 per scatter below which the split is left out: each scattered value costs a slot
+#: store in part 0 and a load in part 1 (diffmpm3d's p2g, 27 x 4 values: 6.0-7.2 float operations per scatter; split
+#: with part 0 scalar 1.7 -> 3.2 ms, vectorised 1.8-1.9, so no gain; in the example, after clear_grid, 1.9-2.1 ->
+#: 2.3-2.9). mpm99's P2G (13.8) went 0.78 -> 0.24 ms, diffmpm3d's g2p.grad (31) 6.0 -> 2.9-3.8
 MIN_FLOAT_OPS_PER_SCATTER = 10
 #: bytes of lane slots per group: they stay in L1 while part 1 reads them back
 SLOT_BYTES = 16384
