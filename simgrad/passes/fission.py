@@ -226,6 +226,34 @@ class _Split(_Rewrite):
             # read, one tree) stayed scalar: "too many memory checks needed"
             lane.attrs["parallel_lanes"] = True
 
+    def _make_slots(self, b: Builder) -> None:
+        """The values one cell's scatters add (grid_v[I][0..2], grid_m[I]: consecutive updates at the same indices)
+        share a slot, a cell's values side by side per lane: part 1 reads them as one vector where its updates
+        are one (a <4 x float> read-modify-write), not 4 loads and inserts."""
+        self.spread = {}
+        groups: list[list[Stmt]] = []
+        last: tuple | None = None
+        for s in self.parts[1]:
+            if s.op is not Op.ATOMIC or id(s.operands[1]) not in self.crossing:
+                continue
+            cell = tuple(id(i) for i in s.operands[0].operands)
+            v = s.operands[1]
+            if groups and cell == last and v.vtype is groups[-1][0].vtype and v not in groups[-1]:
+                groups[-1].append(v)
+            else:
+                groups.append([v])
+            last = cell
+        for g in groups:
+            if len(g) < 2 or any(id(v) in self.spread for v in g):
+                continue
+            shared = b.emit(Op.ALLOCA, g[0].vtype, (), {"lanes": self.width * len(g)})
+            for c, v in enumerate(g):
+                self.slot[id(v)] = shared
+                self.spread[id(v)] = (len(g), c)
+        for key, o in self.crossing.items():
+            if key not in self.slot:
+                self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": self.width})
+
     def _auto_width(self, vector_bits: int) -> int:
         slot_bytes = sum(max(o.vtype.bits, 8) // 8 for o in self.crossing.values())
         width = max(8, min(64, 2 * vector_bits // 32))

@@ -289,8 +289,7 @@ class _Rewrite:
                 a.attrs["lanes"] = w
                 a.block = body
                 body.stmts.append(a)
-        for key, o in self.crossing.items():
-            self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": w})
+        self._make_slots(b)
         if any(not isinstance(p, list) for p in self.parts):  # lock-step whiles: which lanes still run
             self.act = b.emit(Op.ALLOCA, dt.i32, (), {"lanes": w})
             self.any = b.emit(Op.ALLOCA, dt.i32)
@@ -303,6 +302,26 @@ class _Rewrite:
         for x in before.stmts:
             x.block = self.outer
         return before.stmts
+
+    def _make_slots(self, b: Builder) -> None:
+        """A lane slot (ALLOCA of W values) per value crossing parts; `self.spread[key]` = (k, c) places a value at
+        index lane * k + c of a shared slot instead (passes/fission.py)."""
+        self.spread: dict[int, tuple[int, int]] = {}
+        for key, o in self.crossing.items():
+            self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": self.width})
+
+    def _slot_index(self, key: int, lane: Stmt, into: Block | None) -> Stmt:
+        """The index of `lane`'s place in key's slot, computed in `into` (None: the lane loop's builder)."""
+        if key not in self.spread:
+            return lane
+        k, c = self.spread[key]
+        i32 = lane.vtype
+        if into is None:
+            return self.lb.add(self.lb.mul(lane, self.lb.const(k, i32)), self.lb.const(c, i32))
+        m = Builder.detached(Op.MUL, i32, (lane, Builder.constant(k, i32)), None, self.loop.loc, into)
+        a = Builder.detached(Op.ADD, i32, (m, Builder.constant(c, i32)), None, self.loop.loc, into)
+        into.stmts += [m, a]
+        return a
 
     def _group_count(self, b: Builder, begin: Stmt, end: Stmt) -> Stmt:
         """ceil(max(end - begin, 0) / W), without overflow near the index type's maximum."""
@@ -345,7 +364,7 @@ class _Rewrite:
         elif o.op is Op.GLOBAL_PTR:
             v = lb.emit(Op.GLOBAL_PTR, o.type, tuple(self._operand(i) for i in o.operands), dict(o.attrs))
         else:
-            v = lb.emit(Op.LOCAL_LOAD, o.vtype, (self.slot[id(o)], self.lane))
+            v = lb.emit(Op.LOCAL_LOAD, o.vtype, (self.slot[id(o)], self._slot_index(id(o), self.lane, None)))
         self.local[id(o)] = v
         return v
 
@@ -362,7 +381,8 @@ class _Rewrite:
         for s in stmts:
             if id(s) in self.slot:
                 value = self.local.get(id(s), s)
-                rest.stmts.append(Builder.detached(Op.LOCAL_STORE, None, (self.slot[id(s)], value, loop), None,
+                at = self._slot_index(id(s), loop, rest)
+                rest.stmts.append(Builder.detached(Op.LOCAL_STORE, None, (self.slot[id(s)], value, at), None,
                                                    s.loc, rest))
         for x in rest.stmts:
             x.block = loop.blocks[0]
