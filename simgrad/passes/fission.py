@@ -48,9 +48,10 @@ _REFUSED = {Op.CALL, Op.SNODE_OP, Op.SPARSE_CELL, Op.SPARSE_ACTION, Op.TAPE_RESE
 #: a vectorised part 0 and pay for the slots
 MIN_FLOAT_OPS = 16
 #: float operations of part 0 per scatter below which the split is left out: each scattered value costs a slot
-#: store in part 0 and a load in part 1 (diffmpm3d's p2g, 27 x 4 values: 6.0-7.2 float operations per scatter; split
-#: with part 0 scalar 1.7 -> 3.2 ms, vectorised 1.8-1.9, so no gain; in the example, after clear_grid, 1.9-2.1 ->
-#: 2.3-2.9). mpm99's P2G (13.8) went 0.78 -> 0.24 ms, diffmpm3d's g2p.grad (31) 6.0 -> 2.9-3.8
+#: store in part 0 and a load in part 1. diffmpm3d's p2g (27 x 4 values, 7.2 float operations per scatter) measured
+#: slower split in the example (kernel profiler, one thread: min 1.5 -> 2.1 ms a call, with a cell's values sharing
+#: a slot; before that 1.5 -> 2.3), though a 3-D p2g of random particles on a 16^3 grid gained (1.7-2.5 -> 1.3);
+#: mpm99's P2G (13.8) went 0.78 -> 0.24 ms, diffmpm3d's g2p.grad (31) 6.0 -> 2.9-3.8
 MIN_FLOAT_OPS_PER_SCATTER = 10
 #: bytes of lane slots per group: they stay in L1 while part 1 reads them back
 SLOT_BYTES = 16384
