@@ -149,6 +149,9 @@ class FunctionText:
         # iteration of its parallel loop may touch but through atomics; the loop's latch names it
         self.access_group: str | None = None
         self.parallel_loop_md = ""
+        # lane loops whose iterations are independent (passes/fission.py `parallel_lanes`): their loop IDs
+        self.lane_loops: dict[Stmt, str] = {}
+        self.lane_group: str | None = None
 
     def private_root_of(self, ptr: Stmt) -> str | None:
         """The private root an update of this task goes through, if its field is privatised here."""
@@ -504,7 +507,10 @@ class KernelCodegen:
         return f"!{k}"
 
     def parallel_latch(self, f: FunctionText, s: Stmt) -> str:
-        """The `!llvm.loop` of the latch of the loop running task f's iterations of `s`, or ''."""
+        """The `!llvm.loop` of the latch of the loop running task f's iterations of `s` (or of a parallel lane
+        loop), or ''."""
+        if s in f.lane_loops:
+            return f", !llvm.loop {f.lane_loops[s]}"
         return f", !llvm.loop {f.parallel_loop_md}" if f.access_group and s is f.loop else ""
 
     def need_branch_weights(self) -> None:
@@ -591,6 +597,16 @@ def lower_range_for(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         b, e = s.operands
         short = b.op is Op.CONST and e.op is Op.CONST and e.attrs["value"] - b.attrs["value"] <= CANCEL_STRIDE
         short = short or bool(s.attrs.get("lanes"))  # a lane loop (passes/lanes.py): at most its group's width
+        if s.attrs.get("parallel_lanes") and f.access_group is None:
+            # passes/fission.py's part 0, whose iterations share no stored element: its loads and stores (its lane
+            # slots too) in an access group of its own, which its loop ID names
+            k = 1000 + 2 * len(g.module.globals)
+            g.module.globals.append(f"!{k} = distinct !{{}}")
+            f.access_group = f.lane_group = f"!{k}"
+            f.lane_loops[s] = g._parallel_loop(f.access_group)
+            g.serial_loop(f, s, f.v(b), f.v(e))
+            f.access_group = f.lane_group = None
+            return
         g.serial_loop(f, s, f.v(b), f.v(e), cancel=not short)  # a long or unknown one watches Ctrl-C
 
 
@@ -631,14 +647,20 @@ def _local_address(f: FunctionText, a: Stmt, lane: Stmt | None) -> str:
 def lower_local_load(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     r = f.tmp("l")
     p = _local_address(f, s.operands[0], s.operands[1] if len(s.operands) > 1 else None)
-    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {p}")
+    f.emit(f"{r} = load {llvm_type(s.vtype)}, ptr {p}{_slot_group(f, s, 1)}")
     f.names[s] = r
 
 
 def lower_local_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
     a, v = s.operands[:2]
     p = _local_address(f, a, s.operands[2] if len(s.operands) > 2 else None)
-    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}")
+    f.emit(f"store {llvm_type(v.type)} {f.v(v)}, ptr {p}{_slot_group(f, s, 2)}")
+
+
+def _slot_group(f: FunctionText, s: Stmt, lane: int) -> str:
+    """A lane slot's access in a parallel lane loop is in the loop's group (a slot is one lane's: never shared);
+    elsewhere (a task's group) not, the slots being reused by every group of iterations."""
+    return group(f) if len(s.operands) > lane and f.lane_group else ""
 
 
 def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
@@ -705,6 +727,8 @@ def lower_atomic(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         # an f16 min/max kept in memory (volatile): LLVM 22's loop vectoriser aborts on a half minnum/maxnum
         # reduction ("VPlan cost model and legacy cost model disagreed"; taichi's test_atomic_max_f16)
         vol = "volatile " if ty == "half" and op in ("fmin", "fmax") else ""
+        # in a parallel lane loop (passes/fission.py) an update of the iteration's own element is in its group
+        md += group(f) if f.lane_group and s.attrs.get("strategy") == PLAIN and p.op is Op.GLOBAL_PTR else ""
         f.emit(f"{r} = load {vol}{ty}, ptr {f.v(p)}{md}")
         n = f.tmp("new")
         f.emit(_combine_text(n, op, ty, r, f.v(v), g.float_flags(s)))

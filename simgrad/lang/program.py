@@ -50,8 +50,9 @@ SPECIAL_CONFIG: dict = {"log_level": "info", "gdb_trigger": False, "short_circui
                         "print_full_traceback": False, "unrolling_limit": 32}
 # simgrad's own options: flush_denormals (runtime/fpenv.py; Taichi always flushes, this is its way out);
 # simt_lanes: iterations of a parallel loop whose while loops run in lock step on the CPU (passes/lanes.py; 0 off,
-# -1 four vector registers' worth of the loop's widest values)
-SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": -1}
+# -1 four vector registers' worth of the loop's widest values); fission_lanes: iterations of a parallel loop with
+# scatters run W at a time, the part before the scatters vectorised (passes/fission.py; 0 off, -1 by the host)
+SIMGRAD_CONFIG: dict = {"flush_denormals": True, "simt_lanes": -1, "fission_lanes": -1}
 # accepted for older programs, without effect (not in Taichi 1.7.4's list)
 LEGACY_OPTIONS = {"packed", "dynamic_index", "excepthook", "debug_info"}
 
@@ -114,6 +115,7 @@ class Config:
         self.fast_math = bool(kw.get("fast_math", True))  # Taichi's default; see codegen.llvm.FAST_MATH_FLAGS
         self.flush_denormals = bool(kw.get("flush_denormals", SIMGRAD_CONFIG["flush_denormals"]))
         self.simt_lanes = _lanes(kw.get("simt_lanes", SIMGRAD_CONFIG["simt_lanes"]))
+        self.fission_lanes = _lanes(kw.get("fission_lanes", SIMGRAD_CONFIG["fission_lanes"]), "fission_lanes")
         self.offline_cache = bool(kw.get("offline_cache", True))
         self.offline_cache_file_path = kw.get("offline_cache_file_path")
         threads = kw.get("cpu_max_num_threads") or int(os.environ.get("SIMGRAD_NUM_THREADS", 0) or 0)
@@ -121,10 +123,10 @@ class Config:
         self.cpu_max_num_threads = self.num_threads
 
 
-def _lanes(value) -> int:
+def _lanes(value, name: str = "simt_lanes") -> int:
     lanes = int(value)
     if lanes != -1 and (lanes < 0 or lanes & (lanes - 1) or lanes == 1 or lanes > 64):
-        raise ValueError(f"simt_lanes must be -1 (by the host's vector registers), 0 (off) or a power of two from 2 "
+        raise ValueError(f"{name} must be -1 (by the host's vector registers), 0 (off) or a power of two from 2 "
                          f"to 64, got {value!r}")
     return lanes
 

@@ -215,7 +215,10 @@ def _updatable(x: Stmt) -> bool:
 
 # -- the rewrite ---------------------------------------------------------------------------------------------
 class _Rewrite:
-    """Builds the group loop's body from the parts (see the module's doc)."""
+    """Builds the group loop's body from the parts (see the module's doc); the loop is marked with attrs[mark] = W
+    (passes/fission.py's two lane-loop parts: `fission`)."""
+
+    mark = "simt"
 
     def __init__(self, loop: Stmt, parts: list, width: int, vector_bits: int, outer: Block):
         self.loop = loop
@@ -237,12 +240,14 @@ class _Rewrite:
                 for o in x.operands:
                     self._need(o, k)
         self.slot: dict[int, Stmt] = {}
-        if width < 0:  # the host's: vector registers' worth of the widest value that has lane slots
-            slots = [o.vtype for o in self.crossing.values()] + [
-                x.vtype for x in walk(loop.blocks[0]) if x.op is Op.ALLOCA and id(x) in self.lane_local]
-            widest = max([32] + [max(t.bits, 8) for t in slots])
-            width = min(64, max(8, REGISTERS * vector_bits // widest))
-        self.width = width
+        self.width = width if width > 0 else self._auto_width(vector_bits)
+
+    def _auto_width(self, vector_bits: int) -> int:
+        """The host's width: vector registers' worth of the widest value that has lane slots."""
+        slots = [o.vtype for o in self.crossing.values()] + [
+            x.vtype for x in walk(self.loop.blocks[0]) if x.op is Op.ALLOCA and id(x) in self.lane_local]
+        widest = max([32] + [max(t.bits, 8) for t in slots])
+        return min(64, max(8, REGISTERS * vector_bits // widest))
 
     def _need(self, o: Stmt, k: int) -> None:
         """Part k uses o: give o a lane slot if it comes from another part."""
@@ -268,7 +273,8 @@ class _Rewrite:
         loop.operands = (b.const(0, self.ity), ngroups)
         plan = loop.attrs["strategy"]
         plan.grain = max(1, -(-plan.grain // w))  # the same work per chunk, counted in groups
-        loop.attrs["simt"] = w
+        plan.weight *= w  # updates per group (the private copies' pay-off, codegen/privatize.py)
+        loop.attrs[self.mark] = w
         body = Block(loop)
         b = Builder(body)
         b.loc = loop.loc
@@ -283,19 +289,39 @@ class _Rewrite:
                 a.attrs["lanes"] = w
                 a.block = body
                 body.stmts.append(a)
-        for key, o in self.crossing.items():
-            self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": w})
-        self.act = b.emit(Op.ALLOCA, dt.i32, (), {"lanes": w})
-        self.any = b.emit(Op.ALLOCA, dt.i32)
+        self._make_slots(b)
+        if any(not isinstance(p, list) for p in self.parts):  # lock-step whiles: which lanes still run
+            self.act = b.emit(Op.ALLOCA, dt.i32, (), {"lanes": w})
+            self.any = b.emit(Op.ALLOCA, dt.i32)
         for k, p in enumerate(self.parts):
             if isinstance(p, list):
-                self._segment(k, p, followed=k + 1 < len(self.parts))
+                self._segment(k, p, followed=k + 1 < len(self.parts) and not isinstance(self.parts[k + 1], list))
             else:
                 self._step(k, p)
         loop.blocks = (body,)
         for x in before.stmts:
             x.block = self.outer
         return before.stmts
+
+    def _make_slots(self, b: Builder) -> None:
+        """A lane slot (ALLOCA of W values) per value crossing parts; `self.spread[key]` = (k, c) places a value at
+        index lane * k + c of a shared slot instead (passes/fission.py)."""
+        self.spread: dict[int, tuple[int, int]] = {}
+        for key, o in self.crossing.items():
+            self.slot[key] = b.emit(Op.ALLOCA, o.vtype, (), {"lanes": self.width})
+
+    def _slot_index(self, key: int, lane: Stmt, into: Block | None) -> Stmt:
+        """The index of `lane`'s place in key's slot, computed in `into` (None: the lane loop's builder)."""
+        if key not in self.spread:
+            return lane
+        k, c = self.spread[key]
+        i32 = lane.vtype
+        if into is None:
+            return self.lb.add(self.lb.mul(lane, self.lb.const(k, i32)), self.lb.const(c, i32))
+        m = Builder.detached(Op.MUL, i32, (lane, Builder.constant(k, i32)), None, self.loop.loc, into)
+        a = Builder.detached(Op.ADD, i32, (m, Builder.constant(c, i32)), None, self.loop.loc, into)
+        into.stmts += [m, a]
+        return a
 
     def _group_count(self, b: Builder, begin: Stmt, end: Stmt) -> Stmt:
         """ceil(max(end - begin, 0) / W), without overflow near the index type's maximum."""
@@ -338,7 +364,7 @@ class _Rewrite:
         elif o.op is Op.GLOBAL_PTR:
             v = lb.emit(Op.GLOBAL_PTR, o.type, tuple(self._operand(i) for i in o.operands), dict(o.attrs))
         else:
-            v = lb.emit(Op.LOCAL_LOAD, o.vtype, (self.slot[id(o)], self.lane))
+            v = lb.emit(Op.LOCAL_LOAD, o.vtype, (self.slot[id(o)], self._slot_index(id(o), self.lane, None)))
         self.local[id(o)] = v
         return v
 
@@ -355,7 +381,8 @@ class _Rewrite:
         for s in stmts:
             if id(s) in self.slot:
                 value = self.local.get(id(s), s)
-                rest.stmts.append(Builder.detached(Op.LOCAL_STORE, None, (self.slot[id(s)], value, loop), None,
+                at = self._slot_index(id(s), loop, rest)
+                rest.stmts.append(Builder.detached(Op.LOCAL_STORE, None, (self.slot[id(s)], value, at), None,
                                                    s.loc, rest))
         for x in rest.stmts:
             x.block = loop.blocks[0]

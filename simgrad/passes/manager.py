@@ -22,11 +22,13 @@ def _verify_enabled() -> bool:
 
 
 def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math: bool = False,
-                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0) -> None:
+                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0, fission: int = 0) -> None:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics);
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars); `lanes` > 1: parallel loops of while loops run that many iterations in lock
-    step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold."""
+    step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold; `fission`:
+    the same for parallel loops that scatter, split into the part before the scatters and the scatters
+    (passes/fission.py; the CPU's kernels)."""
     from simgrad.passes import (
         accumulate,
         hoist,
@@ -38,6 +40,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         simplify,
         verify,
     )
+    from simgrad.passes import fission as split
     from simgrad.passes import lanes as simt
     from simgrad.passes import store_select as stores
 
@@ -60,6 +63,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps.append(("accumulate", partial(accumulate.accumulate, cache_sums=cache_sums and not debug)))
     if lanes:  # while loops of local arithmetic in parallel loops: W iterations in lock step, vectorisable
         steps.append(("lanes", partial(simt.lanes, width=lanes, vector_bits=vector_bits)))
+    if fission:  # parallel loops with scatters: W iterations' pure part, then their scatters (vectorisable)
+        steps.append(("fission", partial(split.fission, width=fission, vector_bits=vector_bits)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)
     steps.append(("lower_access", partial(lower_access.lower_access, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass

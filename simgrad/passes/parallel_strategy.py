@@ -20,6 +20,7 @@ Targets emit what is written here; none of this depends on how a target runs a p
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from simgrad import dtypes as dt
@@ -169,15 +170,16 @@ def _owned(written: list[Stmt], accessed: list[Stmt], loop: Stmt, inside: set) -
         and len({_varying(p, loop, inside) for p in accessed}) <= 1
 
 
-def _independent(loop: Stmt, inside: set) -> bool:
+def _independent(loop: Stmt, inside: set, stmts: Iterable[Stmt] | None = None) -> bool:
     """Whether the iterations share no element one of them stores to: every field the loop stores to is stored
     and read only at the element the iteration owns (injective stores, every access with the same varying
     indices), and the ndarrays count as one array (one may be passed twice). Taichi's rule calls any other
     sharing a race, but at one thread taichi runs such a loop in order (`x[i] = x[i - 1] + 1` counts up), and a
-    target told the iterations are independent would reorder it."""
+    target told the iterations are independent would reorder it. `stmts`: only these of the body's statements
+    (passes/fission.py's part before the scatters)."""
     stores: dict[int, list[Stmt]] = {}
     reads: dict[int, list[Stmt]] = {}
-    for x in walk(loop.blocks[0]):
+    for x in (walk(loop.blocks[0]) if stmts is None else stmts):
         if x.op in (Op.GLOBAL_STORE, Op.ATOMIC, Op.GLOBAL_LOAD) and x.operands[0].op is Op.GLOBAL_PTR:
             p = x.operands[0]
             t = p.attrs["target"]
