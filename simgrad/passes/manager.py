@@ -29,6 +29,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold."""
     from simgrad.passes import accumulate, hoist, lower_access, parallel_strategy, promote, quant, simplify, verify
     from simgrad.passes import lanes as simt
+    from simgrad.passes import lanes_memory as simt_memory
     from simgrad.passes import store_select as stores
 
     level = _debug()
@@ -48,6 +49,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps.append(("accumulate", partial(accumulate.accumulate, cache_sums=cache_sums and not debug)))
     if lanes:  # while loops of local arithmetic in parallel loops: W iterations in lock step, vectorisable
         steps.append(("lanes", partial(simt.lanes, width=lanes, vector_bits=vector_bits)))
+        # the loops it left whose lock-step part loads fields, stores own elements or counts (passes/lanes_memory.py)
+        steps.append(("lanes_memory", partial(simt_memory.lanes_memory, width=lanes, vector_bits=vector_bits)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)
     steps.append(("lower_access", partial(lower_access.lower_access, debug=debug)))
     if _verify_enabled():  # structural and type invariants before and after every pass
