@@ -482,50 +482,6 @@ class _MemoryRewrite(_Rewrite):
                 if not load and sl.dirty is not None:
                     lb.blocks.pop()
 
-    def _entered(self, k: int, counter: Stmt, end: Stmt) -> Builder:
-        """A lane loop clearing `act` of the lanes whose count is already reached, and an IF on any lane left: the
-        builder of its body."""
-        b = self.b
-        b.emit(Op.LOCAL_STORE, None, (self.any, b.const(0, dt.i32)))
-        loop, lb = self._lane_loop(b.const(self.width, dt.i32))
-        self._enter(k, loop, lb)
-        live = lb.bit_and(lb.emit(Op.LOCAL_LOAD, dt.i32, (self.act, loop)),
-                          lb.lt(lb.emit(Op.LOCAL_LOAD, counter.vtype, (counter, loop)), self._operand(end)))
-        lb.emit(Op.LOCAL_STORE, None, (self.act, live, loop))
-        lb.emit(Op.LOCAL_STORE, None, (self.any, lb.bit_or(lb.emit(Op.LOCAL_LOAD, dt.i32, (self.any,)), live)))
-        guard = b.emit(Op.IF, None, (b.ne(b.emit(Op.LOCAL_LOAD, dt.i32, (self.any,)), b.const(0, dt.i32)),),
-                       nblocks=2)
-        inner = Builder(guard.blocks[0])
-        inner.loc = b.loc
-        return inner
-
-    def _slice_loop(self, k: int, load: bool) -> None:
-        """Before the step, each lane's slices of its own elements into their slots; after it, back."""
-        if not self.slices:
-            return
-        loop, lb = self._lane_loop(self.n)
-        self._enter(k, loop, lb)
-        for sl in self.slices.values():
-            digits = {a: self._operand(o) for a, o in sl.digits.items()}
-            for flat, rest in enumerate(sl.elements()):
-                idx = tuple(digits[a] if a in digits else lb.const(rest[a], sl.types[a]) for a in
-                            range(len(sl.types)))
-                ptr = lb.emit(Op.GLOBAL_PTR, sl.ptr_type, idx, dict(sl.attrs))
-                at = lb.add(lb.const(flat * self.width, dt.i32), loop)
-                if load and sl.dirty is not None:  # stored only: nothing to load, no element written yet
-                    lb.emit(Op.LOCAL_STORE, None, (sl.dirty, lb.const(0, dt.i32), at))
-                elif load:
-                    lb.emit(Op.LOCAL_STORE, None, (sl.slot, lb.emit(Op.GLOBAL_LOAD, sl.target.dtype, (ptr,)), at))
-                elif sl.dirty is not None:  # back the elements the lane wrote
-                    written = lb.emit(Op.IF, None, (lb.emit(Op.LOCAL_LOAD, dt.i32, (sl.dirty, at)),), nblocks=2)
-                    with lb.inside(written.blocks[0]):
-                        ptr.block = written.blocks[0]
-                        lb.block.stmts.append(ptr)
-                        lb.block.stmts.remove(ptr) if False else None
-                        lb.emit(Op.GLOBAL_STORE, None, (ptr, lb.emit(Op.LOCAL_LOAD, sl.target.dtype, (sl.slot, at))))
-                else:
-                    lb.emit(Op.GLOBAL_STORE, None, (ptr, lb.emit(Op.LOCAL_LOAD, sl.target.dtype, (sl.slot, at))))
-
     def _lane_loop(self, count: Stmt) -> tuple[Stmt, Builder]:
         loop, lb = super()._lane_loop(count)
         if self.memory_step:  # the lanes touch no element another lane stores (codegen: an access group)
