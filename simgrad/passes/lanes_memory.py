@@ -52,10 +52,18 @@ MAX_TRIPS = 64
 MAX_UNROLLED = 2048
 
 
+#: whether the host's default width (ti.init(simt_lanes=-1)) runs this pass too: not yet, as it did not pay on the
+#: machine measured (AMD Zen 5, whose gathers cost about a scalar load per element: docs/ARCHITECTURE.md, SIMT lanes)
+AT_DEFAULT_WIDTH = False
+
+
 def lanes_memory(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
     """Rewrite every top-level parallel loop passes/lanes.py left that matches (see the module's doc) to run `width`
-    lanes at a time: only at a width the program asked for (ti.init(simt_lanes=W), W > 1), not at the host's
-    default (-1), as it did not pay on the machine measured (docs/ARCHITECTURE.md, SIMT lanes)."""
+    lanes at a time: at a width the program asked for (ti.init(simt_lanes=W), W > 1); at the host's (-1) only with
+    AT_DEFAULT_WIDTH, then one vector register of f32 (16 lanes measured faster than passes/lanes.py's 64: lanes
+    whose counts differ idle less)."""
+    if width < 0 and AT_DEFAULT_WIDTH and vector_bits > 0:
+        width = max(8, vector_bits // 32)
     if width <= 1:
         return False
     changed = False
