@@ -176,7 +176,8 @@ def test_off_lanes_never_read_outside_a_field():
     assert out.any()
 
 
-def test_counted_loop_with_run_time_bounds_continue_and_break():
+@pytest.mark.parametrize("threads", [1, 2])
+def test_counted_loop_with_run_time_bounds_continue_and_break(threads):
     def build():
         lo = ti.field(ti.i32, shape=203)
         hi = ti.field(ti.i32, shape=203)
@@ -209,7 +210,7 @@ def test_counted_loop_with_run_time_bounds_continue_and_break():
         k(1.25)
         return [out.to_numpy(), hits.to_numpy()], k, (1.25,)
 
-    (out, hits), kernel, args = _both(build, default_fp=ti.f64)
+    (out, hits), kernel, args = _both(build, threads, default_fp=ti.f64)
     assert len(_simt_loops(kernel, args)) == 1
     assert hits.any() and not hits.all()
 
