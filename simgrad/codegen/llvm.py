@@ -149,7 +149,8 @@ class FunctionText:
         # iteration of its parallel loop may touch but through atomics; the loop's latch names it
         self.access_group: str | None = None
         self.parallel_loop_md = ""
-        # lane loops whose iterations are independent (passes/fission.py `parallel_lanes`): their loop IDs
+        # lane loops whose iterations are independent (passes/fission.py, passes/lanes_memory.py `parallel_lanes`):
+        # their loop IDs; the group of the one being emitted, which its lane slots' accesses are in
         self.lane_loops: dict[Stmt, str] = {}
         self.lane_group: str | None = None
 
@@ -597,17 +598,30 @@ def lower_range_for(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
         b, e = s.operands
         short = b.op is Op.CONST and e.op is Op.CONST and e.attrs["value"] - b.attrs["value"] <= CANCEL_STRIDE
         short = short or bool(s.attrs.get("lanes"))  # a lane loop (passes/lanes.py): at most its group's width
-        if s.attrs.get("parallel_lanes") and f.access_group is None:
-            # passes/fission.py's part 0, whose iterations share no stored element: its loads and stores (its lane
-            # slots too) in an access group of its own, which its loop ID names
-            k = 1000 + 2 * len(g.module.globals)
-            g.module.globals.append(f"!{k} = distinct !{{}}")
-            f.access_group = f.lane_group = f"!{k}"
-            f.lane_loops[s] = g._parallel_loop(f.access_group)
-            g.serial_loop(f, s, f.v(b), f.v(e))
-            f.access_group = f.lane_group = None
+        if s.attrs.get("parallel_lanes"):
+            _parallel_lanes(g, f, s)
             return
         g.serial_loop(f, s, f.v(b), f.v(e), cancel=not short)  # a long or unknown one watches Ctrl-C
+
+
+def _parallel_lanes(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
+    """A lane loop whose lanes touch no element another lane stores (passes/lanes_memory.py `parallel_lanes`): its
+    field accesses and lane slots in an access group of its own, which its loop ID names (field accesses stay in the
+    task's group too, when it has one; the slots, reused by every group of iterations, are in the lane loop's only)."""
+    k = 1000 + 2 * len(g.module.globals)
+    g.module.globals.append(f"!{k} = distinct !{{}}")
+    task_group, lanes = f.access_group, f"!{k}"
+    if task_group is None:
+        f.access_group = lanes
+    else:
+        k = 1000 + 2 * len(g.module.globals)
+        g.module.globals.append(f"!{k} = !{{{task_group}, {lanes}}}")
+        f.access_group = f"!{k}"
+    f.lane_group = lanes
+    f.lane_loops[s] = g._parallel_loop(lanes)
+    b, e = s.operands
+    g.serial_loop(f, s, f.v(b), f.v(e))
+    f.access_group, f.lane_group = task_group, None
 
 
 # -- memory ------------------------------------------------------------------------------------------
@@ -660,7 +674,7 @@ def lower_local_store(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:
 def _slot_group(f: FunctionText, s: Stmt, lane: int) -> str:
     """A lane slot's access in a parallel lane loop is in the loop's group (a slot is one lane's: never shared);
     elsewhere (a task's group) not, the slots being reused by every group of iterations."""
-    return group(f) if len(s.operands) > lane and f.lane_group else ""
+    return f", !llvm.access.group {f.lane_group}" if len(s.operands) > lane and f.lane_group else ""
 
 
 def lower_global_ptr(g: KernelCodegen, f: FunctionText, s: Stmt) -> None:

@@ -42,6 +42,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     )
     from simgrad.passes import fission as split
     from simgrad.passes import lanes as simt
+    from simgrad.passes import lanes_memory as simt_memory
     from simgrad.passes import store_select as stores
 
     level = _debug()
@@ -63,6 +64,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps.append(("accumulate", partial(accumulate.accumulate, cache_sums=cache_sums and not debug)))
     if lanes:  # while loops of local arithmetic in parallel loops: W iterations in lock step, vectorisable
         steps.append(("lanes", partial(simt.lanes, width=lanes, vector_bits=vector_bits)))
+        # the loops it left whose lock-step part loads fields, stores own elements or counts (passes/lanes_memory.py)
+        steps.append(("lanes_memory", partial(simt_memory.lanes_memory, width=lanes, vector_bits=vector_bits)))
     if fission:  # parallel loops with scatters: W iterations' pure part, then their scatters (vectorisable)
         steps.append(("fission", partial(split.fission, width=fission, vector_bits=vector_bits)))
     # element accesses become byte offsets in the IR, by SNode kind (debug: each index checked first)

@@ -263,7 +263,9 @@ def test_loops_that_do_not_qualify_are_left_alone(what):
         @ti.kernel
         def k():
             for i in x:
-                v = x[i] if ti.static(what == "read_written") else i * 0.1
+                # (another iteration's element: loops that touch only the iteration's own are
+                # passes/lanes_memory.py's, tests/passes/test_lanes_memory.py)
+                v = x[(i + 1) % 50] if ti.static(what == "read_written") else i * 0.1
                 n = 0
                 s = 0.0
                 while v < 3.0:
@@ -273,7 +275,7 @@ def test_loops_that_do_not_qualify_are_left_alone(what):
                         s += v
                         s += v * 0.5
                     if ti.static(what == "store"):
-                        x[i] = v  # memory inside the while
+                        x[(i + 1) % 50] = v  # memory inside the while
                     if ti.static(what == "atomic"):
                         hist[n % 8] += 1
                 if ti.static(what == "float_sum"):
