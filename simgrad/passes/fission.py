@@ -35,7 +35,7 @@ from simgrad.ir.builder import Builder
 from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.ops import PURE, Op
-from simgrad.passes.lanes import _jumps_out, _Rewrite, _walk_list
+from simgrad.passes.lanes import _jumps_out, _Rewrite, _walk_list, rewrite_loops
 from simgrad.passes.parallel_strategy import PLAIN, REDUCE, LoopStrategy, _independent
 
 #: never in a split loop: calls and sparse structure ops may do anything, the tape is a per-thread stack whose
@@ -62,18 +62,12 @@ def fission(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
     width -1: two vector registers of `vector_bits` of f32 lanes, halved while the slots exceed SLOT_BYTES."""
     if width == 0 or width == 1 or (width < 0 and vector_bits <= 0):
         return False
-    changed = False
-    out: list[Stmt] = []
-    for s in kernel.body.stmts:
-        if s.op is Op.RANGE_FOR and s.attrs.get("parallel") and not s.attrs.get("cells") \
-                and not s.attrs.get("listgen") and not s.attrs.get("simt"):
-            parts = _match(s)
-            if parts is not None:
-                out += _Split(s, parts, width, vector_bits, kernel.body).run()
-                changed = True
-        out.append(s)
-    kernel.body.stmts = out
-    return changed
+
+    def rewrite(loop: Stmt) -> list[Stmt] | None:
+        parts = _match(loop)
+        return None if parts is None else _Split(loop, parts, width, vector_bits, kernel.body).run()
+
+    return rewrite_loops(kernel, rewrite)
 
 
 def place(target) -> tuple:

@@ -65,14 +65,26 @@ def lanes(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
     width -1: REGISTERS vector registers of `vector_bits` of the loop's widest lane values (8 to 64 lanes)."""
     if width == 0 or width == 1 or (width < 0 and vector_bits <= 0):
         return False
+
+    def rewrite(loop: Stmt) -> list[Stmt] | None:
+        parts = _match(loop)
+        return None if parts is None else _Rewrite(loop, parts, width, vector_bits, kernel.body).run()
+
+    return rewrite_loops(kernel, rewrite)
+
+
+def rewrite_loops(kernel: Kernel, rewrite) -> bool:
+    """`rewrite(loop)` on every top-level parallel loop over indices (not cells, no list generation) that no lane
+    rewrite has taken yet: the statements that go before the loop, or None (the loop does not match, unchanged).
+    The driver of passes/lanes.py, lanes_memory.py and fission.py."""
     changed = False
     out: list[Stmt] = []
     for s in kernel.body.stmts:
         if s.op is Op.RANGE_FOR and s.attrs.get("parallel") and not s.attrs.get("cells") \
-                and not s.attrs.get("listgen"):
-            parts = _match(s)
-            if parts is not None:
-                out += _Rewrite(s, parts, width, vector_bits, kernel.body).run()
+                and not s.attrs.get("listgen") and not s.attrs.get("simt"):
+            before = rewrite(s)
+            if before is not None:
+                out += before
                 changed = True
         out.append(s)
     kernel.body.stmts = out

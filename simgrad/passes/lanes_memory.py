@@ -43,7 +43,7 @@ from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import PURE, Op
 from simgrad.passes.digits import invariant_chain, invariant_digit
-from simgrad.passes.lanes import _REFUSED, _UPDATE_OPS, _jumps_out, _Rewrite, _updatable, _walk_list
+from simgrad.passes.lanes import _REFUSED, _UPDATE_OPS, _jumps_out, _Rewrite, _updatable, _walk_list, rewrite_loops
 from simgrad.passes.parallel_strategy import LoopStrategy
 
 #: a serial loop of constant trip count inside a lock-step part is unrolled whole: at most this many trips, and
@@ -66,19 +66,15 @@ def lanes_memory(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
         width = max(8, vector_bits // 32)
     if width <= 1:
         return False
-    changed = False
-    out: list[Stmt] = []
-    for s in kernel.body.stmts:
-        if s.op is Op.RANGE_FOR and s.attrs.get("parallel") and not s.attrs.get("cells") \
-                and not s.attrs.get("listgen") and not s.attrs.get("simt"):
-            matched = _match(s)
-            if matched is not None:
-                parts, counted = matched
-                out += _MemoryRewrite(s, parts, width, vector_bits, kernel.body, counted).run()
-                changed = True
-        out.append(s)
-    kernel.body.stmts = out
-    return changed
+
+    def rewrite(loop: Stmt) -> list[Stmt] | None:
+        matched = _match(loop)
+        if matched is None:
+            return None
+        parts, counted = matched
+        return _MemoryRewrite(loop, parts, width, vector_bits, kernel.body, counted).run()
+
+    return rewrite_loops(kernel, rewrite)
 
 
 # -- what the loop does to memory ----------------------------------------------------------------------------
