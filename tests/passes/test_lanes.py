@@ -14,12 +14,12 @@ from simgrad.ir.ops import Op
 from simgrad.runtime.jit import get_jit
 
 
-def _both(build, threads=1, **init):
+def _both(build, threads=1, lanes=8, **init):
     """build() defines fields and kernels, runs them, returns (arrays, kernel, args); run with the rewrite off and
     on: the arrays must agree bit for bit. Returns (the rewritten run's arrays, its kernel and args)."""
     out = []
-    for lanes in (0, 8):
-        ti.init(arch=ti.cpu, cpu_max_num_threads=threads, simt_lanes=lanes, **init)
+    for w in (0, lanes):
+        ti.init(arch=ti.cpu, cpu_max_num_threads=threads, simt_lanes=w, **init)
         arrays, kernel, args = build()
         out.append(([np.ascontiguousarray(a) for a in arrays], kernel, args))
     for a, b in zip(out[0][0], out[1][0]):

@@ -11,32 +11,7 @@ import pytest
 
 import simgrad as ti
 from simgrad.ir.nodes import walk
-from simgrad.ir.ops import Op
-from simgrad.runtime.jit import get_jit
-
-
-def _both(build, threads=1, lanes=8, **init):
-    """build() defines fields and kernels, runs them, returns (arrays, kernel, args); run with the rewrite off and
-    on: the arrays must agree bit for bit. Returns (the rewritten run's arrays, its kernel and args)."""
-    out = []
-    for w in (0, lanes):
-        ti.init(arch=ti.cpu, cpu_max_num_threads=threads, simt_lanes=w, **init)
-        arrays, kernel, args = build()
-        out.append(([np.ascontiguousarray(a) for a in arrays], kernel, args))
-    for a, b in zip(out[0][0], out[1][0]):
-        assert a.dtype == b.dtype and a.shape == b.shape
-        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))
-    return out[1]
-
-
-def _simt_loops(kernel, args):
-    return [s for s in kernel._instance_for(args, "").ir.body.stmts if s.op is Op.RANGE_FOR and s.attrs.get("simt")]
-
-
-def _task(kernel, args):
-    text = kernel._instance_for(args, "").llvm_text
-    opt = str(get_jit()._optimized(text, 0))
-    return opt.split("define internal void @sg_kernel_task1")[1].split("\n}")[0]
+from tests.passes.test_lanes import _both, _simt_loops, _task
 
 
 def _rasterizer(w, h, ntri, dtype=ti.f32, tile=4, seed=0):
