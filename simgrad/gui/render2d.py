@@ -357,21 +357,21 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, ban
                         for i in range(i0, i1 + 1):
                             for dj in range(RUN):
                                 _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
-                        i1 = i0 - 1
-                    for i in range(i0, i1 + 1):
-                        s0, s1 = _near(i + 0.5, ax, dx, near)
-                        if s0 <= s1:
-                            y0 = ay + s0 * dy
-                            y1 = ay + s1 * dy
-                            j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - near - 0.5), 0.0), ti.i32)
-                            j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + near - 0.5), h - 1.0), ti.i32)
-                            # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
-                            # written back unchanged), so short runs take the vector loop too
-                            n = (j1 - j0 + RUN) // RUN * RUN
-                            j1 = ti.min(j0 + n - 1, img.shape[1] - 1)
-                            j0 = ti.max(j1 - n + 1, 0)
-                            for j in range(j0, j1 + 1):
-                                _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
+                    else:
+                        for i in range(i0, i1 + 1):
+                            s0, s1 = _near(i + 0.5, ax, dx, near)
+                            if s0 <= s1:
+                                y0 = ay + s0 * dy
+                                y1 = ay + s1 * dy
+                                j0 = ti.cast(ti.max(ti.floor(ti.min(y0, y1) - near - 0.5), 0.0), ti.i32)
+                                j1 = ti.cast(ti.min(ti.ceil(ti.max(y0, y1) + near - 0.5), h - 1.0), ti.i32)
+                                # a run rounded up to whole vectors of RUN pixels (more pixels, each as before,
+                                # written back unchanged), so short runs take the vector loop too
+                                n = (j1 - j0 + RUN) // RUN * RUN
+                                j1 = ti.min(j0 + n - 1, img.shape[1] - 1)
+                                j0 = ti.max(j1 - n + 1, 0)
+                                for j in range(j0, j1 + 1):
+                                    _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
 
 
 @ti.func

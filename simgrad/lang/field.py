@@ -329,20 +329,17 @@ class ScalarField(Field):
         if view is None and self.gather is None:
             self._ensure()
             view = self._view
-        if type(key) is tuple and not self.offset:  # `f[i, j]`: numpy's item() checks the indices' types and
-            try:  # upper bounds (0.3 us instead of 1.0); anything else it refuses takes the general path below
-                if view is not None:
-                    if len(key) == view.ndim and min(key) >= 0:
-                        v = view.item(key)
-                        return int(v) if self.dtype is dt.u1 else v
-                elif self.gather is not None and len(key) == self.gather.ndim and min(key) >= 0:
-                    v = self._flat.item(self.gather.item(key))
+        source = view if view is not None else self.gather
+        if source is not None and not self.offset and (type(key) is tuple or type(key) is int):
+            # `f[i]`, `f[i, j]`: numpy's item() checks the indices' types and upper bounds (0.3 us instead of 1.0);
+            # what it refuses (or a negative index) takes the general path below
+            index = key if type(key) is tuple else (key,)
+            try:
+                if len(index) == source.ndim and min(index) >= 0:
+                    v = view.item(index) if view is not None else self._flat.item(self.gather.item(index))
                     return int(v) if self.dtype is dt.u1 else v
             except (TypeError, IndexError, ValueError):
                 pass
-        if self._direct(key):
-            v = view[key].item() if view is not None else self._flat[self.gather[key]].item()
-            return int(v) if self.dtype is dt.u1 else v
         key = self._shift(_norm_index(key, len(self.shape), self.name))
         _check_bounds(key, self.shape, self.name)
         if self.sparse:
