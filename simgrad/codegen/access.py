@@ -8,6 +8,7 @@ from simgrad.codegen.alias import dense_place, field_end
 from simgrad.ir.fieldref import FieldRef
 from simgrad.ir.nodes import Stmt
 from simgrad.ir.ops import Op
+from simgrad.passes.privatize import PAGE_SHIFT
 
 
 def lower_check_index(gen, f, s) -> str:
@@ -53,6 +54,7 @@ def lower_global_ptr(gen, f, s) -> str:
         private = f.private_root_of(s)
         if private is not None:  # its root points before the copy: no inbounds
             f.emit(f"{p} = getelementptr i8, ptr {private}, i64 {off}")
+            mark_page(f, private, off)
         else:
             if dense_place(s) is not None:
                 f.reaches(target.layout[0], field_end(target))
@@ -60,7 +62,23 @@ def lower_global_ptr(gen, f, s) -> str:
     else:
         private = f.private_root_of(s)  # this thread's copy of the whole ndarray, or the array itself
         f.emit(f"{p} = getelementptr inbounds i8, ptr {private or f.array_base(target)}, i64 {off}")
+        if private is not None:
+            mark_page(f, private, off)
     return p
+
+
+def mark_page(f, root: str, off: str) -> None:
+    """Mark the page of this thread's copy (a target's per-thread copies, codegen/privatize.py) that an update
+    at byte offset `off` from `root` goes to."""
+    marks = f.private_marks[root]
+    if marks is None:
+        return
+    mine, neg = marks
+    rel, page, at = f.tmp("pgo"), f.tmp("pg"), f.tmp("pgm")
+    f.emit(f"{rel} = add i64 {off}, {neg}")
+    f.emit(f"{page} = lshr i64 {rel}, {PAGE_SHIFT}")
+    f.emit(f"{at} = getelementptr inbounds i8, ptr {mine}, i64 {page}")
+    f.emit(f"store i8 1, ptr {at}{f.gen.module.facts.page_map()}")
 
 
 def pointer_and_offsets(f, x: Stmt, depth: int = 0) -> tuple[str, tuple[str, ...]] | None:

@@ -67,6 +67,15 @@ class MemoryFacts:
         k = self._scope(t)
         return f", !alias.scope !{FIRST_ID + 3 + 3 * k}, !noalias !{FIRST_ID + 4 + 3 * k}"
 
+    def page_map(self) -> str:
+        """The metadata of a store to a per-thread page map of scatter copies (codegen/privatize.py): apart
+        from every field place."""
+        key = (-1, -1)
+        if key not in self.scopes:
+            self.scopes[key] = len(self.scopes)
+        k = self.scopes[key]
+        return f", !alias.scope !{FIRST_ID + 3 + 3 * k}, !noalias !{FIRST_ID + 4 + 3 * k}"
+
     def globals(self) -> list[str]:
         if not self.scopes:
             return []
@@ -74,7 +83,8 @@ class MemoryFacts:
         out = [f'!{dom} = distinct !{{!{dom}, !"simgrad fields"}}']
         ids = {k: FIRST_ID + 2 + 3 * k for k in self.scopes.values()}
         for (tree, off), k in self.scopes.items():
-            out.append(f'!{ids[k]} = distinct !{{!{ids[k]}, !{dom}, !"tree {tree} byte {off}"}}')
+            name = "page maps" if tree < 0 else f"tree {tree} byte {off}"
+            out.append(f'!{ids[k]} = distinct !{{!{ids[k]}, !{dom}, !"{name}"}}')
             out.append(f"!{ids[k] + 1} = !{{!{ids[k]}}}")
             others = ", ".join(f"!{ids[j]}" for j in ids if j != k)
             out.append(f"!{ids[k] + 2} = !{{{others}}}")

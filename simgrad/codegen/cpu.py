@@ -10,7 +10,14 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
-from simgrad.codegen.privatize import emit_private_launch, emit_runs_alone, region_bytes, slice_shift
+from simgrad.codegen.privatize import (
+    emit_private_launch,
+    emit_runs_alone,
+    line_padded,
+    region_bytes,
+    region_pages,
+    slice_shift,
+)
 from simgrad.ir.nodes import Stmt, offset_form, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import PRIVATE, LoopStrategy
@@ -43,7 +50,7 @@ class CpuCodegen(KernelCodegen):
         captured = _free_values(s)
         regions = plan.regions
         clo = f.tmp("clo")
-        f.prologue.append(f"  {clo} = alloca [{len(captured) + len(regions) + 1} x i64], align 8")
+        f.prologue.append(f"  {clo} = alloca [{len(captured) + 2 * len(regions) + 1} x i64], align 8")  # copies, maps
         f.emit(f"store ptr %ctx, ptr {clo}")
         stored = {id(x.operands[0]) for x in walk(s.blocks[0]) if x.op in (Op.LOCAL_STORE, Op.ATOMIC)}
         slots: list[Capture] = []
@@ -83,11 +90,10 @@ class CpuCodegen(KernelCodegen):
             return
         pname = f"{tname}_private"
         self._emit_task(s, plan, pname, captured, slots, regions, first_slot=len(captured) + 1)
-        alone_name = pname
-        if _needs_atomics(s, copied=False):  # updates the copies do not take: plain too when on one thread alone
-            alone_name = f"{pname}_serial"
-            self._emit_task(s, plan, alone_name, captured, slots, regions, first_slot=len(captured) + 1,
-                            serial=True)
+        # on one thread alone: the fields are thread 0's copies, no page marks, and the updates the copies do
+        # not take are plain too
+        alone_name = f"{pname}_serial"
+        self._emit_task(s, plan, alone_name, captured, slots, regions, first_slot=len(captured) + 1, serial=True)
         nthreads = f.ctx_slot(abi.CTX_NTHREADS, "i64")
         emit_private_launch(f, regions, plan.weight, clo, len(captured) + 1, tname, pname, pfor, nthreads, b64,
                             e64, grain, alone_name)
@@ -113,7 +119,7 @@ class CpuCodegen(KernelCodegen):
                 val = copy
             t.names[v] = val
         for k, r in enumerate(regions):
-            _private_root(t, r, first_slot + k)
+            _private_root(t, r, first_slot + k, first_slot + len(regions) + k)
         ty = llvm_type(s.vtype)
         lo, hi = t.tmp("lo"), t.tmp("hi")
         t.prologue.append(f"  {lo} = trunc i64 %lo to {ty}" if ty != "i64" else f"  {lo} = add i64 %lo, 0")
@@ -319,14 +325,20 @@ def _row_split(loop: Stmt) -> tuple[Stmt, Stmt | None, Stmt] | None:
     return None
 
 
-def _private_root(t: FunctionText, region: Region, slot: int) -> None:
+def _private_root(t: FunctionText, region: Region, slot: int, map_slot: int) -> None:
     """Point the region's updates at this thread's zeroed copy (closure slot `slot`), shifted so that
-    the fields' usual byte offsets land inside it."""
-    q, buf, t64, off, base, root = (t.tmp("pr") for _ in range(6))
+    the fields' usual byte offsets land inside it, and their page marks at this thread's map (all threads'
+    maps from closure slot `map_slot`; codegen/privatize.py)."""
+    q, buf, t64, off, base, root, mq, maps, mrow, mine = (t.tmp("pr") for _ in range(10))
     lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
              f"{t64} = zext i32 %tid to i64"]
     size = region_bytes(lines, lambda: t.tmp("rb"), t.array_shape, region)
-    lines += [f"{off} = mul i64 {t64}, {size}", f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}"]
+    stride = line_padded(lines, lambda: t.tmp("rb"), size)
+    pages = line_padded(lines, lambda: t.tmp("rb"), region_pages(lines, lambda: t.tmp("rb"), size))
+    lines += [f"{off} = mul i64 {t64}, {stride}", f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}",
+              f"{mq} = getelementptr i64, ptr %clo, i64 {map_slot}", f"{maps} = load ptr, ptr {mq}",
+              f"{mrow} = mul i64 {t64}, {pages}", f"{mine} = getelementptr inbounds i8, ptr {maps}, i64 {mrow}"]
+    neg = "0"
     if region.array is not None:  # the whole array: its offsets land in the copy as they are
         root = base
     else:
@@ -334,6 +346,7 @@ def _private_root(t: FunctionText, region: Region, slot: int) -> None:
         neg = t.tmp("pr")
         lines += [f"{neg} = sub i64 {-region.lo}, {shift}", f"{root} = getelementptr i8, ptr {base}, i64 {neg}"]
     t.prologue += ["  " + line for line in lines]
+    t.private_marks[root] = None if t.serial else (mine, neg)  # (alone on one thread: no sum to mark pages for)
     for tid, key in region.keys:
         t.private_roots[(tid, key)] = root
         t.private_prefix[tid] = len(key)  # every update of a field uses the same number of prefix axes

@@ -135,6 +135,7 @@ class FunctionText:
         self.reduction_of: dict[int, str] = {}  # ATOMIC statement -> this thread's partial-sum variable
         self.private_roots: dict[tuple, str] = {}  # (id(field), slice key) -> root of this thread's copy
         self.private_prefix: dict[int, int] = {}  # id(field) -> leading axes that pick the slice
+        self.private_marks: dict[str, tuple[str, str] | None] = {}  # root -> (this thread's page map, copy offset of 0)
         self.bound: set[int] = set()  # statements whose value the enclosing loop gives (lower_block skips them)
         self.cursors: dict[int, str] = {}  # dynamic node's pool -> this function's chunk cursor (codegen/sparse.py)
         # TREE_ROOT / SPARSE_CELL -> (pointer, i64 offsets) whose sum is its u64 address (codegen/access.py)

@@ -19,6 +19,8 @@ from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Stmt, offset_form
 from simgrad.ir.ops import Op
 
+PAGE_SHIFT = 12  # the pages of a copy that each thread marks as updated, and the final sum visits
+
 
 @dataclass
 class Region:

@@ -386,3 +386,73 @@ def test_atomic_updates_have_a_plain_variant_for_a_loop_on_one_thread(threads, n
         np.testing.assert_allclose(prod[k], np.prod(1.0 + 1e-3 * sel), rtol=1e-9)
     text = scatter._instance_for((idx, val, s, lo, hi, cnt, prod), "").llvm_text
     assert "_private_serial" in text
+
+
+def _page_counts(kernel, *args):
+    """Per region, the pages its last final sum found marked (-1 before one): the page maps' holders (a region's
+    holders are its copies', then its maps')."""
+    return list(kernel._instance_for(args, "").launcher._holders[1::2, 2])
+
+
+def test_the_final_sum_adds_the_pages_each_thread_marked_as_the_updates_move():
+    """A scatter into two small clusters of a 16 MB interleaved field: each thread marks the pages of its copy it
+    updates, and only marked pages are summed and cleared. The clusters move every launch (a page left marked or
+    a missed mark would add a stale partial or lose one), a -0.0 and the neighbouring field stay as they were."""
+    n, cells = 100_000, 1 << 21
+    a, b = ti.field(ti.f32), ti.field(ti.f32)
+    ti.root.dense(ti.i, cells).place(a, b)  # the copy spans b too
+    at = ti.field(ti.i32, shape=n)
+    w = ti.field(ti.f32, shape=n)
+
+    @ti.kernel
+    def scatter():
+        for p in at:
+            for k in ti.static(range(4)):
+                a[at[p] + k] += w[p] * (k + 1)
+
+    rng = np.random.default_rng(3)
+    start = rng.integers(-4, 4, cells).astype(np.float32)
+    start[5] = -0.0
+    a.from_numpy(start)
+    b.from_numpy(start + 1)
+    want = start.copy()
+    for _launch in range(4):
+        centres = rng.integers(10, cells - 5000, 2)
+        i = (centres[rng.integers(0, 2, n)] + rng.integers(0, 3000, n)).astype(np.int32)
+        v = rng.integers(-8, 8, n).astype(np.float32)  # integers: exact in any order
+        at.from_numpy(i)
+        w.from_numpy(v)
+        scatter()
+        for k in range(4):
+            np.add.at(want, i + k, v * (k + 1))
+        got = a.to_numpy()
+        np.testing.assert_array_equal(got, want)
+        assert np.signbit(got[5])
+        (count,) = _page_counts(scatter)
+        assert 0 < count <= 4 * 2 * 4, count  # <= threads x clusters x pages a 3000-cell cluster can touch
+    np.testing.assert_array_equal(b.to_numpy(), start + 1)
+    assert "_private" in _text(scatter)
+
+
+def test_copies_whose_pages_all_got_marked_give_way_to_atomics_at_the_next_launch():
+    """Before a count the copies are taken if the updates outweigh an eighth of the copies' pages; a histogram
+    over a whole 4 MB field then marks every page (of each thread that took part), and the next launch keeps its
+    atomics (the count decays by 1/64 a launch that does). Both launches count exactly."""
+    n, cells = 150_000, 1 << 20
+    h = ti.field(ti.i32, shape=cells)
+    at = ti.field(ti.i32, shape=n)
+
+    @ti.kernel
+    def histogram():
+        for p in at:
+            h[at[p]] += 1
+
+    keys = np.random.default_rng(4).integers(0, cells, n).astype(np.int32)
+    at.from_numpy(keys)
+    assert _page_counts(histogram) == [-1]
+    histogram()
+    (first,) = _page_counts(histogram)
+    assert first >= cells * 4 >> 12  # every page, by each thread that took a chunk
+    histogram()
+    assert _page_counts(histogram) == [first - (first >> 6)]
+    np.testing.assert_array_equal(h.to_numpy(), 2 * np.bincount(keys, minlength=cells))

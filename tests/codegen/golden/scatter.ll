@@ -2,15 +2,18 @@ declare noalias ptr @calloc(i64, i64)
 declare void @free(ptr)
 !0 = !{}
 !900000 = distinct !{!900000, !"simgrad fields"}
-!900002 = distinct !{!900002, !900000, !"tree 0 byte 0"}
+!900002 = distinct !{!900002, !900000, !"page maps"}
 !900003 = !{!900002}
-!900004 = !{!900005, !900008}
-!900005 = distinct !{!900005, !900000, !"tree 0 byte 4"}
+!900004 = !{!900005, !900008, !900011}
+!900005 = distinct !{!900005, !900000, !"tree 0 byte 0"}
 !900006 = !{!900005}
-!900007 = !{!900002, !900008}
-!900008 = distinct !{!900008, !900000, !"tree 1 byte 0"}
+!900007 = !{!900002, !900008, !900011}
+!900008 = distinct !{!900008, !900000, !"tree 0 byte 4"}
 !900009 = !{!900008}
-!900010 = !{!900002, !900005}
+!900010 = !{!900002, !900005, !900011}
+!900011 = distinct !{!900011, !900000, !"tree 1 byte 0"}
+!900012 = !{!900011}
+!900013 = !{!900002, !900005, !900008}
 define internal void @sg_kernel_task1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
   %ctx = load ptr, ptr %clo
@@ -89,88 +92,215 @@ entry:
   %pr.3 = zext i32 %tid to i64
   %pr.4 = mul i64 %pr.3, 64
   %pr.5 = getelementptr inbounds i8, ptr %pr.2, i64 %pr.4
-  %pr.7 = sub i64 0, 0
-  %pr.6 = getelementptr i8, ptr %pr.5, i64 %pr.7
-  %pr.8 = getelementptr i64, ptr %clo, i64 2
-  %pr.9 = load ptr, ptr %pr.8
-  %pr.10 = zext i32 %tid to i64
-  %pr.11 = mul i64 %pr.10, 32
-  %pr.12 = getelementptr inbounds i8, ptr %pr.9, i64 %pr.11
-  %pr.14 = sub i64 0, 0
-  %pr.13 = getelementptr i8, ptr %pr.12, i64 %pr.14
-  %lo.15 = trunc i64 %lo to i32
-  %hi.16 = trunc i64 %hi to i32
-  %red.17 = alloca float
-  store float 0x0000000000000000, ptr %red.17
-  %cp.44 = getelementptr i64, ptr %ctx, i64 0
-  %cv.45 = load ptr, ptr %cp.44
-  %rp.46 = getelementptr ptr, ptr %cv.45, i64 2
-  %root.47 = load ptr, ptr %rp.46, !invariant.load !0, !dereferenceable !{i64 4}, !align !{i64 64}
-  br label %pre.18
-pre.18:
-  br label %head.19
-head.19:
-  %i.23 = phi i32 [%lo.15, %pre.18], [%inext.24, %latch.21]
-  %c.25 = icmp slt i32 %i.23, %hi.16
-  br i1 %c.25, label %body.20, label %done.22
-body.20:
-  %v.26 = and i32 %i.23, 7
-  %cv.27 = sext i32 %v.26 to i64
-  %v.28 = mul nuw nsw i64 %cv.27, 8
-  %ptr.29 = getelementptr i8, ptr %pr.6, i64 %v.28
-  %old.30 = load float, ptr %ptr.29, !alias.scope !900003, !noalias !900004
-  %new.31 = fadd nsz float %old.30, 0x3FF0000000000000
-  store float %new.31, ptr %ptr.29, !alias.scope !900003, !noalias !900004
-  %cv.32 = sext i32 %v.26 to i64
-  %v.33 = mul nuw nsw i64 %cv.32, 8
-  %v.34 = add nuw nsw i64 4, %v.33
-  %ptr.35 = getelementptr i8, ptr %pr.6, i64 %v.34
-  %old.36 = load float, ptr %ptr.35, !alias.scope !900006, !noalias !900007
-  %new.37 = fadd nsz float %old.36, 0x4000000000000000
-  store float %new.37, ptr %ptr.35, !alias.scope !900006, !noalias !900007
-  %cv.38 = sext i32 %v.26 to i64
-  %v.39 = mul nuw nsw i64 %cv.38, 4
-  %ptr.40 = getelementptr i8, ptr %pr.13, i64 %v.39
-  %old.41 = load float, ptr %ptr.40, !alias.scope !900009, !noalias !900010
+  %pr.7 = getelementptr i64, ptr %clo, i64 3
+  %pr.8 = load ptr, ptr %pr.7
+  %pr.9 = mul i64 %pr.3, 64
+  %pr.10 = getelementptr inbounds i8, ptr %pr.8, i64 %pr.9
+  %pr.11 = sub i64 0, 0
+  %pr.6 = getelementptr i8, ptr %pr.5, i64 %pr.11
+  %pr.12 = getelementptr i64, ptr %clo, i64 2
+  %pr.13 = load ptr, ptr %pr.12
+  %pr.14 = zext i32 %tid to i64
+  %pr.15 = mul i64 %pr.14, 64
+  %pr.16 = getelementptr inbounds i8, ptr %pr.13, i64 %pr.15
+  %pr.18 = getelementptr i64, ptr %clo, i64 4
+  %pr.19 = load ptr, ptr %pr.18
+  %pr.20 = mul i64 %pr.14, 64
+  %pr.21 = getelementptr inbounds i8, ptr %pr.19, i64 %pr.20
+  %pr.22 = sub i64 0, 0
+  %pr.17 = getelementptr i8, ptr %pr.16, i64 %pr.22
+  %lo.23 = trunc i64 %lo to i32
+  %hi.24 = trunc i64 %hi to i32
+  %red.25 = alloca float
+  store float 0x0000000000000000, ptr %red.25
+  %cp.61 = getelementptr i64, ptr %ctx, i64 0
+  %cv.62 = load ptr, ptr %cp.61
+  %rp.63 = getelementptr ptr, ptr %cv.62, i64 2
+  %root.64 = load ptr, ptr %rp.63, !invariant.load !0, !dereferenceable !{i64 4}, !align !{i64 64}
+  br label %pre.26
+pre.26:
+  br label %head.27
+head.27:
+  %i.31 = phi i32 [%lo.23, %pre.26], [%inext.32, %latch.29]
+  %c.33 = icmp slt i32 %i.31, %hi.24
+  br i1 %c.33, label %body.28, label %done.30
+body.28:
+  %v.34 = and i32 %i.31, 7
+  %cv.35 = sext i32 %v.34 to i64
+  %v.36 = mul nuw nsw i64 %cv.35, 8
+  %ptr.37 = getelementptr i8, ptr %pr.6, i64 %v.36
+  %pgo.38 = add i64 %v.36, %pr.11
+  %pg.39 = lshr i64 %pgo.38, 12
+  %pgm.40 = getelementptr inbounds i8, ptr %pr.10, i64 %pg.39
+  store i8 1, ptr %pgm.40, !alias.scope !900003, !noalias !900004
+  %old.41 = load float, ptr %ptr.37, !alias.scope !900006, !noalias !900007
   %new.42 = fadd nsz float %old.41, 0x3FF0000000000000
-  store float %new.42, ptr %ptr.40, !alias.scope !900009, !noalias !900010
-  %ptr.43 = getelementptr inbounds i8, ptr %root.47, i64 0
-  %old.48 = load float, ptr %red.17
-  %new.49 = fadd nsz float %old.48, 0x3FF0000000000000
-  store float %new.49, ptr %red.17
-  br label %latch.21
-latch.21:
-  %inext.24 = add i32 %i.23, 1
-  br label %head.19
-done.22:
-  %sum.50 = load float, ptr %red.17
-  %ptr.51 = getelementptr inbounds i8, ptr %root.47, i64 0
-  %old.52 = atomicrmw fadd ptr %ptr.51, float %sum.50 monotonic
+  store float %new.42, ptr %ptr.37, !alias.scope !900006, !noalias !900007
+  %cv.43 = sext i32 %v.34 to i64
+  %v.44 = mul nuw nsw i64 %cv.43, 8
+  %v.45 = add nuw nsw i64 4, %v.44
+  %ptr.46 = getelementptr i8, ptr %pr.6, i64 %v.45
+  %pgo.47 = add i64 %v.45, %pr.11
+  %pg.48 = lshr i64 %pgo.47, 12
+  %pgm.49 = getelementptr inbounds i8, ptr %pr.10, i64 %pg.48
+  store i8 1, ptr %pgm.49, !alias.scope !900003, !noalias !900004
+  %old.50 = load float, ptr %ptr.46, !alias.scope !900009, !noalias !900010
+  %new.51 = fadd nsz float %old.50, 0x4000000000000000
+  store float %new.51, ptr %ptr.46, !alias.scope !900009, !noalias !900010
+  %cv.52 = sext i32 %v.34 to i64
+  %v.53 = mul nuw nsw i64 %cv.52, 4
+  %ptr.54 = getelementptr i8, ptr %pr.17, i64 %v.53
+  %pgo.55 = add i64 %v.53, %pr.22
+  %pg.56 = lshr i64 %pgo.55, 12
+  %pgm.57 = getelementptr inbounds i8, ptr %pr.21, i64 %pg.56
+  store i8 1, ptr %pgm.57, !alias.scope !900003, !noalias !900004
+  %old.58 = load float, ptr %ptr.54, !alias.scope !900012, !noalias !900013
+  %new.59 = fadd nsz float %old.58, 0x3FF0000000000000
+  store float %new.59, ptr %ptr.54, !alias.scope !900012, !noalias !900013
+  %ptr.60 = getelementptr inbounds i8, ptr %root.64, i64 0
+  %old.65 = load float, ptr %red.25
+  %new.66 = fadd nsz float %old.65, 0x3FF0000000000000
+  store float %new.66, ptr %red.25
+  br label %latch.29
+latch.29:
+  %inext.32 = add i32 %i.31, 1
+  br label %head.27
+done.30:
+  %sum.67 = load float, ptr %red.25
+  %ptr.68 = getelementptr inbounds i8, ptr %root.64, i64 0
+  %old.69 = atomicrmw fadd ptr %ptr.68, float %sum.67 monotonic
+  ret void
+}
+define internal void @sg_kernel_task1_private_serial(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
+entry:
+  %ctx = load ptr, ptr %clo
+  %pr.1 = getelementptr i64, ptr %clo, i64 1
+  %pr.2 = load ptr, ptr %pr.1
+  %pr.3 = zext i32 %tid to i64
+  %pr.4 = mul i64 %pr.3, 64
+  %pr.5 = getelementptr inbounds i8, ptr %pr.2, i64 %pr.4
+  %pr.7 = getelementptr i64, ptr %clo, i64 3
+  %pr.8 = load ptr, ptr %pr.7
+  %pr.9 = mul i64 %pr.3, 64
+  %pr.10 = getelementptr inbounds i8, ptr %pr.8, i64 %pr.9
+  %pr.11 = sub i64 0, 0
+  %pr.6 = getelementptr i8, ptr %pr.5, i64 %pr.11
+  %pr.12 = getelementptr i64, ptr %clo, i64 2
+  %pr.13 = load ptr, ptr %pr.12
+  %pr.14 = zext i32 %tid to i64
+  %pr.15 = mul i64 %pr.14, 64
+  %pr.16 = getelementptr inbounds i8, ptr %pr.13, i64 %pr.15
+  %pr.18 = getelementptr i64, ptr %clo, i64 4
+  %pr.19 = load ptr, ptr %pr.18
+  %pr.20 = mul i64 %pr.14, 64
+  %pr.21 = getelementptr inbounds i8, ptr %pr.19, i64 %pr.20
+  %pr.22 = sub i64 0, 0
+  %pr.17 = getelementptr i8, ptr %pr.16, i64 %pr.22
+  %lo.23 = trunc i64 %lo to i32
+  %hi.24 = trunc i64 %hi to i32
+  %red.25 = alloca float
+  store float 0x0000000000000000, ptr %red.25
+  %cp.52 = getelementptr i64, ptr %ctx, i64 0
+  %cv.53 = load ptr, ptr %cp.52
+  %rp.54 = getelementptr ptr, ptr %cv.53, i64 2
+  %root.55 = load ptr, ptr %rp.54, !invariant.load !0, !dereferenceable !{i64 4}, !align !{i64 64}
+  br label %pre.26
+pre.26:
+  br label %head.27
+head.27:
+  %i.31 = phi i32 [%lo.23, %pre.26], [%inext.32, %latch.29]
+  %c.33 = icmp slt i32 %i.31, %hi.24
+  br i1 %c.33, label %body.28, label %done.30
+body.28:
+  %v.34 = and i32 %i.31, 7
+  %cv.35 = sext i32 %v.34 to i64
+  %v.36 = mul nuw nsw i64 %cv.35, 8
+  %ptr.37 = getelementptr i8, ptr %pr.6, i64 %v.36
+  %old.38 = load float, ptr %ptr.37, !alias.scope !900006, !noalias !900007
+  %new.39 = fadd nsz float %old.38, 0x3FF0000000000000
+  store float %new.39, ptr %ptr.37, !alias.scope !900006, !noalias !900007
+  %cv.40 = sext i32 %v.34 to i64
+  %v.41 = mul nuw nsw i64 %cv.40, 8
+  %v.42 = add nuw nsw i64 4, %v.41
+  %ptr.43 = getelementptr i8, ptr %pr.6, i64 %v.42
+  %old.44 = load float, ptr %ptr.43, !alias.scope !900009, !noalias !900010
+  %new.45 = fadd nsz float %old.44, 0x4000000000000000
+  store float %new.45, ptr %ptr.43, !alias.scope !900009, !noalias !900010
+  %cv.46 = sext i32 %v.34 to i64
+  %v.47 = mul nuw nsw i64 %cv.46, 4
+  %ptr.48 = getelementptr i8, ptr %pr.17, i64 %v.47
+  %old.49 = load float, ptr %ptr.48, !alias.scope !900012, !noalias !900013
+  %new.50 = fadd nsz float %old.49, 0x3FF0000000000000
+  store float %new.50, ptr %ptr.48, !alias.scope !900012, !noalias !900013
+  %ptr.51 = getelementptr inbounds i8, ptr %root.55, i64 0
+  %old.56 = load float, ptr %red.25
+  %new.57 = fadd nsz float %old.56, 0x3FF0000000000000
+  store float %new.57, ptr %red.25
+  br label %latch.29
+latch.29:
+  %inext.32 = add i32 %i.31, 1
+  br label %head.27
+done.30:
+  %sum.58 = load float, ptr %red.25
+  %ptr.59 = getelementptr inbounds i8, ptr %root.55, i64 0
+  %old.60 = atomicrmw fadd ptr %ptr.59, float %sum.58 monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private_sum0(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
-  %buf = load ptr, ptr %clo
-  %realp = getelementptr i64, ptr %clo, i64 1
-  %real = load ptr, ptr %realp
-  %ntp = getelementptr i64, ptr %clo, i64 2
-  %nt = load i64, ptr %ntp
+  %w0p = getelementptr i64, ptr %clo, i64 0
+  %w0 = load ptr, ptr %w0p
+  %w1p = getelementptr i64, ptr %clo, i64 1
+  %w1 = load ptr, ptr %w1p
+  %w2p = getelementptr i64, ptr %clo, i64 2
+  %w2 = load i64, ptr %w2p
+  %w3p = getelementptr i64, ptr %clo, i64 3
+  %w3 = load i64, ptr %w3p
+  %w4p = getelementptr i64, ptr %clo, i64 4
+  %w4 = load ptr, ptr %w4p
+  %w5p = getelementptr i64, ptr %clo, i64 5
+  %w5 = load i64, ptr %w5p
+  %w6p = getelementptr i64, ptr %clo, i64 6
+  %w6 = load ptr, ptr %w6p
+  %w7p = getelementptr i64, ptr %clo, i64 7
+  %w7 = load i64, ptr %w7p
+  br label %phead
+phead:
+  %p = phi i64 [%lo, %entry], [%pnext, %tdone]
+  %seen = phi i64 [0, %entry], [%seen.t, %tdone]
+  %pc = icmp slt i64 %p, %hi
+  br i1 %pc, label %pbody, label %done
+pbody:
+  %k0 = mul i64 %p, 1024
+  %kend = add i64 %k0, 1024
+  %kfull = icmp slt i64 %kend, %w3
+  %k1 = select i1 %kfull, i64 %kend, i64 %w3
   br label %thead
 thead:
-  %t = phi i64 [0, %entry], [%tnext, %kdone]
-  %tc = icmp slt i64 %t, %nt
-  br i1 %tc, label %tbody, label %done
+  %t = phi i64 [0, %pbody], [%tnext, %tnext.from]
+  %seen.t = phi i64 [%seen, %pbody], [%seen.n, %tnext.from]
+  %tc = icmp slt i64 %t, %w2
+  br i1 %tc, label %tbody, label %tdone
 tbody:
-  %base = mul i64 %t, 16
-  %copy = getelementptr inbounds float, ptr %buf, i64 %base
+  %mrow = mul i64 %t, %w5
+  %mat = add i64 %mrow, %p
+  %mp = getelementptr inbounds i8, ptr %w4, i64 %mat
+  %mark = load i8, ptr %mp
+  %marked = icmp ne i8 %mark, 0
+  br i1 %marked, label %tsum, label %tnext.from
+tsum:
+  store i8 0, ptr %mp
+  %seen.s = add i64 %seen.t, 1
+  %base = mul i64 %t, %w7
+  %copy = getelementptr inbounds float, ptr %w0, i64 %base
   br label %khead
 khead:
-  %k = phi i64 [%lo, %tbody], [%knext, %kbody]
-  %kc = icmp slt i64 %k, %hi
-  br i1 %kc, label %kbody, label %kdone
+  %k = phi i64 [%k0, %tsum], [%knext, %kbody]
+  %kc = icmp slt i64 %k, %k1
+  br i1 %kc, label %kbody, label %tnext.from
 kbody:
   %src = getelementptr inbounds float, ptr %copy, i64 %k
-  %dst = getelementptr inbounds float, ptr %real, i64 %k
+  %dst = getelementptr inbounds float, ptr %w1, i64 %k
   %part = load float, ptr %src
   %old = load float, ptr %dst
   %added = fadd float %old, %part
@@ -180,35 +310,72 @@ kbody:
   store float %new, ptr %dst
   %knext = add i64 %k, 1
   br label %khead
-kdone:
+tnext.from:
+  %seen.n = phi i64 [%seen.t, %tbody], [%seen.s, %khead]
   %tnext = add i64 %t, 1
   br label %thead
+tdone:
+  %pnext = add i64 %p, 1
+  br label %phead
 done:
+  %old.seen = atomicrmw add ptr %w6, i64 %seen monotonic
   ret void
 }
 define internal void @sg_kernel_task1_private_sum1(ptr %clo, i64 %lo, i64 %hi, i32 %tid) {
 entry:
-  %buf = load ptr, ptr %clo
-  %realp = getelementptr i64, ptr %clo, i64 1
-  %real = load ptr, ptr %realp
-  %ntp = getelementptr i64, ptr %clo, i64 2
-  %nt = load i64, ptr %ntp
+  %w0p = getelementptr i64, ptr %clo, i64 0
+  %w0 = load ptr, ptr %w0p
+  %w1p = getelementptr i64, ptr %clo, i64 1
+  %w1 = load ptr, ptr %w1p
+  %w2p = getelementptr i64, ptr %clo, i64 2
+  %w2 = load i64, ptr %w2p
+  %w3p = getelementptr i64, ptr %clo, i64 3
+  %w3 = load i64, ptr %w3p
+  %w4p = getelementptr i64, ptr %clo, i64 4
+  %w4 = load ptr, ptr %w4p
+  %w5p = getelementptr i64, ptr %clo, i64 5
+  %w5 = load i64, ptr %w5p
+  %w6p = getelementptr i64, ptr %clo, i64 6
+  %w6 = load ptr, ptr %w6p
+  %w7p = getelementptr i64, ptr %clo, i64 7
+  %w7 = load i64, ptr %w7p
+  br label %phead
+phead:
+  %p = phi i64 [%lo, %entry], [%pnext, %tdone]
+  %seen = phi i64 [0, %entry], [%seen.t, %tdone]
+  %pc = icmp slt i64 %p, %hi
+  br i1 %pc, label %pbody, label %done
+pbody:
+  %k0 = mul i64 %p, 1024
+  %kend = add i64 %k0, 1024
+  %kfull = icmp slt i64 %kend, %w3
+  %k1 = select i1 %kfull, i64 %kend, i64 %w3
   br label %thead
 thead:
-  %t = phi i64 [0, %entry], [%tnext, %kdone]
-  %tc = icmp slt i64 %t, %nt
-  br i1 %tc, label %tbody, label %done
+  %t = phi i64 [0, %pbody], [%tnext, %tnext.from]
+  %seen.t = phi i64 [%seen, %pbody], [%seen.n, %tnext.from]
+  %tc = icmp slt i64 %t, %w2
+  br i1 %tc, label %tbody, label %tdone
 tbody:
-  %base = mul i64 %t, 8
-  %copy = getelementptr inbounds float, ptr %buf, i64 %base
+  %mrow = mul i64 %t, %w5
+  %mat = add i64 %mrow, %p
+  %mp = getelementptr inbounds i8, ptr %w4, i64 %mat
+  %mark = load i8, ptr %mp
+  %marked = icmp ne i8 %mark, 0
+  br i1 %marked, label %tsum, label %tnext.from
+tsum:
+  store i8 0, ptr %mp
+  %seen.s = add i64 %seen.t, 1
+  %base = mul i64 %t, %w7
+  %copy = getelementptr inbounds float, ptr %w0, i64 %base
   br label %khead
 khead:
-  %k = phi i64 [%lo, %tbody], [%knext, %kbody]
-  %kc = icmp slt i64 %k, %hi
-  br i1 %kc, label %kbody, label %kdone
+  %k = phi i64 [%k0, %tsum], [%knext, %kbody]
+  %kc = icmp slt i64 %k, %k1
+  br i1 %kc, label %kbody, label %tnext.from
 kbody:
   %src = getelementptr inbounds float, ptr %copy, i64 %k
-  %dst = getelementptr inbounds float, ptr %real, i64 %k
+  %dst = getelementptr inbounds float, ptr %w1, i64 %k
   %part = load float, ptr %src
   %old = load float, ptr %dst
   %added = fadd float %old, %part
@@ -218,10 +385,15 @@ kbody:
   store float %new, ptr %dst
   %knext = add i64 %k, 1
   br label %khead
-kdone:
+tnext.from:
+  %seen.n = phi i64 [%seen.t, %tbody], [%seen.s, %khead]
   %tnext = add i64 %t, 1
   br label %thead
+tdone:
+  %pnext = add i64 %p, 1
+  br label %phead
 done:
+  %old.seen = atomicrmw add ptr %w6, i64 %seen monotonic
   ret void
 }
 define void @sg_kernel(ptr %ctx) {
@@ -229,7 +401,7 @@ entry:
   %cp.1 = getelementptr i64, ptr %ctx, i64 8
   %cv.2 = load ptr, ptr %cp.1
   store atomic i32 0, ptr %cv.2 monotonic, align 4
-  %clo.3 = alloca [3 x i64], align 8
+  %clo.3 = alloca [5 x i64], align 8
   %cp.6 = getelementptr i64, ptr %ctx, i64 3
   %cv.7 = load ptr, ptr %cp.6
   %cp.8 = getelementptr i64, ptr %ctx, i64 7
@@ -242,8 +414,8 @@ entry:
   %cv.31 = load ptr, ptr %cp.30
   %rp.32 = getelementptr ptr, ptr %cv.31, i64 1
   %root.33 = load ptr, ptr %rp.32, !invariant.load !0
-  %sclo.74 = alloca [4 x i64], align 8
-  %sclo.85 = alloca [4 x i64], align 8
+  %sclo.146 = alloca [8 x i64], align 8
+  %sclo.161 = alloca [8 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
@@ -253,120 +425,230 @@ entry:
   %pv.17 = or i1 %pv.15, %pv.16
   br i1 %pv.17, label %direct.18, label %decide.19
 direct.18:
-  %pslot.20 = getelementptr i64, ptr %clo.3, i64 1
   %real.22 = getelementptr i8, ptr %root.26, i64 0
   %real.21 = getelementptr i8, ptr %real.22, i64 0
-  store ptr %real.21, ptr %pslot.20
-  %pslot.27 = getelementptr i64, ptr %clo.3, i64 2
+  %pslot.27 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %real.21, ptr %pslot.27
   %real.29 = getelementptr i8, ptr %root.33, i64 0
   %real.28 = getelementptr i8, ptr %real.29, i64 0
-  store ptr %real.28, ptr %pslot.27
-  call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.34
+  %pslot.34 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %real.28, ptr %pslot.34
+  call void %cv.7(ptr @sg_kernel_task1_private_serial, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
+  br label %scatterdone.35
 decide.19:
+  %ph.36 = getelementptr i64, ptr %ctx, i64 12
+  %ph.37 = load ptr, ptr %ph.36
+  %ph.38 = getelementptr i64, ptr %ph.37, i64 2
+  %ph.39 = getelementptr i64, ptr %ctx, i64 14
+  %ph.40 = load ptr, ptr %ph.39
+  %ph.41 = getelementptr i64, ptr %ph.40, i64 2
+  %pg.42 = load i64, ptr %ph.38
+  %pg.43 = icmp sge i64 %pg.42, 0
+  %pg.45 = mul i64 %cv.9, 1
+  %pg.46 = udiv i64 %pg.45, 8
+  %pg.44 = select i1 %pg.43, i64 %pg.42, i64 %pg.46
+  %pg.47 = mul i64 %pg.44, 1024
+  %pg.48 = load i64, ptr %ph.41
+  %pg.49 = icmp sge i64 %pg.48, 0
+  %pg.51 = mul i64 %cv.9, 1
+  %pg.52 = udiv i64 %pg.51, 8
+  %pg.50 = select i1 %pg.49, i64 %pg.48, i64 %pg.52
+  %pg.53 = mul i64 %pg.50, 1024
   %pv.10 = mul i64 %pv.14, 24
-  %pv.11 = mul i64 %cv.9, 24
+  %pv.54 = add i64 0, %pg.47
+  %pv.55 = add i64 %pv.54, %pg.53
+  %pv.11 = add i64 %pv.55, 0
   %pv.12 = icmp sge i64 %pv.10, %pv.11
-  %pv.35 = mul i64 %cv.9, 96
-  %pv.36 = icmp ule i64 %pv.35, 268435456
-  %pv.13 = and i1 %pv.12, %pv.36
-  br i1 %pv.13, label %alloc.38, label %atomic.37
-alloc.38:
-  %ph.40 = getelementptr i64, ptr %ctx, i64 11
-  %ph.41 = load ptr, ptr %ph.40
-  %ph.42 = load ptr, ptr %ph.41
-  %ph.43 = getelementptr i64, ptr %ph.41, i64 1
-  %ph.44 = load i64, ptr %ph.43
-  %ph.45 = mul i64 %cv.9, 64
-  %ph.46 = icmp uge i64 %ph.44, %ph.45
-  br i1 %ph.46, label %pready.48, label %pfresh.47
-pfresh.47:
-  call void @free(ptr %ph.42)
-  %pnew.49 = call ptr @calloc(i64 %cv.9, i64 64)
-  store ptr %pnew.49, ptr %ph.41
-  %pnull.50 = icmp eq ptr %pnew.49, null
-  %pcap.51 = select i1 %pnull.50, i64 0, i64 %ph.45
-  store i64 %pcap.51, ptr %ph.43
-  br label %pready.48
-pready.48:
-  %priv.52 = load ptr, ptr %ph.41
-  %pslot.53 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.52, ptr %pslot.53
-  %pnn.54 = icmp ne ptr %priv.52, null
-  %pok.55 = and i1 true, %pnn.54
-  %ph.56 = getelementptr i64, ptr %ctx, i64 12
-  %ph.57 = load ptr, ptr %ph.56
-  %ph.58 = load ptr, ptr %ph.57
-  %ph.59 = getelementptr i64, ptr %ph.57, i64 1
-  %ph.60 = load i64, ptr %ph.59
-  %ph.61 = mul i64 %cv.9, 32
-  %ph.62 = icmp uge i64 %ph.60, %ph.61
-  br i1 %ph.62, label %pready.64, label %pfresh.63
-pfresh.63:
-  call void @free(ptr %ph.58)
-  %pnew.65 = call ptr @calloc(i64 %cv.9, i64 32)
-  store ptr %pnew.65, ptr %ph.57
-  %pnull.66 = icmp eq ptr %pnew.65, null
-  %pcap.67 = select i1 %pnull.66, i64 0, i64 %ph.61
-  store i64 %pcap.67, ptr %ph.59
-  br label %pready.64
-pready.64:
-  %priv.68 = load ptr, ptr %ph.57
-  %pslot.69 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.68, ptr %pslot.69
-  %pnn.70 = icmp ne ptr %priv.68, null
-  %pok.71 = and i1 %pok.55, %pnn.70
-  br i1 %pok.71, label %private.39, label %atomic.37
-private.39:
+  %pv.56 = mul i64 %cv.9, 96
+  %pv.57 = icmp ule i64 %pv.56, 268435456
+  %pv.13 = and i1 %pv.12, %pv.57
+  br i1 %pv.13, label %alloc.58, label %atomic.20
+alloc.58:
+  %ph.59 = getelementptr i64, ptr %ctx, i64 11
+  %ph.60 = load ptr, ptr %ph.59
+  %ph.61 = load ptr, ptr %ph.60
+  %ph.62 = getelementptr i64, ptr %ph.60, i64 1
+  %ph.63 = load i64, ptr %ph.62
+  %ph.64 = mul i64 %cv.9, 64
+  %ph.65 = icmp uge i64 %ph.63, %ph.64
+  br i1 %ph.65, label %pready.67, label %pfresh.66
+pfresh.66:
+  call void @free(ptr %ph.61)
+  %pmore.71 = add i64 %ph.64, 64
+  %pnew.68 = call ptr @calloc(i64 1, i64 %pmore.71)
+  store ptr %pnew.68, ptr %ph.60
+  %pnull.69 = icmp eq ptr %pnew.68, null
+  %pcap.70 = select i1 %pnull.69, i64 0, i64 %ph.64
+  store i64 %pcap.70, ptr %ph.62
+  br label %pready.67
+pready.67:
+  %priv.72 = load ptr, ptr %ph.60
+  %priv.73 = ptrtoint ptr %priv.72 to i64
+  %priv.74 = add i64 %priv.73, 63
+  %priv.75 = and i64 %priv.74, -64
+  %priv.76 = inttoptr i64 %priv.75 to ptr
+  %pslot.79 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.76, ptr %pslot.79
+  %pnn.77 = icmp ne ptr %priv.76, null
+  %pok.78 = and i1 true, %pnn.77
+  %ph.80 = getelementptr i64, ptr %ctx, i64 12
+  %ph.81 = load ptr, ptr %ph.80
+  %ph.82 = load ptr, ptr %ph.81
+  %ph.83 = getelementptr i64, ptr %ph.81, i64 1
+  %ph.84 = load i64, ptr %ph.83
+  %ph.85 = mul i64 %cv.9, 64
+  %ph.86 = icmp uge i64 %ph.84, %ph.85
+  br i1 %ph.86, label %pready.88, label %pfresh.87
+pfresh.87:
+  call void @free(ptr %ph.82)
+  %pmore.92 = add i64 %ph.85, 64
+  %pnew.89 = call ptr @calloc(i64 1, i64 %pmore.92)
+  store ptr %pnew.89, ptr %ph.81
+  %pnull.90 = icmp eq ptr %pnew.89, null
+  %pcap.91 = select i1 %pnull.90, i64 0, i64 %ph.85
+  store i64 %pcap.91, ptr %ph.83
+  br label %pready.88
+pready.88:
+  %priv.93 = load ptr, ptr %ph.81
+  %priv.94 = ptrtoint ptr %priv.93 to i64
+  %priv.95 = add i64 %priv.94, 63
+  %priv.96 = and i64 %priv.95, -64
+  %priv.97 = inttoptr i64 %priv.96 to ptr
+  %pslot.100 = getelementptr i64, ptr %clo.3, i64 3
+  store ptr %priv.97, ptr %pslot.100
+  %pnn.98 = icmp ne ptr %priv.97, null
+  %pok.99 = and i1 %pok.78, %pnn.98
+  %ph.101 = getelementptr i64, ptr %ctx, i64 13
+  %ph.102 = load ptr, ptr %ph.101
+  %ph.103 = load ptr, ptr %ph.102
+  %ph.104 = getelementptr i64, ptr %ph.102, i64 1
+  %ph.105 = load i64, ptr %ph.104
+  %ph.106 = mul i64 %cv.9, 64
+  %ph.107 = icmp uge i64 %ph.105, %ph.106
+  br i1 %ph.107, label %pready.109, label %pfresh.108
+pfresh.108:
+  call void @free(ptr %ph.103)
+  %pmore.113 = add i64 %ph.106, 64
+  %pnew.110 = call ptr @calloc(i64 1, i64 %pmore.113)
+  store ptr %pnew.110, ptr %ph.102
+  %pnull.111 = icmp eq ptr %pnew.110, null
+  %pcap.112 = select i1 %pnull.111, i64 0, i64 %ph.106
+  store i64 %pcap.112, ptr %ph.104
+  br label %pready.109
+pready.109:
+  %priv.114 = load ptr, ptr %ph.102
+  %priv.115 = ptrtoint ptr %priv.114 to i64
+  %priv.116 = add i64 %priv.115, 63
+  %priv.117 = and i64 %priv.116, -64
+  %priv.118 = inttoptr i64 %priv.117 to ptr
+  %pslot.121 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.118, ptr %pslot.121
+  %pnn.119 = icmp ne ptr %priv.118, null
+  %pok.120 = and i1 %pok.99, %pnn.119
+  %ph.122 = getelementptr i64, ptr %ctx, i64 14
+  %ph.123 = load ptr, ptr %ph.122
+  %ph.124 = load ptr, ptr %ph.123
+  %ph.125 = getelementptr i64, ptr %ph.123, i64 1
+  %ph.126 = load i64, ptr %ph.125
+  %ph.127 = mul i64 %cv.9, 64
+  %ph.128 = icmp uge i64 %ph.126, %ph.127
+  br i1 %ph.128, label %pready.130, label %pfresh.129
+pfresh.129:
+  call void @free(ptr %ph.124)
+  %pmore.134 = add i64 %ph.127, 64
+  %pnew.131 = call ptr @calloc(i64 1, i64 %pmore.134)
+  store ptr %pnew.131, ptr %ph.123
+  %pnull.132 = icmp eq ptr %pnew.131, null
+  %pcap.133 = select i1 %pnull.132, i64 0, i64 %ph.127
+  store i64 %pcap.133, ptr %ph.125
+  br label %pready.130
+pready.130:
+  %priv.135 = load ptr, ptr %ph.123
+  %priv.136 = ptrtoint ptr %priv.135 to i64
+  %priv.137 = add i64 %priv.136, 63
+  %priv.138 = and i64 %priv.137, -64
+  %priv.139 = inttoptr i64 %priv.138 to ptr
+  %pslot.142 = getelementptr i64, ptr %clo.3, i64 4
+  store ptr %priv.139, ptr %pslot.142
+  %pnn.140 = icmp ne ptr %priv.139, null
+  %pok.141 = and i1 %pok.120, %pnn.140
+  br i1 %pok.141, label %private.143, label %atomic.20
+private.143:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.73 = getelementptr i8, ptr %root.26, i64 0
-  %real.72 = getelementptr i8, ptr %real.73, i64 0
-  %sslot.75 = getelementptr i64, ptr %sclo.74, i64 0
-  store ptr %priv.52, ptr %sslot.75
-  %sslot.76 = getelementptr i64, ptr %sclo.74, i64 1
-  store ptr %real.72, ptr %sslot.76
-  %sslot.77 = getelementptr i64, ptr %sclo.74, i64 2
-  store i64 %cv.9, ptr %sslot.77
-  %sslot.78 = getelementptr i64, ptr %sclo.74, i64 3
-  store i64 16, ptr %sslot.78
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.74, i64 0, i64 16, i64 8192)
-  %cancel.79 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.80 = icmp ne i32 %cancel.79, 0
-  br i1 %cancelled.80, label %psumhere.81, label %psumdone.82
-psumhere.81:
-  call void @sg_kernel_task1_private_sum0(ptr %sclo.74, i64 0, i64 16, i32 0)
-  br label %psumdone.82
-psumdone.82:
-  %real.84 = getelementptr i8, ptr %root.33, i64 0
-  %real.83 = getelementptr i8, ptr %real.84, i64 0
-  %sslot.86 = getelementptr i64, ptr %sclo.85, i64 0
-  store ptr %priv.68, ptr %sslot.86
-  %sslot.87 = getelementptr i64, ptr %sclo.85, i64 1
-  store ptr %real.83, ptr %sslot.87
-  %sslot.88 = getelementptr i64, ptr %sclo.85, i64 2
-  store i64 %cv.9, ptr %sslot.88
-  %sslot.89 = getelementptr i64, ptr %sclo.85, i64 3
-  store i64 8, ptr %sslot.89
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.85, i64 0, i64 8, i64 8192)
-  %cancel.90 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.91 = icmp ne i32 %cancel.90, 0
-  br i1 %cancelled.91, label %psumhere.92, label %psumdone.93
-psumhere.92:
-  call void @sg_kernel_task1_private_sum1(ptr %sclo.85, i64 0, i64 8, i32 0)
-  br label %psumdone.93
-psumdone.93:
-  br label %scatterdone.34
-atomic.37:
+  %real.145 = getelementptr i8, ptr %root.26, i64 0
+  %real.144 = getelementptr i8, ptr %real.145, i64 0
+  store i64 0, ptr %ph.38
+  %pslot.147 = getelementptr i64, ptr %sclo.146, i64 0
+  store ptr %priv.76, ptr %pslot.147
+  %pslot.148 = getelementptr i64, ptr %sclo.146, i64 1
+  store ptr %real.144, ptr %pslot.148
+  %pslot.149 = getelementptr i64, ptr %sclo.146, i64 2
+  store i64 %cv.9, ptr %pslot.149
+  %pslot.150 = getelementptr i64, ptr %sclo.146, i64 3
+  store i64 16, ptr %pslot.150
+  %pslot.151 = getelementptr i64, ptr %sclo.146, i64 4
+  store ptr %priv.97, ptr %pslot.151
+  %pslot.152 = getelementptr i64, ptr %sclo.146, i64 5
+  store i64 64, ptr %pslot.152
+  %pslot.153 = getelementptr i64, ptr %sclo.146, i64 6
+  store ptr %ph.38, ptr %pslot.153
+  %pslot.154 = getelementptr i64, ptr %sclo.146, i64 7
+  store i64 16, ptr %pslot.154
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.146, i64 0, i64 1, i64 8)
+  %cancel.155 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.156 = icmp ne i32 %cancel.155, 0
+  br i1 %cancelled.156, label %psumhere.157, label %psumdone.158
+psumhere.157:
+  call void @sg_kernel_task1_private_sum0(ptr %sclo.146, i64 0, i64 1, i32 0)
+  br label %psumdone.158
+psumdone.158:
+  %real.160 = getelementptr i8, ptr %root.33, i64 0
+  %real.159 = getelementptr i8, ptr %real.160, i64 0
+  store i64 0, ptr %ph.41
+  %pslot.162 = getelementptr i64, ptr %sclo.161, i64 0
+  store ptr %priv.118, ptr %pslot.162
+  %pslot.163 = getelementptr i64, ptr %sclo.161, i64 1
+  store ptr %real.159, ptr %pslot.163
+  %pslot.164 = getelementptr i64, ptr %sclo.161, i64 2
+  store i64 %cv.9, ptr %pslot.164
+  %pslot.165 = getelementptr i64, ptr %sclo.161, i64 3
+  store i64 8, ptr %pslot.165
+  %pslot.166 = getelementptr i64, ptr %sclo.161, i64 4
+  store ptr %priv.139, ptr %pslot.166
+  %pslot.167 = getelementptr i64, ptr %sclo.161, i64 5
+  store i64 64, ptr %pslot.167
+  %pslot.168 = getelementptr i64, ptr %sclo.161, i64 6
+  store ptr %ph.41, ptr %pslot.168
+  %pslot.169 = getelementptr i64, ptr %sclo.161, i64 7
+  store i64 16, ptr %pslot.169
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.161, i64 0, i64 1, i64 8)
+  %cancel.170 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.171 = icmp ne i32 %cancel.170, 0
+  br i1 %cancelled.171, label %psumhere.172, label %psumdone.173
+psumhere.172:
+  call void @sg_kernel_task1_private_sum1(ptr %sclo.161, i64 0, i64 1, i32 0)
+  br label %psumdone.173
+psumdone.173:
+  br label %scatterdone.35
+atomic.20:
+  %pc.174 = load i64, ptr %ph.38
+  %pc.175 = sdiv i64 %pc.174, 64
+  %pc.176 = sub i64 %pc.174, %pc.175
+  store i64 %pc.176, ptr %ph.38
+  %pc.177 = load i64, ptr %ph.41
+  %pc.178 = sdiv i64 %pc.177, 64
+  %pc.179 = sub i64 %pc.177, %pc.178
+  store i64 %pc.179, ptr %ph.41
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.34
-scatterdone.34:
-  %cancel.94 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.95 = icmp ne i32 %cancel.94, 0
-  br i1 %cancelled.95, label %stop.96, label %go.97
-stop.96:
+  br label %scatterdone.35
+scatterdone.35:
+  %cancel.180 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.181 = icmp ne i32 %cancel.180, 0
+  br i1 %cancelled.181, label %stop.182, label %go.183
+stop.182:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.97:
+go.183:
   ret void
 }
 
