@@ -26,6 +26,9 @@ The parent records exit status (signal names for SIGSEGV, SIGKILL...), wall time
 VmHWM, polled every 50 ms) and a timeout, then compares simgrad against taichi: every array both dumped (relative
 to the taichi array's largest magnitude), the last image, and stdout (numbers with a relative tolerance,
 the rest as text; ``[Taichi]`` banner lines dropped). taichi comes from --taichi-python or $TAICHI_PYTHON.
+
+N is --frames, or more where taichi's frames are short (``--min-seconds``, see steady_frames): both frameworks
+show the same N frames, and --speed reports the median frame time from the 3rd on.
 """
 
 from __future__ import annotations
@@ -436,8 +439,9 @@ def _signal_name(rc):
         return f"signal {-rc}"
 
 
-def run_child(python, framework, script, args, out):
-    """Runs one child; returns its record (rc/status, wall, peak RSS, stdout, stderr tail, child's json)."""
+def run_child(python, framework, script, args, out, frames=None):
+    """Runs one child (`frames` shown frames, else the example's default); returns its record (rc/status, wall,
+    peak RSS, stdout, stderr tail, child's json)."""
     work = os.path.join(out, f"work-{framework}")
     os.makedirs(work, exist_ok=True)
     env = dict(os.environ, MPLBACKEND="Agg", TI_ARCH="x64", TI_GUI_SHOW="0", TI_LOG_LEVEL="error")
@@ -449,7 +453,8 @@ def run_child(python, framework, script, args, out):
     env["TAICHI_EXAMPLES_INIT"] = json.dumps(init)
     if framework == "simgrad":
         env["PYTHONPATH"] = os.pathsep.join(p for p in [args.simgrad_path, os.environ.get("PYTHONPATH", "")] if p)
-    frames = FRAMES.get(os.path.relpath(script, args.examples), args.frames)
+    if frames is None:
+        frames = FRAMES.get(os.path.relpath(script, args.examples), args.frames)
     cmd = [python, os.path.abspath(__file__), "--child", framework, script, args.examples, str(frames), out]
     if args.nice:
         cmd = ["nice", "-n", str(args.nice), *cmd]
@@ -610,8 +615,11 @@ def run_example(rel, args, pythons):
     out = tempfile.mkdtemp(prefix="tiex-")
     entry = {"example": rel}
     try:
-        for fw in args.frameworks.split(","):
-            entry[fw] = run_child(pythons[fw], fw, script, args, out)
+        fws = args.frameworks.split(",")
+        frames, probe = steady_frames(rel, args, pythons, script, out) if "taichi" in fws else (None, None)
+        for fw in fws:
+            entry[fw] = probe if fw == "taichi" and probe is not None else \
+                run_child(pythons[fw], fw, script, args, out, frames)
         if "simgrad" in entry and "taichi" in entry:
             entry["compare"] = compare_states(out)
             ok, why = compare_stdout(entry["simgrad"]["stdout"], entry["taichi"]["stdout"])
@@ -620,7 +628,7 @@ def run_example(rel, args, pythons):
         if args.self_check and entry.get("taichi", {}).get("status") == "ok":
             again = os.path.join(out, "again")  # taichi against itself: its run-to-run noise
             os.makedirs(again)
-            entry["taichi_again"] = run_child(pythons["taichi"], "taichi", script, args, again)
+            entry["taichi_again"] = run_child(pythons["taichi"], "taichi", script, args, again, frames)
             c = compare_states(out, os.path.join(again, "taichi.npz"))
             ok, _ = compare_stdout(entry["taichi_again"]["stdout"], entry["taichi"]["stdout"])
             entry["taichi_self"] = c and {"worst": c["worst"], "worst_err": c["worst_err"], "image": c["image"],
@@ -634,6 +642,23 @@ def run_example(rel, args, pythons):
         if fw in entry and len(entry[fw].get("stdout", "")) > 4000:
             entry[fw]["stdout"] = entry[fw]["stdout"][:2000] + "\n…\n" + entry[fw]["stdout"][-2000:]
     return entry
+
+
+def steady_frames(rel, args, pythons, script, out):
+    """(frames, taichi's record or None): how many frames both frameworks show so that taichi's frames last at
+    least --min-seconds together (at most --max-frames). A steady time needs that many: a frame of tens of
+    microseconds is mostly interpreter warm-up for its first ten (Python 3.11 specialises a function's bytecode
+    after its first eight calls), whatever the framework. Taichi's own run at the default count measures its frame;
+    it is kept when no more frames are needed. Both run the same count: their pictures and arrays are compared."""
+    base = FRAMES.get(rel, args.frames)
+    if not args.min_seconds:
+        return base, None
+    probe = run_child(pythons["taichi"], "taichi", script, args, out, base)
+    t = steady_ms(probe)
+    if t is None:
+        return base, probe
+    frames = min(args.max_frames, max(base, math.ceil(args.min_seconds * 1e3 / t)))
+    return frames, (probe if frames == base else None)
 
 
 def _keyval(s):
@@ -769,6 +794,9 @@ def main():
     ap.add_argument("--examples", required=True, help="an installed taichi wheel's taichi/examples folder")
     ap.add_argument("--only", nargs="*", help="examples by path below PATH or by file name (without .py)")
     ap.add_argument("--frames", type=int, default=3)
+    ap.add_argument("--min-seconds", type=float, default=0.25,
+                    help="more frames (both frameworks alike) until taichi's frames last this long (0: --frames)")
+    ap.add_argument("--max-frames", type=int, default=300)
     ap.add_argument("--json", default=None, help="write the records here (rewritten after each example)")
     ap.add_argument("--table", action="store_true", help="print the markdown table at the end")
     ap.add_argument("--frameworks", default="simgrad,taichi")
@@ -803,6 +831,7 @@ def main():
     entries = []
     header = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.node(),
               "cpus": os.cpu_count(), "command": " ".join(sys.argv), "frames": args.frames,
+              "min_seconds": args.min_seconds, "max_frames": args.max_frames,
               "load": os.getloadavg()}
     if args.update and args.json and os.path.exists(args.json):
         with open(args.json) as fh:

@@ -253,8 +253,9 @@ class GUI:
         (a 4 MB allocation and free per frame made the next frame's Python work several times slower)."""
         if self._rgba is None:
             self._rgba = np.ones(self.res + (4,), np.float32)
-        rgba = self._rgba
-        rgba[..., :3] = self.canvas.img
+        rgba, img = self._rgba, self.canvas.img
+        for c in range(3):  # a channel at a time: long strided runs (rgba[..., :3] = img: 525 -> 144 us, 400 x 400)
+            rgba[..., c] = img[..., c]
         rgba[..., 3] = 1.0
         return rgba
 

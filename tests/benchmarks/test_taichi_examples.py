@@ -231,3 +231,24 @@ def test_fields_too_large_to_dump_are_refused_before_to_numpy(monkeypatch):
         tex._arrays(x, np)
     monkeypatch.setattr(tex, "MAX_ELEMENTS", 16)
     assert tex._arrays(x, np)[""].shape == (4, 4)
+
+
+@pytest.mark.parametrize("frame_ms,min_seconds,want,kept", [
+    (0.05, 0.25, 300, False),  # 50 us frames: the most frames allowed, taichi runs again with them
+    (10.0, 0.25, 25, False),  # 10 ms: 25 frames make 0.25 s
+    (100.0, 0.25, 12, True),  # long frames: --frames, taichi's probe is its record
+    (0.05, 0.0, 12, True),  # --min-seconds 0: --frames, no probe
+])
+def test_short_frames_get_more_frames_for_both_frameworks(monkeypatch, frame_ms, min_seconds, want, kept):
+    calls = []
+
+    def fake_child(python, framework, script, args, out, frames=None):
+        calls.append((framework, frames))
+        return {"status": "ok", "frame_s": [1.0] + [frame_ms / 1e3] * (frames - 1)}
+
+    monkeypatch.setattr(tex, "run_child", fake_child)
+    args = argparse.Namespace(frames=12, min_seconds=min_seconds, max_frames=300)
+    frames, probe = tex.steady_frames("x.py", args, {"taichi": "py"}, "x.py", "out")
+    assert frames == want
+    assert (probe is not None) == (kept and min_seconds > 0)
+    assert calls == ([("taichi", 12)] if min_seconds else [])
