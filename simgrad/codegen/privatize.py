@@ -79,12 +79,14 @@ def region_bytes(lines: list, tmp, shape, r: Region) -> str:
     return total
 
 
-def _bytes(f, r: Region) -> str:
+def _emitted(f, build, *args) -> str:
+    """`build(lines, tmp, *args)`'s value, its lines emitted into `f` (the builders above serve the task's prologue
+    too)."""
     lines: list[str] = []
-    n = region_bytes(lines, lambda: f.tmp("rb"), f.array_shape, r)
+    v = build(lines, lambda: f.tmp("pv"), *args)
     for line in lines:
         f.emit(line)
-    return n
+    return v
 
 
 def emit_runs_alone(f, nthreads: str, begin: str, end: str, grain: int) -> tuple[str, str]:
@@ -109,10 +111,10 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     `alone_task` (the private task, or its variant whose other updates are plain too) runs with the fields
     themselves as thread 0's copies: plain updates, no page marks, nothing to sum.
     Closure slots `first_slot + k` hold region k's copies, `first_slot + len(regions) + k` its page maps."""
-    sizes = [_bytes(f, r) for r in regions]  # one copy of each region, in bytes
-    pages = [_pages(f, n) for n in sizes]
-    strides = [_padded(f, n) for n in sizes]
-    map_strides = [_padded(f, n) for n in pages]
+    sizes = [_emitted(f, region_bytes, f.array_shape, r) for r in regions]  # one copy of each region, in bytes
+    pages = [_emitted(f, region_pages, n) for n in sizes]
+    strides = [_emitted(f, line_padded, n) for n in sizes]
+    map_strides = [_emitted(f, line_padded, n) for n in pages]
     work, need, big, ok = (f.tmp("pv") for _ in range(4))
     iters, alone = emit_runs_alone(f, nthreads, begin, end, grain)
     direct, decide, plain = f.label("direct"), f.label("decide"), f.label("atomic")
@@ -209,22 +211,6 @@ def _hold(f, clo: str, slot: int, holder_slot: int, nthreads: str, nbytes: str, 
     return buf, both
 
 
-def _padded(f, n: str) -> str:
-    lines: list[str] = []
-    r = line_padded(lines, lambda: f.tmp("pad"), n)
-    for line in lines:
-        f.emit(line)
-    return r
-
-
-def _pages(f, nbytes: str) -> str:
-    lines: list[str] = []
-    n = region_pages(lines, lambda: f.tmp("pg"), nbytes)
-    for line in lines:
-        f.emit(line)
-    return n
-
-
 def _elements(f, r: Region, nbytes: str) -> str:
     """The elements in `nbytes` of the region's type (i64)."""
     if not nbytes.startswith("%"):
@@ -290,10 +276,7 @@ def _field_slice(f, r: Region) -> str:
     ndarray's data."""
     if r.array is not None:
         return f.array_base(r.array)
-    lines: list[str] = []
-    shift = slice_shift(lines, lambda: f.tmp("sh"), f.v, r)
-    for line in lines:
-        f.emit(line)
+    shift = _emitted(f, slice_shift, f.v, r)
     real, at = f.tmp("real"), f.tmp("real")
     f.emit(f"{at} = getelementptr i8, ptr {f.root(r.tree_id)}, i64 {shift}")
     f.emit(f"{real} = getelementptr i8, ptr {at}, i64 {r.lo}")
