@@ -195,7 +195,8 @@ def _build_in_mode(kernel: KernelSource, prog: Program, args, transform, name_su
     fission = prog.config.fission_lanes if not prog.on_gpu and not prog.config.debug else 0
     run_pipeline(ir, transform, debug=prog.config.debug, fast_math=prog.config.fast_math,
                  cache_sums=bool(getattr(prog.config, "cache_loop_invariant_global_vars", True)), lanes=lanes,
-                 vector_bits=prog.jit.vector_bits() if lanes < 0 or fission < 0 else 0, fission=fission)
+                 vector_bits=prog.jit.vector_bits() if lanes < 0 or fission < 0 else 0, fission=fission,
+                 versions=not prog.on_gpu and not prog.config.debug)
     symbol = f"sg_{kernel.name}{name_suffix}_{id(ir):x}"
     tape_entries = (max(ir.tape_bound, 1) if ir.tape_bound is not None else prog.tape_capacity) if ir.uses_tape \
         else 1

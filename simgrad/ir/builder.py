@@ -136,3 +136,14 @@ def _helper(d: OpDef) -> Callable[..., Stmt]:
 for _d in OPS.values():
     assert not hasattr(Builder, _d.name), _d.name  # a registry op must not shadow a builder method
     setattr(Builder, _d.name, _helper(_d))
+
+
+def clone(s: Stmt, mapping: dict, block: Block | None) -> Stmt:
+    """A copy of `s` and everything nested in it; operands defined inside are the copies' (`mapping`: id of
+    an original -> its copy, or what to use instead of it)."""
+    new = Builder.detached(s.op, s.type, tuple(mapping.get(id(o), o) for o in s.operands), dict(s.attrs), s.loc,
+                           block, len(s.blocks))
+    mapping[id(s)] = new
+    for old_b, new_b in zip(s.blocks, new.blocks):
+        new_b.stmts = [clone(x, mapping, new_b) for x in old_b.stmts]
+    return new

@@ -31,7 +31,7 @@ Offsets are u64 arithmetic marked `nowrap` (an in-bounds offset cannot wrap): LL
 from __future__ import annotations
 
 from simgrad import dtypes as dt
-from simgrad.ir.builder import Builder
+from simgrad.ir.builder import Builder, clone
 from simgrad.ir.fieldref import ArrayRef, FieldRef
 from simgrad.ir.nodes import Block, Kernel, Stmt, offset_form, walk
 from simgrad.ir.ops import Op
@@ -262,7 +262,7 @@ class OwnBlock:
             self.sides = False  # per-thread sums and copies name their statements: keep one loop, branches
             return
         mapping: dict = {}
-        self.slow = _clone(self.cell_loop, mapping, None)
+        self.slow = clone(self.cell_loop, mapping, None)
         for old in list(mapping):
             if old in written:
                 written.add(id(mapping[old]))
@@ -359,17 +359,6 @@ class OwnBlock:
         for x in scratch.stmts:
             x.block = block
         return scratch.stmts
-
-
-def _clone(s: Stmt, mapping: dict, block: Block | None) -> Stmt:
-    """A copy of `s` and everything nested in it; operands defined inside are the copies' (`mapping`: id of
-    an original -> its copy)."""
-    new = Builder.detached(s.op, s.type, tuple(mapping.get(id(o), o) for o in s.operands), dict(s.attrs), s.loc,
-                           block, len(s.blocks))
-    mapping[id(s)] = new
-    for old_b, new_b in zip(s.blocks, new.blocks):
-        new_b.stmts = [_clone(x, mapping, new_b) for x in old_b.stmts]
-    return new
 
 
 def _node_of(level) -> tuple:

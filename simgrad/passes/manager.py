@@ -22,13 +22,15 @@ def _verify_enabled() -> bool:
 
 
 def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math: bool = False,
-                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0, fission: int = 0) -> None:
+                 cache_sums: bool = True, lanes: int = 0, vector_bits: int = 0, fission: int = 0,
+                 versions: bool = False) -> None:
     """`debug`: ti.init(debug=True), which every index is bounds-checked under (no paired atomics);
     `fast_math` lets serial-loop sums be reordered (passes/accumulate.py; `cache_sums`: Taichi's
     cache_loop_invariant_global_vars); `lanes` > 1: parallel loops of while loops run that many iterations in lock
     step (passes/lanes.py; the CPU's forward kernels), -1: as many as four `vector_bits` registers hold; `fission`:
     the same for parallel loops that scatter, split into the part before the scatters and the scatters
-    (passes/fission.py; the CPU's kernels)."""
+    (passes/fission.py; the CPU's kernels); `versions`: a copy of a parallel loop per value of a launch-wide
+    component index (passes/unswitch.py; the CPU's kernels)."""
     from simgrad.passes import (
         accumulate,
         hoist,
@@ -44,6 +46,7 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
     from simgrad.passes import lanes as simt
     from simgrad.passes import lanes_memory as simt_memory
     from simgrad.passes import store_select as stores
+    from simgrad.passes import unswitch as per_value
 
     level = _debug()
     steps: list[tuple[str, Callable[[Kernel], object]]] = [
@@ -55,6 +58,8 @@ def run_pipeline(kernel: Kernel, transform=None, debug: bool = False, fast_math:
         steps.append(("reciprocal", reciprocal.reciprocal))
     # loop-invariant index arithmetic out of parallel loops, then merged where it became common
     steps.append(("hoist", lambda k: hoist.hoist(k) and simplify.simplify(k)))
+    if versions:  # `v[i][k]` with k the same for the whole launch: a loop per value of k, one load or store each
+        steps.append(("unswitch", lambda k: per_value.unswitch(k) and simplify.simplify(k)))
     steps.append(("store_select", stores.store_select))  # `if c: x[p] = v` after a store to x[p]: a select
     # quant fields: accesses become integer IR on their physical cells (compare-and-swap loops for writes)
     steps.append(("quant", quant.expand_quant))

@@ -45,13 +45,17 @@ def fold(s: Stmt):
     return d.fold(s.operands[0].vtype, *values)
 
 
-_IDENTITY_OPS = {Op.ADD, Op.SUB, Op.MUL, Op.CAST}
+_IDENTITY_OPS = {Op.ADD, Op.SUB, Op.MUL, Op.CAST, Op.SELECT}
 
 
 def _identity(s: Stmt):
-    """x + 0, x * 1, x - 0 -> x (integers, and floats where exact)."""
+    """x + 0, x * 1, x - 0 -> x (integers, and floats where exact); select(c, a, b) with a constant c -> a or b."""
     if s.op not in _IDENTITY_OPS:
         return None
+    if s.op is Op.SELECT:
+        c = _const(s.operands[0])
+        return None if c is None or s.operands[1].type is not s.type or s.operands[2].type is not s.type \
+            else s.operands[1] if c else s.operands[2]
     if s.op in (Op.ADD, Op.SUB, Op.MUL) and len(s.operands) == 2:
         a, b = s.operands
         cb, ca = _const(b), _const(a)
