@@ -43,7 +43,7 @@ def _launch_index(loop: Stmt, before: list[Stmt]) -> tuple[Stmt, list[int], set]
     """(k, the constants it is compared with, ids of the statements before the loop whose values the loop uses,
     directly or through others) for the integer `k` defined before the loop that is compared for equality with
     the most constants there (passes/hoist.py has moved the comparisons out of the loop), or None."""
-    size, used = 0, set()
+    size, used = 0, set[int]()
     for x in walk(loop.blocks[0]):
         size += 1
         used.update(id(o) for o in x.operands)
@@ -72,15 +72,17 @@ def _versions(loop: Stmt, before: list[Stmt], k: Stmt, values: list[int], used: 
     and that it uses, again with k = v, then a copy of it over them that runs only when k == v; `loop` itself then
     runs only when k has none of the values."""
     begin, end = loop.operands
+    ty = k.type
+    assert ty is not None  # (an integer value: _launch_index)
     flag = next(x for x in before if x.op is Op.EQ and any(o is k for o in x.operands)).type  # their boolean type
     out: list[Stmt] = []
     rest = end
     for v in values:
-        mapping = {id(k): Builder.constant(v, k.type)}
+        mapping = {id(k): Builder.constant(v, ty)}
         for x in before:
             if id(x) in used and x.op in PURE and not x.blocks and any(id(o) in mapping for o in x.operands):
                 out.append(clone(x, mapping, loop.block))
-        hit = Builder.detached(Op.EQ, flag, (k, Builder.constant(v, k.type)), {}, loop.loc, loop.block)
+        hit = Builder.detached(Op.EQ, flag, (k, Builder.constant(v, ty)), {}, loop.loc, loop.block)
         stop = Builder.detached(Op.SELECT, end.type, (hit, end, begin), {}, loop.loc, loop.block)
         copy = clone(loop, mapping, loop.block)
         copy.operands = (begin, stop)
