@@ -21,7 +21,7 @@ from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.ops import PURE, Op
 
 MAX_VERSIONS = 4
-MAX_COPIED = 4000
+MAX_COPIED = 2000  # statements: bounds the compile time a kernel gains (snow_phaseField: 4 x ~400)
 
 
 def unswitch(kernel: Kernel) -> bool:
