@@ -438,7 +438,9 @@ def test_copies_whose_pages_all_got_marked_give_way_to_atomics_at_the_next_launc
     """Before a count the copies are taken if the updates outweigh an eighth of the copies' pages; a histogram
     over a whole 4 MB field then marks every page (of each thread that took part), and the next launch keeps its
     atomics (the count decays by 1/64 a launch that does). Both launches count exactly."""
-    n, cells = 150_000, 1 << 20
+    # work 100000 x 8 updates' worth: over the first guess (4 threads x 1024 pages / 8 x 1024 elements), under one
+    # thread's marks on every page (1024 x 1024), however many threads took part in the first launch
+    n, cells = 100_000, 1 << 20
     h = ti.field(ti.i32, shape=cells)
     at = ti.field(ti.i32, shape=n)
 
