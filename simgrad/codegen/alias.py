@@ -53,28 +53,22 @@ class MemoryFacts:
     def __init__(self) -> None:
         self.scopes: dict[tuple[int, int], int] = {}
 
-    def _scope(self, t: FieldRef) -> int:
-        key = (t.layout[0], t.layout[1])
-        if key not in self.scopes:
-            self.scopes[key] = len(self.scopes)
-        return self.scopes[key]
+    def _metadata(self, key: tuple[int, int]) -> str:
+        """`, !alias.scope !A, !noalias !B` of the place `key` (tree, byte offset), its scope made on first use."""
+        k = self.scopes.setdefault(key, len(self.scopes))
+        return f", !alias.scope !{FIRST_ID + 3 + 3 * k}, !noalias !{FIRST_ID + 4 + 3 * k}"
 
     def access(self, ptr: Stmt, llvm_ty: str) -> str:
-        """`, !alias.scope !A, !noalias !B` for a load/store of type llvm_ty through ptr, or ''."""
+        """The metadata of a load/store of type llvm_ty through ptr, or ''."""
         t = dense_place(ptr)
         if t is None or llvm_ty != t.dtype.llvm:  # a wider access could reach a neighbour place
             return ""
-        k = self._scope(t)
-        return f", !alias.scope !{FIRST_ID + 3 + 3 * k}, !noalias !{FIRST_ID + 4 + 3 * k}"
+        return self._metadata((t.layout[0], t.layout[1]))
 
     def page_map(self) -> str:
         """The metadata of a store to a per-thread page map of scatter copies (codegen/privatize.py): apart
         from every field place."""
-        key = (-1, -1)
-        if key not in self.scopes:
-            self.scopes[key] = len(self.scopes)
-        k = self.scopes[key]
-        return f", !alias.scope !{FIRST_ID + 3 + 3 * k}, !noalias !{FIRST_ID + 4 + 3 * k}"
+        return self._metadata((-1, -1))
 
     def globals(self) -> list[str]:
         if not self.scopes:

@@ -10,14 +10,7 @@ What each task sets up (per-thread sums, per-thread copies) follows the loop's L
 from __future__ import annotations
 
 from simgrad.codegen.llvm import FunctionText, KernelCodegen, llvm_type
-from simgrad.codegen.privatize import (
-    emit_private_launch,
-    emit_runs_alone,
-    line_padded,
-    region_bytes,
-    region_pages,
-    slice_shift,
-)
+from simgrad.codegen.privatize import copy_layout, emit_private_launch, emit_runs_alone, slice_shift
 from simgrad.ir.nodes import Stmt, offset_form, walk
 from simgrad.ir.ops import Op
 from simgrad.passes.parallel_strategy import PRIVATE, LoopStrategy
@@ -332,12 +325,10 @@ def _private_root(t: FunctionText, region: Region, slot: int, map_slot: int) -> 
     q, buf, t64, off, base, root, mq, maps, mrow, mine = (t.tmp("pr") for _ in range(10))
     lines = [f"{q} = getelementptr i64, ptr %clo, i64 {slot}", f"{buf} = load ptr, ptr {q}",
              f"{t64} = zext i32 %tid to i64"]
-    size = region_bytes(lines, lambda: t.tmp("rb"), t.array_shape, region)
-    stride = line_padded(lines, lambda: t.tmp("rb"), size)
-    pages = line_padded(lines, lambda: t.tmp("rb"), region_pages(lines, lambda: t.tmp("rb"), size))
+    _size, _pages, stride, map_stride = copy_layout(lines, lambda: t.tmp("rb"), t.array_shape, region)
     lines += [f"{off} = mul i64 {t64}, {stride}", f"{base} = getelementptr inbounds i8, ptr {buf}, i64 {off}",
               f"{mq} = getelementptr i64, ptr %clo, i64 {map_slot}", f"{maps} = load ptr, ptr {mq}",
-              f"{mrow} = mul i64 {t64}, {pages}", f"{mine} = getelementptr inbounds i8, ptr {maps}, i64 {mrow}"]
+              f"{mrow} = mul i64 {t64}, {map_stride}", f"{mine} = getelementptr inbounds i8, ptr {maps}, i64 {mrow}"]
     neg = "0"
     if region.array is not None:  # the whole array: its offsets land in the copy as they are
         root = base

@@ -5,12 +5,15 @@ The generated entry decides at run time from the trip count whether the copies p
 additions, which atomics already leave unordered. An ndarray's region is sized at launch from its extents
 (`region_bytes`): its copies grow when a larger array comes.
 
-Each thread also marks the pages (PAGE_SHIFT) of its copy it updates, in a byte map per thread that follows
-the copies, and the final sum visits only marked pages: a particle scatter touches a small part of its grid
+Each thread also marks the pages (PAGE_SHIFT) of its copy it updates, in a byte map per thread (a buffer of its
+own, see copy_layout), and the final sum visits only marked pages: a particle scatter touches a small part of its grid
 (diffmpm3d's p2g: the copy of a 14.7 MB grid region cost more to sum than the loop took).
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
 
 from simgrad.passes.privatize import PAGE_SHIFT, Region
 
@@ -49,6 +52,15 @@ def region_pages(lines: list, tmp, nbytes: str) -> str:
     return n
 
 
+def copy_layout(lines: list, tmp, shape, r: Region) -> tuple[str, str, str, str]:
+    """(bytes of one copy of the region, its pages, bytes from one thread's copy to the next, bytes from one
+    thread's page map to the next), i64 values appended to `lines`: the one layout both the launch (which
+    allocates and sums) and the task (which adds and marks) compute."""
+    size = region_bytes(lines, tmp, shape, r)
+    pages = region_pages(lines, tmp, size)
+    return size, pages, line_padded(lines, tmp, size), line_padded(lines, tmp, pages)
+
+
 def slice_shift(lines: list, tmp, value, region: Region) -> str:
     """Append to `lines` the computation of a region's slice base (bytes, i64); returns its name.
     `value(stmt)` names an index value in the function at hand, `tmp()` makes a fresh name."""
@@ -79,7 +91,7 @@ def region_bytes(lines: list, tmp, shape, r: Region) -> str:
     return total
 
 
-def _emitted(f, build, *args) -> str:
+def _emitted(f, build, *args) -> Any:
     """`build(lines, tmp, *args)`'s value, its lines emitted into `f` (the builders above serve the task's prologue
     too)."""
     lines: list[str] = []
@@ -108,14 +120,11 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     into the fields when the loop's updates cost more as atomics than the copies cost to zero and sum (see
     ATOMIC_COST); else run the atomic `task`. When the pool will run the whole loop on this thread (one
     thread, or no more iterations than a grain: simgrad_parallel_for's serial path; launches never overlap),
-    `alone_task` (the private task, or its variant whose other updates are plain too) runs with the fields
-    themselves as thread 0's copies: plain updates, no page marks, nothing to sum.
+    `alone_task` (the private task's variant without page marks, whose other updates are plain too) runs with the
+    fields themselves as thread 0's copies: nothing to sum.
     Closure slots `first_slot + k` hold region k's copies, `first_slot + len(regions) + k` its page maps."""
-    sizes = [_emitted(f, region_bytes, f.array_shape, r) for r in regions]  # one copy of each region, in bytes
-    pages = [_emitted(f, region_pages, n) for n in sizes]
-    strides = [_emitted(f, line_padded, n) for n in sizes]
-    map_strides = [_emitted(f, line_padded, n) for n in pages]
-    work, need, big, ok = (f.tmp("pv") for _ in range(4))
+    sizes, pages, strides, map_strides = zip(*(_emitted(f, copy_layout, f.array_shape, r) for r in regions))
+    work, big, ok = (f.tmp("pv") for _ in range(3))
     iters, alone = emit_runs_alone(f, nthreads, begin, end, grain)
     direct, decide, plain = f.label("direct"), f.label("decide"), f.label("atomic")
     f.emit(f"br i1 {alone}, label %{direct}, label %{decide}")
@@ -129,9 +138,8 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.emit(f"br label %{done}")
     f.start_block(decide)
     counts = [_marked_count(f, mh) for _, mh in holders]
-    guesses = [_sum_guess(f, r, n, pg, nthreads, c) for r, n, pg, c in zip(regions, sizes, pages, counts)]
+    need = _sum_of(f, [_sum_guess(f, r, pg, nthreads, c) for r, pg, c in zip(regions, pages, counts)])
     f.emit(f"{work} = mul i64 {iters}, {weight * ATOMIC_COST}")
-    f.emit(f"{need} = add i64 {_sum_of(f, guesses)}, 0")
     f.emit(f"{big} = icmp sge i64 {work}, {need}")  # (several threads here: one took the direct path)
     nbytes, fits = f.tmp("pv"), f.tmp("pv")
     f.emit(f"{nbytes} = mul i64 {nthreads}, {_sum_of(f, sizes)}")
@@ -172,16 +180,23 @@ def emit_private_launch(f, regions: list[Region], weight: int, clo: str, first_s
     f.start_block(done)
 
 
-def _marked_count(f, holder_slot: int) -> str:
-    """The address of a page-map holder's count of the pages its last sum found marked (-1: no sum yet)."""
-    hslot, holder, c = f.tmp("ph"), f.tmp("ph"), f.tmp("ph")
+def _holder(f, holder_slot: int) -> str:
+    """The address of the holder {pointer, capacity in bytes, pages counted} whose address context slot
+    `holder_slot` holds (runtime/launch.py `_holders`)."""
+    hslot, holder = f.tmp("ph"), f.tmp("ph")
     f.emit(f"{hslot} = getelementptr i64, ptr %ctx, i64 {holder_slot}")
     f.emit(f"{holder} = load ptr, ptr {hslot}")
-    f.emit(f"{c} = getelementptr i64, ptr {holder}, i64 2")
+    return holder
+
+
+def _marked_count(f, holder_slot: int) -> str:
+    """The address of a page-map holder's count of the pages its last sum found marked (-1: no sum yet)."""
+    c = f.tmp("ph")
+    f.emit(f"{c} = getelementptr i64, ptr {_holder(f, holder_slot)}, i64 2")
     return c
 
 
-def _sum_guess(f, r: Region, nbytes: str, pages: str, nthreads: str, count: str) -> str:
+def _sum_guess(f, r: Region, pages: str, nthreads: str, count: str) -> str:
     """The elements the final sum of a region will add (i64): its last count of marked pages, or before one
     FIRST_GUESS_SHARE of every thread's pages."""
     per = (1 << PAGE_SHIFT) // r.dtype.nbytes
@@ -220,7 +235,7 @@ def _elements(f, r: Region, nbytes: str) -> str:
     return n
 
 
-def _sum_of(f, terms: list[str]) -> str:
+def _sum_of(f, terms: Sequence[str]) -> str:
     """The i64 sum of `terms` (constants folded)."""
     const = sum(int(t) for t in terms if not t.startswith("%"))
     total = str(const)
@@ -241,9 +256,8 @@ def _held(f, holder_slot: int, nthreads: str, nbytes: str) -> str:
     (calloc: still zero). The launcher frees them (runtime/launch.py)."""
     f.gen.module.declare("declare noalias ptr @calloc(i64, i64)")
     f.gen.module.declare("declare void @free(ptr)")
-    hslot, holder, have, capp, cap, need, enough = (f.tmp("ph") for _ in range(7))
-    f.emit(f"{hslot} = getelementptr i64, ptr %ctx, i64 {holder_slot}")
-    f.emit(f"{holder} = load ptr, ptr {hslot}")
+    holder = _holder(f, holder_slot)
+    have, capp, cap, need, enough = (f.tmp("ph") for _ in range(5))
     f.emit(f"{have} = load ptr, ptr {holder}")
     f.emit(f"{capp} = getelementptr i64, ptr {holder}, i64 1")
     f.emit(f"{cap} = load i64, ptr {capp}")

@@ -16,6 +16,7 @@ components), at most MAX_VERSIONS of them, and the copies together at most MAX_C
 
 from __future__ import annotations
 
+from simgrad.dtypes import DataType
 from simgrad.ir.builder import Builder, clone
 from simgrad.ir.nodes import Kernel, Stmt, walk
 from simgrad.ir.ops import PURE, Op
@@ -39,10 +40,11 @@ def unswitch(kernel: Kernel) -> bool:
     return changed
 
 
-def _launch_index(loop: Stmt, before: list[Stmt]) -> tuple[Stmt, list[int], set] | None:
+def _launch_index(loop: Stmt, before: list[Stmt]) -> tuple[Stmt, list[int], set, DataType] | None:
     """(k, the constants it is compared with, ids of the statements before the loop whose values the loop uses,
-    directly or through others) for the integer `k` defined before the loop that is compared for equality with
-    the most constants there (passes/hoist.py has moved the comparisons out of the loop), or None."""
+    directly or through others, the comparisons' boolean type) for the integer `k` defined before the loop that
+    is compared for equality with the most constants there (passes/hoist.py has moved the comparisons out of the
+    loop), or None."""
     size, used = 0, set[int]()
     for x in walk(loop.blocks[0]):
         size += 1
@@ -51,38 +53,38 @@ def _launch_index(loop: Stmt, before: list[Stmt]) -> tuple[Stmt, list[int], set]
     for x in reversed(before):
         if id(x) in used:
             used.update(id(o) for o in x.operands)
-    seen: dict[int, tuple[Stmt, set]] = {}  # id(k) -> (k, constants)
+    seen: dict[int, tuple[Stmt, set, DataType]] = {}  # id(k) -> (k, constants, boolean type)
     for eq in before:
-        if eq.op is not Op.EQ or id(eq) not in used:
+        if eq.op is not Op.EQ or id(eq) not in used or eq.type is None:
             continue
         a, b = eq.operands
         k, c = (a, b) if b.op is Op.CONST else (b, a) if a.op is Op.CONST else (None, None)
         if k is not None and c is not None and k.op is not Op.CONST and k.type is not None and not k.type.is_float:
-            seen.setdefault(id(k), (k, set()))[1].add(int(c.attrs["value"]))
+            seen.setdefault(id(k), (k, set(), eq.type))[1].add(int(c.attrs["value"]))
     best = None
-    for k, values in seen.values():
+    for k, values, flag in seen.values():
         if 2 <= len(values) <= MAX_VERSIONS and size * len(values) <= MAX_COPIED:
             if best is None or len(values) > len(best[1]):
-                best = (k, sorted(values), used)
+                best = (k, sorted(values), used, flag)
     return best
 
 
-def _versions(loop: Stmt, before: list[Stmt], k: Stmt, values: list[int], used: set) -> list[Stmt]:
+def _versions(loop: Stmt, before: list[Stmt], k: Stmt, values: list[int], used: set, flag: DataType) -> list[Stmt]:
     """The statements to add before `loop`: for each value v, the pure statements before the loop that depend on k
     and that it uses, again with k = v, then a copy of it over them that runs only when k == v; `loop` itself then
     runs only when k has none of the values."""
     begin, end = loop.operands
     ty = k.type
     assert ty is not None  # (an integer value: _launch_index)
-    flag = next(x for x in before if x.op is Op.EQ and any(o is k for o in x.operands)).type  # their boolean type
     out: list[Stmt] = []
     rest = end
     for v in values:
-        mapping = {id(k): Builder.constant(v, ty)}
+        value = Builder.constant(v, ty)
+        mapping = {id(k): value}
         for x in before:
             if id(x) in used and x.op in PURE and not x.blocks and any(id(o) in mapping for o in x.operands):
                 out.append(clone(x, mapping, loop.block))
-        hit = Builder.detached(Op.EQ, flag, (k, Builder.constant(v, ty)), {}, loop.loc, loop.block)
+        hit = Builder.detached(Op.EQ, flag, (k, value), {}, loop.loc, loop.block)
         stop = Builder.detached(Op.SELECT, end.type, (hit, end, begin), {}, loop.loc, loop.block)
         copy = clone(loop, mapping, loop.block)
         copy.operands = (begin, stop)

@@ -96,7 +96,7 @@ class Launcher:
         diffmpm3d's p2g.grad take 6.1 ms a launch instead of 2.9, in the runs where numpy placed them so.)"""
         regions = self.program.pool.num_threads + 1
         entries = -(-entries // 8) * 8  # whole 64-byte lines
-        store = self._tape_store = np.zeros(regions * entries + 8, dtype=np.int64)
+        store = np.zeros(regions * entries + 8, dtype=np.int64)  # (the view below keeps it alive)
         start = (-store.ctypes.data % 64) // 8  # the first line boundary in it
         tape = self.tape = store[start:start + regions * entries]
         self.buf[CTX_TAPE] = tape.ctypes.data

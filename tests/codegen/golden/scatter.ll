@@ -406,249 +406,248 @@ entry:
   %cv.7 = load ptr, ptr %cp.6
   %cp.8 = getelementptr i64, ptr %ctx, i64 7
   %cv.9 = load i64, ptr %cp.8
-  %cp.23 = getelementptr i64, ptr %ctx, i64 0
-  %cv.24 = load ptr, ptr %cp.23
-  %rp.25 = getelementptr ptr, ptr %cv.24, i64 0
-  %root.26 = load ptr, ptr %rp.25, !invariant.load !0
-  %cp.30 = getelementptr i64, ptr %ctx, i64 0
-  %cv.31 = load ptr, ptr %cp.30
-  %rp.32 = getelementptr ptr, ptr %cv.31, i64 1
-  %root.33 = load ptr, ptr %rp.32, !invariant.load !0
-  %sclo.146 = alloca [8 x i64], align 8
-  %sclo.161 = alloca [8 x i64], align 8
+  %cp.22 = getelementptr i64, ptr %ctx, i64 0
+  %cv.23 = load ptr, ptr %cp.22
+  %rp.24 = getelementptr ptr, ptr %cv.23, i64 0
+  %root.25 = load ptr, ptr %rp.24, !invariant.load !0
+  %cp.29 = getelementptr i64, ptr %ctx, i64 0
+  %cv.30 = load ptr, ptr %cp.29
+  %rp.31 = getelementptr ptr, ptr %cv.30, i64 1
+  %root.32 = load ptr, ptr %rp.31, !invariant.load !0
+  %sclo.145 = alloca [8 x i64], align 8
+  %sclo.160 = alloca [8 x i64], align 8
   store ptr %ctx, ptr %clo.3
   %b.4 = sext i32 0 to i64
   %e.5 = sext i32 64 to i64
-  %pv.14 = sub i64 %e.5, %b.4
-  %pv.15 = icmp sle i64 %cv.9, 1
-  %pv.16 = icmp sle i64 %pv.14, 455
-  %pv.17 = or i1 %pv.15, %pv.16
-  br i1 %pv.17, label %direct.18, label %decide.19
-direct.18:
-  %real.22 = getelementptr i8, ptr %root.26, i64 0
-  %real.21 = getelementptr i8, ptr %real.22, i64 0
-  %pslot.27 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %real.21, ptr %pslot.27
-  %real.29 = getelementptr i8, ptr %root.33, i64 0
-  %real.28 = getelementptr i8, ptr %real.29, i64 0
-  %pslot.34 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %real.28, ptr %pslot.34
+  %pv.13 = sub i64 %e.5, %b.4
+  %pv.14 = icmp sle i64 %cv.9, 1
+  %pv.15 = icmp sle i64 %pv.13, 455
+  %pv.16 = or i1 %pv.14, %pv.15
+  br i1 %pv.16, label %direct.17, label %decide.18
+direct.17:
+  %real.21 = getelementptr i8, ptr %root.25, i64 0
+  %real.20 = getelementptr i8, ptr %real.21, i64 0
+  %pslot.26 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %real.20, ptr %pslot.26
+  %real.28 = getelementptr i8, ptr %root.32, i64 0
+  %real.27 = getelementptr i8, ptr %real.28, i64 0
+  %pslot.33 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %real.27, ptr %pslot.33
   call void %cv.7(ptr @sg_kernel_task1_private_serial, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.35
-decide.19:
+  br label %scatterdone.34
+decide.18:
   %ph.36 = getelementptr i64, ptr %ctx, i64 12
   %ph.37 = load ptr, ptr %ph.36
-  %ph.38 = getelementptr i64, ptr %ph.37, i64 2
+  %ph.35 = getelementptr i64, ptr %ph.37, i64 2
   %ph.39 = getelementptr i64, ptr %ctx, i64 14
   %ph.40 = load ptr, ptr %ph.39
-  %ph.41 = getelementptr i64, ptr %ph.40, i64 2
-  %pg.42 = load i64, ptr %ph.38
-  %pg.43 = icmp sge i64 %pg.42, 0
-  %pg.45 = mul i64 %cv.9, 1
-  %pg.46 = udiv i64 %pg.45, 8
-  %pg.44 = select i1 %pg.43, i64 %pg.42, i64 %pg.46
-  %pg.47 = mul i64 %pg.44, 1024
-  %pg.48 = load i64, ptr %ph.41
-  %pg.49 = icmp sge i64 %pg.48, 0
-  %pg.51 = mul i64 %cv.9, 1
-  %pg.52 = udiv i64 %pg.51, 8
-  %pg.50 = select i1 %pg.49, i64 %pg.48, i64 %pg.52
-  %pg.53 = mul i64 %pg.50, 1024
-  %pv.10 = mul i64 %pv.14, 24
-  %pv.54 = add i64 0, %pg.47
-  %pv.55 = add i64 %pv.54, %pg.53
-  %pv.11 = add i64 %pv.55, 0
-  %pv.12 = icmp sge i64 %pv.10, %pv.11
-  %pv.56 = mul i64 %cv.9, 96
-  %pv.57 = icmp ule i64 %pv.56, 268435456
-  %pv.13 = and i1 %pv.12, %pv.57
-  br i1 %pv.13, label %alloc.58, label %atomic.20
-alloc.58:
-  %ph.59 = getelementptr i64, ptr %ctx, i64 11
+  %ph.38 = getelementptr i64, ptr %ph.40, i64 2
+  %pg.41 = load i64, ptr %ph.35
+  %pg.42 = icmp sge i64 %pg.41, 0
+  %pg.44 = mul i64 %cv.9, 1
+  %pg.45 = udiv i64 %pg.44, 8
+  %pg.43 = select i1 %pg.42, i64 %pg.41, i64 %pg.45
+  %pg.46 = mul i64 %pg.43, 1024
+  %pg.47 = load i64, ptr %ph.38
+  %pg.48 = icmp sge i64 %pg.47, 0
+  %pg.50 = mul i64 %cv.9, 1
+  %pg.51 = udiv i64 %pg.50, 8
+  %pg.49 = select i1 %pg.48, i64 %pg.47, i64 %pg.51
+  %pg.52 = mul i64 %pg.49, 1024
+  %pv.53 = add i64 0, %pg.46
+  %pv.54 = add i64 %pv.53, %pg.52
+  %pv.10 = mul i64 %pv.13, 24
+  %pv.11 = icmp sge i64 %pv.10, %pv.54
+  %pv.55 = mul i64 %cv.9, 96
+  %pv.56 = icmp ule i64 %pv.55, 268435456
+  %pv.12 = and i1 %pv.11, %pv.56
+  br i1 %pv.12, label %alloc.57, label %atomic.19
+alloc.57:
+  %ph.58 = getelementptr i64, ptr %ctx, i64 11
+  %ph.59 = load ptr, ptr %ph.58
   %ph.60 = load ptr, ptr %ph.59
-  %ph.61 = load ptr, ptr %ph.60
-  %ph.62 = getelementptr i64, ptr %ph.60, i64 1
-  %ph.63 = load i64, ptr %ph.62
-  %ph.64 = mul i64 %cv.9, 64
-  %ph.65 = icmp uge i64 %ph.63, %ph.64
-  br i1 %ph.65, label %pready.67, label %pfresh.66
-pfresh.66:
-  call void @free(ptr %ph.61)
-  %pmore.71 = add i64 %ph.64, 64
-  %pnew.68 = call ptr @calloc(i64 1, i64 %pmore.71)
-  store ptr %pnew.68, ptr %ph.60
-  %pnull.69 = icmp eq ptr %pnew.68, null
-  %pcap.70 = select i1 %pnull.69, i64 0, i64 %ph.64
-  store i64 %pcap.70, ptr %ph.62
-  br label %pready.67
-pready.67:
-  %priv.72 = load ptr, ptr %ph.60
-  %priv.73 = ptrtoint ptr %priv.72 to i64
-  %priv.74 = add i64 %priv.73, 63
-  %priv.75 = and i64 %priv.74, -64
-  %priv.76 = inttoptr i64 %priv.75 to ptr
-  %pslot.79 = getelementptr i64, ptr %clo.3, i64 1
-  store ptr %priv.76, ptr %pslot.79
-  %pnn.77 = icmp ne ptr %priv.76, null
-  %pok.78 = and i1 true, %pnn.77
-  %ph.80 = getelementptr i64, ptr %ctx, i64 12
+  %ph.61 = getelementptr i64, ptr %ph.59, i64 1
+  %ph.62 = load i64, ptr %ph.61
+  %ph.63 = mul i64 %cv.9, 64
+  %ph.64 = icmp uge i64 %ph.62, %ph.63
+  br i1 %ph.64, label %pready.66, label %pfresh.65
+pfresh.65:
+  call void @free(ptr %ph.60)
+  %pmore.70 = add i64 %ph.63, 64
+  %pnew.67 = call ptr @calloc(i64 1, i64 %pmore.70)
+  store ptr %pnew.67, ptr %ph.59
+  %pnull.68 = icmp eq ptr %pnew.67, null
+  %pcap.69 = select i1 %pnull.68, i64 0, i64 %ph.63
+  store i64 %pcap.69, ptr %ph.61
+  br label %pready.66
+pready.66:
+  %priv.71 = load ptr, ptr %ph.59
+  %priv.72 = ptrtoint ptr %priv.71 to i64
+  %priv.73 = add i64 %priv.72, 63
+  %priv.74 = and i64 %priv.73, -64
+  %priv.75 = inttoptr i64 %priv.74 to ptr
+  %pslot.78 = getelementptr i64, ptr %clo.3, i64 1
+  store ptr %priv.75, ptr %pslot.78
+  %pnn.76 = icmp ne ptr %priv.75, null
+  %pok.77 = and i1 true, %pnn.76
+  %ph.79 = getelementptr i64, ptr %ctx, i64 12
+  %ph.80 = load ptr, ptr %ph.79
   %ph.81 = load ptr, ptr %ph.80
-  %ph.82 = load ptr, ptr %ph.81
-  %ph.83 = getelementptr i64, ptr %ph.81, i64 1
-  %ph.84 = load i64, ptr %ph.83
-  %ph.85 = mul i64 %cv.9, 64
-  %ph.86 = icmp uge i64 %ph.84, %ph.85
-  br i1 %ph.86, label %pready.88, label %pfresh.87
-pfresh.87:
-  call void @free(ptr %ph.82)
-  %pmore.92 = add i64 %ph.85, 64
-  %pnew.89 = call ptr @calloc(i64 1, i64 %pmore.92)
-  store ptr %pnew.89, ptr %ph.81
-  %pnull.90 = icmp eq ptr %pnew.89, null
-  %pcap.91 = select i1 %pnull.90, i64 0, i64 %ph.85
-  store i64 %pcap.91, ptr %ph.83
-  br label %pready.88
-pready.88:
-  %priv.93 = load ptr, ptr %ph.81
-  %priv.94 = ptrtoint ptr %priv.93 to i64
-  %priv.95 = add i64 %priv.94, 63
-  %priv.96 = and i64 %priv.95, -64
-  %priv.97 = inttoptr i64 %priv.96 to ptr
-  %pslot.100 = getelementptr i64, ptr %clo.3, i64 3
-  store ptr %priv.97, ptr %pslot.100
-  %pnn.98 = icmp ne ptr %priv.97, null
-  %pok.99 = and i1 %pok.78, %pnn.98
-  %ph.101 = getelementptr i64, ptr %ctx, i64 13
+  %ph.82 = getelementptr i64, ptr %ph.80, i64 1
+  %ph.83 = load i64, ptr %ph.82
+  %ph.84 = mul i64 %cv.9, 64
+  %ph.85 = icmp uge i64 %ph.83, %ph.84
+  br i1 %ph.85, label %pready.87, label %pfresh.86
+pfresh.86:
+  call void @free(ptr %ph.81)
+  %pmore.91 = add i64 %ph.84, 64
+  %pnew.88 = call ptr @calloc(i64 1, i64 %pmore.91)
+  store ptr %pnew.88, ptr %ph.80
+  %pnull.89 = icmp eq ptr %pnew.88, null
+  %pcap.90 = select i1 %pnull.89, i64 0, i64 %ph.84
+  store i64 %pcap.90, ptr %ph.82
+  br label %pready.87
+pready.87:
+  %priv.92 = load ptr, ptr %ph.80
+  %priv.93 = ptrtoint ptr %priv.92 to i64
+  %priv.94 = add i64 %priv.93, 63
+  %priv.95 = and i64 %priv.94, -64
+  %priv.96 = inttoptr i64 %priv.95 to ptr
+  %pslot.99 = getelementptr i64, ptr %clo.3, i64 3
+  store ptr %priv.96, ptr %pslot.99
+  %pnn.97 = icmp ne ptr %priv.96, null
+  %pok.98 = and i1 %pok.77, %pnn.97
+  %ph.100 = getelementptr i64, ptr %ctx, i64 13
+  %ph.101 = load ptr, ptr %ph.100
   %ph.102 = load ptr, ptr %ph.101
-  %ph.103 = load ptr, ptr %ph.102
-  %ph.104 = getelementptr i64, ptr %ph.102, i64 1
-  %ph.105 = load i64, ptr %ph.104
-  %ph.106 = mul i64 %cv.9, 64
-  %ph.107 = icmp uge i64 %ph.105, %ph.106
-  br i1 %ph.107, label %pready.109, label %pfresh.108
-pfresh.108:
-  call void @free(ptr %ph.103)
-  %pmore.113 = add i64 %ph.106, 64
-  %pnew.110 = call ptr @calloc(i64 1, i64 %pmore.113)
-  store ptr %pnew.110, ptr %ph.102
-  %pnull.111 = icmp eq ptr %pnew.110, null
-  %pcap.112 = select i1 %pnull.111, i64 0, i64 %ph.106
-  store i64 %pcap.112, ptr %ph.104
-  br label %pready.109
-pready.109:
-  %priv.114 = load ptr, ptr %ph.102
-  %priv.115 = ptrtoint ptr %priv.114 to i64
-  %priv.116 = add i64 %priv.115, 63
-  %priv.117 = and i64 %priv.116, -64
-  %priv.118 = inttoptr i64 %priv.117 to ptr
-  %pslot.121 = getelementptr i64, ptr %clo.3, i64 2
-  store ptr %priv.118, ptr %pslot.121
-  %pnn.119 = icmp ne ptr %priv.118, null
-  %pok.120 = and i1 %pok.99, %pnn.119
-  %ph.122 = getelementptr i64, ptr %ctx, i64 14
+  %ph.103 = getelementptr i64, ptr %ph.101, i64 1
+  %ph.104 = load i64, ptr %ph.103
+  %ph.105 = mul i64 %cv.9, 64
+  %ph.106 = icmp uge i64 %ph.104, %ph.105
+  br i1 %ph.106, label %pready.108, label %pfresh.107
+pfresh.107:
+  call void @free(ptr %ph.102)
+  %pmore.112 = add i64 %ph.105, 64
+  %pnew.109 = call ptr @calloc(i64 1, i64 %pmore.112)
+  store ptr %pnew.109, ptr %ph.101
+  %pnull.110 = icmp eq ptr %pnew.109, null
+  %pcap.111 = select i1 %pnull.110, i64 0, i64 %ph.105
+  store i64 %pcap.111, ptr %ph.103
+  br label %pready.108
+pready.108:
+  %priv.113 = load ptr, ptr %ph.101
+  %priv.114 = ptrtoint ptr %priv.113 to i64
+  %priv.115 = add i64 %priv.114, 63
+  %priv.116 = and i64 %priv.115, -64
+  %priv.117 = inttoptr i64 %priv.116 to ptr
+  %pslot.120 = getelementptr i64, ptr %clo.3, i64 2
+  store ptr %priv.117, ptr %pslot.120
+  %pnn.118 = icmp ne ptr %priv.117, null
+  %pok.119 = and i1 %pok.98, %pnn.118
+  %ph.121 = getelementptr i64, ptr %ctx, i64 14
+  %ph.122 = load ptr, ptr %ph.121
   %ph.123 = load ptr, ptr %ph.122
-  %ph.124 = load ptr, ptr %ph.123
-  %ph.125 = getelementptr i64, ptr %ph.123, i64 1
-  %ph.126 = load i64, ptr %ph.125
-  %ph.127 = mul i64 %cv.9, 64
-  %ph.128 = icmp uge i64 %ph.126, %ph.127
-  br i1 %ph.128, label %pready.130, label %pfresh.129
-pfresh.129:
-  call void @free(ptr %ph.124)
-  %pmore.134 = add i64 %ph.127, 64
-  %pnew.131 = call ptr @calloc(i64 1, i64 %pmore.134)
-  store ptr %pnew.131, ptr %ph.123
-  %pnull.132 = icmp eq ptr %pnew.131, null
-  %pcap.133 = select i1 %pnull.132, i64 0, i64 %ph.127
-  store i64 %pcap.133, ptr %ph.125
-  br label %pready.130
-pready.130:
-  %priv.135 = load ptr, ptr %ph.123
-  %priv.136 = ptrtoint ptr %priv.135 to i64
-  %priv.137 = add i64 %priv.136, 63
-  %priv.138 = and i64 %priv.137, -64
-  %priv.139 = inttoptr i64 %priv.138 to ptr
-  %pslot.142 = getelementptr i64, ptr %clo.3, i64 4
-  store ptr %priv.139, ptr %pslot.142
-  %pnn.140 = icmp ne ptr %priv.139, null
-  %pok.141 = and i1 %pok.120, %pnn.140
-  br i1 %pok.141, label %private.143, label %atomic.20
-private.143:
+  %ph.124 = getelementptr i64, ptr %ph.122, i64 1
+  %ph.125 = load i64, ptr %ph.124
+  %ph.126 = mul i64 %cv.9, 64
+  %ph.127 = icmp uge i64 %ph.125, %ph.126
+  br i1 %ph.127, label %pready.129, label %pfresh.128
+pfresh.128:
+  call void @free(ptr %ph.123)
+  %pmore.133 = add i64 %ph.126, 64
+  %pnew.130 = call ptr @calloc(i64 1, i64 %pmore.133)
+  store ptr %pnew.130, ptr %ph.122
+  %pnull.131 = icmp eq ptr %pnew.130, null
+  %pcap.132 = select i1 %pnull.131, i64 0, i64 %ph.126
+  store i64 %pcap.132, ptr %ph.124
+  br label %pready.129
+pready.129:
+  %priv.134 = load ptr, ptr %ph.122
+  %priv.135 = ptrtoint ptr %priv.134 to i64
+  %priv.136 = add i64 %priv.135, 63
+  %priv.137 = and i64 %priv.136, -64
+  %priv.138 = inttoptr i64 %priv.137 to ptr
+  %pslot.141 = getelementptr i64, ptr %clo.3, i64 4
+  store ptr %priv.138, ptr %pslot.141
+  %pnn.139 = icmp ne ptr %priv.138, null
+  %pok.140 = and i1 %pok.119, %pnn.139
+  br i1 %pok.140, label %private.142, label %atomic.19
+private.142:
   call void %cv.7(ptr @sg_kernel_task1_private, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  %real.145 = getelementptr i8, ptr %root.26, i64 0
-  %real.144 = getelementptr i8, ptr %real.145, i64 0
+  %real.144 = getelementptr i8, ptr %root.25, i64 0
+  %real.143 = getelementptr i8, ptr %real.144, i64 0
+  store i64 0, ptr %ph.35
+  %pslot.146 = getelementptr i64, ptr %sclo.145, i64 0
+  store ptr %priv.75, ptr %pslot.146
+  %pslot.147 = getelementptr i64, ptr %sclo.145, i64 1
+  store ptr %real.143, ptr %pslot.147
+  %pslot.148 = getelementptr i64, ptr %sclo.145, i64 2
+  store i64 %cv.9, ptr %pslot.148
+  %pslot.149 = getelementptr i64, ptr %sclo.145, i64 3
+  store i64 16, ptr %pslot.149
+  %pslot.150 = getelementptr i64, ptr %sclo.145, i64 4
+  store ptr %priv.96, ptr %pslot.150
+  %pslot.151 = getelementptr i64, ptr %sclo.145, i64 5
+  store i64 64, ptr %pslot.151
+  %pslot.152 = getelementptr i64, ptr %sclo.145, i64 6
+  store ptr %ph.35, ptr %pslot.152
+  %pslot.153 = getelementptr i64, ptr %sclo.145, i64 7
+  store i64 16, ptr %pslot.153
+  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.145, i64 0, i64 1, i64 8)
+  %cancel.154 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.155 = icmp ne i32 %cancel.154, 0
+  br i1 %cancelled.155, label %psumhere.156, label %psumdone.157
+psumhere.156:
+  call void @sg_kernel_task1_private_sum0(ptr %sclo.145, i64 0, i64 1, i32 0)
+  br label %psumdone.157
+psumdone.157:
+  %real.159 = getelementptr i8, ptr %root.32, i64 0
+  %real.158 = getelementptr i8, ptr %real.159, i64 0
   store i64 0, ptr %ph.38
-  %pslot.147 = getelementptr i64, ptr %sclo.146, i64 0
-  store ptr %priv.76, ptr %pslot.147
-  %pslot.148 = getelementptr i64, ptr %sclo.146, i64 1
-  store ptr %real.144, ptr %pslot.148
-  %pslot.149 = getelementptr i64, ptr %sclo.146, i64 2
-  store i64 %cv.9, ptr %pslot.149
-  %pslot.150 = getelementptr i64, ptr %sclo.146, i64 3
-  store i64 16, ptr %pslot.150
-  %pslot.151 = getelementptr i64, ptr %sclo.146, i64 4
-  store ptr %priv.97, ptr %pslot.151
-  %pslot.152 = getelementptr i64, ptr %sclo.146, i64 5
-  store i64 64, ptr %pslot.152
-  %pslot.153 = getelementptr i64, ptr %sclo.146, i64 6
-  store ptr %ph.38, ptr %pslot.153
-  %pslot.154 = getelementptr i64, ptr %sclo.146, i64 7
-  store i64 16, ptr %pslot.154
-  call void %cv.7(ptr @sg_kernel_task1_private_sum0, ptr %sclo.146, i64 0, i64 1, i64 8)
-  %cancel.155 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.156 = icmp ne i32 %cancel.155, 0
-  br i1 %cancelled.156, label %psumhere.157, label %psumdone.158
-psumhere.157:
-  call void @sg_kernel_task1_private_sum0(ptr %sclo.146, i64 0, i64 1, i32 0)
-  br label %psumdone.158
-psumdone.158:
-  %real.160 = getelementptr i8, ptr %root.33, i64 0
-  %real.159 = getelementptr i8, ptr %real.160, i64 0
-  store i64 0, ptr %ph.41
-  %pslot.162 = getelementptr i64, ptr %sclo.161, i64 0
-  store ptr %priv.118, ptr %pslot.162
-  %pslot.163 = getelementptr i64, ptr %sclo.161, i64 1
-  store ptr %real.159, ptr %pslot.163
-  %pslot.164 = getelementptr i64, ptr %sclo.161, i64 2
-  store i64 %cv.9, ptr %pslot.164
-  %pslot.165 = getelementptr i64, ptr %sclo.161, i64 3
-  store i64 8, ptr %pslot.165
-  %pslot.166 = getelementptr i64, ptr %sclo.161, i64 4
-  store ptr %priv.139, ptr %pslot.166
-  %pslot.167 = getelementptr i64, ptr %sclo.161, i64 5
-  store i64 64, ptr %pslot.167
-  %pslot.168 = getelementptr i64, ptr %sclo.161, i64 6
-  store ptr %ph.41, ptr %pslot.168
-  %pslot.169 = getelementptr i64, ptr %sclo.161, i64 7
-  store i64 16, ptr %pslot.169
-  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.161, i64 0, i64 1, i64 8)
-  %cancel.170 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.171 = icmp ne i32 %cancel.170, 0
-  br i1 %cancelled.171, label %psumhere.172, label %psumdone.173
-psumhere.172:
-  call void @sg_kernel_task1_private_sum1(ptr %sclo.161, i64 0, i64 1, i32 0)
-  br label %psumdone.173
-psumdone.173:
-  br label %scatterdone.35
-atomic.20:
-  %pc.174 = load i64, ptr %ph.38
-  %pc.175 = sdiv i64 %pc.174, 64
-  %pc.176 = sub i64 %pc.174, %pc.175
-  store i64 %pc.176, ptr %ph.38
-  %pc.177 = load i64, ptr %ph.41
-  %pc.178 = sdiv i64 %pc.177, 64
-  %pc.179 = sub i64 %pc.177, %pc.178
-  store i64 %pc.179, ptr %ph.41
+  %pslot.161 = getelementptr i64, ptr %sclo.160, i64 0
+  store ptr %priv.117, ptr %pslot.161
+  %pslot.162 = getelementptr i64, ptr %sclo.160, i64 1
+  store ptr %real.158, ptr %pslot.162
+  %pslot.163 = getelementptr i64, ptr %sclo.160, i64 2
+  store i64 %cv.9, ptr %pslot.163
+  %pslot.164 = getelementptr i64, ptr %sclo.160, i64 3
+  store i64 8, ptr %pslot.164
+  %pslot.165 = getelementptr i64, ptr %sclo.160, i64 4
+  store ptr %priv.138, ptr %pslot.165
+  %pslot.166 = getelementptr i64, ptr %sclo.160, i64 5
+  store i64 64, ptr %pslot.166
+  %pslot.167 = getelementptr i64, ptr %sclo.160, i64 6
+  store ptr %ph.38, ptr %pslot.167
+  %pslot.168 = getelementptr i64, ptr %sclo.160, i64 7
+  store i64 16, ptr %pslot.168
+  call void %cv.7(ptr @sg_kernel_task1_private_sum1, ptr %sclo.160, i64 0, i64 1, i64 8)
+  %cancel.169 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.170 = icmp ne i32 %cancel.169, 0
+  br i1 %cancelled.170, label %psumhere.171, label %psumdone.172
+psumhere.171:
+  call void @sg_kernel_task1_private_sum1(ptr %sclo.160, i64 0, i64 1, i32 0)
+  br label %psumdone.172
+psumdone.172:
+  br label %scatterdone.34
+atomic.19:
+  %pc.173 = load i64, ptr %ph.35
+  %pc.174 = sdiv i64 %pc.173, 64
+  %pc.175 = sub i64 %pc.173, %pc.174
+  store i64 %pc.175, ptr %ph.35
+  %pc.176 = load i64, ptr %ph.38
+  %pc.177 = sdiv i64 %pc.176, 64
+  %pc.178 = sub i64 %pc.176, %pc.177
+  store i64 %pc.178, ptr %ph.38
   call void %cv.7(ptr @sg_kernel_task1, ptr %clo.3, i64 %b.4, i64 %e.5, i64 455)
-  br label %scatterdone.35
-scatterdone.35:
-  %cancel.180 = load atomic i32, ptr %cv.2 monotonic, align 4
-  %cancelled.181 = icmp ne i32 %cancel.180, 0
-  br i1 %cancelled.181, label %stop.182, label %go.183
-stop.182:
+  br label %scatterdone.34
+scatterdone.34:
+  %cancel.179 = load atomic i32, ptr %cv.2 monotonic, align 4
+  %cancelled.180 = icmp ne i32 %cancel.179, 0
+  br i1 %cancelled.180, label %stop.181, label %go.182
+stop.181:
   call void @sg_report(ptr %ctx, i64 -1, i64 0)
   ret void
-go.183:
+go.182:
   ret void
 }
 
