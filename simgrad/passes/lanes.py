@@ -291,10 +291,7 @@ class _Rewrite:
         b = Builder(body)
         b.loc = loop.loc
         self.b = b
-        self.base = b.add(begin, b.mul(loop, b.const(w, self.ity)))
-        left = b.sub(end, self.base)
-        wide = b.const(w, self.ity)
-        self.n = b.cast(b.select(b.lt(left, wide), left, wide), dt.i32)
+        self.base, self.n = self._group_start(b, begin, end)
         allocas = {id(x): x for x in walk(loop.blocks[0]) if x.op is Op.ALLOCA}
         for a in allocas.values():
             if id(a) in self.lane_local:
@@ -314,6 +311,14 @@ class _Rewrite:
         for x in before.stmts:
             x.block = self.outer
         return before.stmts
+
+    def _group_start(self, b: Builder, begin: Stmt, end: Stmt) -> tuple[Stmt, Stmt]:
+        """The group's first iteration (its lane 0's index) and its count of iterations (i32, at most W)."""
+        w = self.width
+        base = b.add(begin, b.mul(self.loop, b.const(w, self.ity)))
+        left = b.sub(end, base)
+        wide = b.const(w, self.ity)
+        return base, b.cast(b.select(b.lt(left, wide), left, wide), dt.i32)
 
     def _make_slots(self, b: Builder) -> None:
         """A lane slot (ALLOCA of W values) per value crossing parts; `self.spread[key]` = (k, c) places a value at

@@ -26,6 +26,16 @@ The lane loop of a step that touches memory is marked `parallel_lanes`: codegen 
 group its loop ID names (no lane stores to an element another lane reads or stores), so LLVM vectorises it with
 gathers and masked stores, needing no run-time overlap checks (which it cannot build for gathers).
 
+Uniform counted loops (`_Uniformity`): when every lane of a group counts the same trips (the rasterizer's tile of
+8 pixels in a row shares its triangle count and list), the loop stays a loop at the group's level, its statements
+that are the same for every lane (the triangle's index and vertices: loads of fields the loop does not write, at
+uniform indices, and pure arithmetic of those) run once per trip, and the rest in one lane loop under `lane < n`:
+scalar loads broadcast, not gathers. Uniformity follows the index: a value is X + lane with X a multiple of W (the
+innermost axis' index, groups cut per row when the row length is no multiple of W), and floor-dividing such a value
+by a multiple of W gives one value for the group. At the host's width (-1) the pass runs only such loops, at the
+widest power of two of f32 lanes down to 4 that makes some data-sized count uniform, and only where no uniform loop
+gathers at lanes' own indices.
+
 Every bit stays: each lane executes its iteration's scalar operations, loads and stores in the scalar order. The
 iterations' parts interleave otherwise than in the scalar loop, so nothing they share may be seen: an element of a
 field the loop stores to is the iteration's own (stored and read by it alone, `_owned` per field; every ndarray
@@ -52,29 +62,41 @@ MAX_TRIPS = 64
 MAX_UNROLLED = 2048
 
 
-#: whether the host's default width (ti.init(simt_lanes=-1)) runs this pass too: not yet, as it did not pay on the
-#: machine measured (AMD Zen 5, whose gathers cost about a scalar load per element: docs/ARCHITECTURE.md, SIMT lanes)
-AT_DEFAULT_WIDTH = False
-
-
 def lanes_memory(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
     """Rewrite every top-level parallel loop passes/lanes.py left that matches (see the module's doc) to run `width`
-    lanes at a time: at a width the program asked for (ti.init(simt_lanes=W), W > 1); at the host's (-1) only with
-    AT_DEFAULT_WIDTH, then one vector register of f32 (16 lanes measured faster than passes/lanes.py's 64: lanes
-    whose counts differ idle less)."""
-    if width < 0 and AT_DEFAULT_WIDTH and vector_bits > 0:
-        width = max(8, vector_bits // 32)
-    if width <= 1:
+    lanes at a time: at a width the program asked for (ti.init(simt_lanes=W), W > 1), and at the host's (-1) where
+    every lock-step loop is a uniform one, at a width `_group_uniformity` picks. (Lanes that gather at their own
+    indices lost to the scalar loop on the machine measured, AMD Zen 5, whose gathers cost about a scalar load per
+    element: docs/ARCHITECTURE.md, SIMT lanes.)"""
+    if width == 0 or width == 1 or (width < 0 and vector_bits <= 0):
         return False
 
     def rewrite(loop: Stmt) -> list[Stmt] | None:
-        matched = _match(loop)
+        uni = _group_uniformity(loop, width, vector_bits)
+        if uni is None:
+            return None
+        matched = _match(loop, uni, all_uniform=width < 0)
         if matched is None:
             return None
         parts, counted = matched
-        return _MemoryRewrite(loop, parts, width, vector_bits, kernel.body, counted).run()
+        return _MemoryRewrite(loop, parts, uni.width, vector_bits, kernel.body, counted, uni).run()
 
     return rewrite_loops(kernel, rewrite)
+
+
+def _group_uniformity(loop: Stmt, width: int, vector_bits: int) -> _Uniformity | None:
+    """The lanes' uniformity at the width the program asked for; at the host's (-1), at the widest of one f32
+    vector register's lanes down to 4 where some counted loop's trip count is the same for all lanes of a group
+    (None: none is, and the host's width leaves the loop alone)."""
+    if width > 0:
+        return _Uniformity(loop, width)
+    w = max(8, vector_bits // 32)
+    while w >= 4:
+        uni = _Uniformity(loop, w)
+        if uni.pays():
+            return uni
+        w //= 2
+    return None
 
 
 # -- what the loop does to memory ----------------------------------------------------------------------------
@@ -148,9 +170,11 @@ def _dense(ptr: Stmt) -> bool:
 
 
 # -- matching ------------------------------------------------------------------------------------------------
-def _match(loop: Stmt) -> tuple[list[list[Stmt] | Stmt], dict[int, tuple[Stmt, Stmt]]] | None:
-    """The loop body cut into parts as passes/lanes.py `_match` does, its counted lock-step loops made whiles, and
-    for those {id(while): (its counter, its end)}; None (and the loop untouched) when the loop does not qualify."""
+def _match(loop: Stmt, uni: _Uniformity, all_uniform: bool) \
+        -> tuple[list[list[Stmt] | Stmt], dict[int, tuple[Stmt, Stmt]]] | None:
+    """The loop body cut into parts as passes/lanes.py `_match` does, its counted lock-step loops made whiles (the
+    uniform ones, `uni.steps`, stay loops), and for those {id(while): (its counter, its end)}; None (and the loop
+    untouched) when the loop does not qualify, or with `all_uniform` some lock-step loop is not uniform."""
     plan = loop.attrs.get("strategy")
     if not isinstance(plan, LoopStrategy) or plan.regions:
         return None
@@ -164,7 +188,7 @@ def _match(loop: Stmt) -> tuple[list[list[Stmt] | Stmt], dict[int, tuple[Stmt, S
     steps = [s for s in body.stmts
              if (s.op is Op.WHILE or (s.op is Op.RANGE_FOR and not s.attrs.get("parallel")))
              and _lockstep(s, mem, inside)]
-    if not steps:
+    if not steps or (all_uniform and any(id(s) not in uni.steps for s in steps)):
         return None
     step_ids = {id(s) for s in steps}
     segments: list[list[Stmt]] = [[]]
@@ -187,7 +211,7 @@ def _match(loop: Stmt) -> tuple[list[list[Stmt] | Stmt], dict[int, tuple[Stmt, S
         if id(s) in step_ids:
             seg = parts[-1]
             assert isinstance(seg, list)
-            if s.op is Op.RANGE_FOR:
+            if s.op is Op.RANGE_FOR and id(s) not in uni.steps:
                 end = s.operands[1]
                 before, s = _as_while(s)
                 counted[id(s)] = (before[0], end)
@@ -305,6 +329,137 @@ def _as_while(loop: Stmt) -> tuple[list[Stmt], Stmt]:
     return [counter, init], w
 
 
+# -- what every lane of a group shares ------------------------------------------------------------------------
+#: how a value varies over a group's lanes: the same for every lane, or X + lane with X a multiple of the width
+#: (the lane's own index on the innermost axis: `j` of `for i, j in pixels`), X >= 0 or not
+UNIFORM, ALIGNED, ALIGNED_NONNEG = "uniform", "aligned", "aligned>=0"
+_ALIGNED_OPS = {Op.CAST, Op.ADD, Op.SUB, Op.FLOORDIV, Op.RAW_DIV, Op.MOD, Op.RAW_MOD, Op.SHR}
+
+
+def _row_length(loop: Stmt, width: int) -> int | None:
+    """M when the loop runs over rows of M iterations, M no multiple of the width (`raw_mod(i, M)` in the body of a
+    loop over [0, rows * M)): its groups are then cut per row, so that a group's iterations share the row (a tile
+    of 8 pixels shares its triangle list; 500-pixel rows in 8-lane groups would straddle rows)."""
+    begin, end = loop.operands
+    if begin.op is not Op.CONST or int(begin.attrs["value"]) != 0 or end.op is not Op.CONST:
+        return None
+    total = int(end.attrs["value"])
+    for x in loop.blocks[0].stmts:
+        if x.op is Op.RAW_MOD and x.operands[0] is loop and x.operands[1].op is Op.CONST:
+            m = int(x.operands[1].attrs["value"])
+            if m > 0 and total % m == 0 and m % width:
+                return m
+    return None
+
+
+class _Uniformity:
+    """Which statements of the parallel body have one value for every active lane of a group of `width` iterations
+    (`kind`: UNIFORM), or are X + lane with X a multiple of the width (ALIGNED: the innermost axis' index), and which
+    serial counted loops at its top level run the same trips in every lane (`steps`: bounds uniform, no break or
+    continue). Only statements every iteration runs count (the body's top level and such loops' top level): a
+    group runs them once, as lane 0 (always an active lane), before the lanes. Rules: constants and values from
+    outside the loop are uniform; pure operations and loads of fields the loop does not write are uniform in uniform
+    operands; X + lane floor-divided by a multiple of the width is uniform (lanes 0..W-1 stay in one block of it),
+    taken modulo one stays aligned, as does adding a multiple of the width or widening it."""
+
+    def __init__(self, loop: Stmt, width: int):
+        self.loop = loop
+        self.width = width
+        self.rows = _row_length(loop, width)
+        body = loop.blocks[0]
+        self.inside = {id(x) for x in walk(body)}
+        self.mem = _Memory(loop, self.inside)
+        self.kind: dict[int, str] = {}
+        self.steps: set[int] = set()
+        self._visit(body.stmts)
+
+    def of(self, o: Stmt) -> str | None:
+        if o.op is Op.CONST or id(o) not in self.inside and o is not self.loop:
+            return UNIFORM
+        if o is self.loop:
+            begin = self.loop.operands[0]
+            if self.rows is None and begin.op is Op.CONST and int(begin.attrs["value"]) % self.width == 0:
+                return ALIGNED_NONNEG if int(begin.attrs["value"]) >= 0 else ALIGNED
+            return None
+        return self.kind.get(id(o))
+
+    def uniform(self, s: Stmt) -> bool:
+        """A statement of the body that the group runs once (statements made after the analysis are not)."""
+        return self.kind.get(id(s)) == UNIFORM
+
+    def _visit(self, stmts: list[Stmt], top: bool = True) -> None:
+        for s in stmts:
+            k = self._classify(s)
+            if k is not None:
+                self.kind[id(s)] = k
+            if s.op is Op.RANGE_FOR and k == UNIFORM:
+                if top:
+                    self.steps.add(id(s))
+                self._visit(s.blocks[0].stmts, top=False)
+
+    def pays(self) -> bool:
+        """Whether the host's width should take the loop: a uniform loop whose trips are data (LLVM vectorises no
+        loop around one), and no uniform loop loading at lanes' own indices (gathers) but its own elements."""
+        counted = False
+        for x in self.loop.blocks[0].stmts:
+            if id(x) not in self.steps:
+                continue
+            counted = counted or any(o.op is not Op.CONST for o in x.operands)
+            for y in walk(x.blocks[0]):
+                if y.op is Op.GLOBAL_LOAD and not self.uniform(y) \
+                        and _key(y.operands[0].attrs["target"]) not in self.mem.owned:
+                    return False
+        return counted
+
+    def _classify(self, s: Stmt) -> str | None:
+        op = s.op
+        kinds = [self.of(o) for o in s.operands]
+        if op is Op.RANGE_FOR:
+            jumps = any(x.op in (Op.BREAK, Op.CONTINUE) for x in walk(s.blocks[0]))
+            ok = not s.attrs.get("parallel") and not jumps and all(k == UNIFORM for k in kinds) \
+                and _lockstep(s, self.mem, self.inside)
+            return UNIFORM if ok else None
+        if op is Op.GLOBAL_LOAD:
+            ptr = s.operands[0]
+            free = ptr.op is Op.GLOBAL_PTR and _key(ptr.attrs["target"]) not in self.mem.written
+            return UNIFORM if free and kinds[0] == UNIFORM else None
+        if op not in PURE or op is Op.TREE_ROOT:
+            return None
+        if all(k == UNIFORM for k in kinds):
+            return UNIFORM
+        return self._aligned(s, kinds)
+
+    def _aligned(self, s: Stmt, kinds: list) -> str | None:
+        """The kind of an integer operation on an aligned value and a constant."""
+        op, w = s.op, self.width
+        if op is Op.RAW_MOD and self.rows is not None and s.operands[0] is self.loop \
+                and s.operands[1].op is Op.CONST and int(s.operands[1].attrs["value"]) == self.rows:
+            return ALIGNED_NONNEG  # the row's own index: J0 + lane, J0 a multiple of W
+        if op is Op.RAW_DIV and self.rows is not None and s.operands[0] is self.loop \
+                and s.operands[1].op is Op.CONST and int(s.operands[1].attrs["value"]) % self.rows == 0:
+            return UNIFORM  # (row * M + J0 + lane) // (r * M): the row's
+        if op not in _ALIGNED_OPS or not s.vtype.is_int or kinds[0] not in (ALIGNED, ALIGNED_NONNEG):
+            return None
+        if op is Op.CAST:
+            src = s.operands[0].vtype
+            return kinds[0] if src.is_int and s.vtype.bits >= src.bits and (s.vtype.is_signed or kinds[0] ==
+                                                                          ALIGNED_NONNEG) else None
+        c = s.operands[1] if len(s.operands) == 2 else None
+        if c is None or c.op is not Op.CONST:
+            return None
+        v = int(c.attrs["value"])
+        nonneg = kinds[0] == ALIGNED_NONNEG
+        if op in (Op.ADD, Op.SUB) and v % w == 0:
+            return ALIGNED_NONNEG if nonneg and (v >= 0) == (op is Op.ADD) else ALIGNED
+        if v > 0 and v % w == 0 and (op is Op.FLOORDIV or op is Op.RAW_DIV and nonneg):
+            return UNIFORM
+        if v > 0 and v % w == 0 and (op is Op.MOD or op is Op.RAW_MOD and nonneg):
+            return ALIGNED_NONNEG
+        if op is Op.SHR and 0 <= v < s.vtype.bits and (1 << v) % w == 0 and (nonneg or s.vtype.is_signed):
+            return UNIFORM
+        return None
+
+
 # -- slices of own elements in lane slots ---------------------------------------------------------------------
 #: at most this many elements of a target in one lane's slice, and slice elements times lanes
 MAX_SLICE = 64
@@ -403,8 +558,13 @@ class _MemoryRewrite(_Rewrite):
     """passes/lanes.py's rewrite, whose steps also load, store and run nested counted loops (module doc)."""
 
     def __init__(self, loop: Stmt, parts: list, width: int, vector_bits: int, outer: Block,
-                 counted: dict[int, tuple[Stmt, Stmt]]):
+                 counted: dict[int, tuple[Stmt, Stmt]], uni: _Uniformity):
         super().__init__(loop, parts, width, vector_bits, outer)
+        self.uni = uni
+        # uniform statements run once per group, as lane 0 (`_hoist`): no lane slots; `group` maps a statement to
+        # its value at the group's level (itself, moved there, or a copy computed for lane 0)
+        self.crossing = {k: o for k, o in self.crossing.items() if not uni.uniform(o)}
+        self.group: dict[int, Stmt] = {}
         self.counted = counted
         self.memory_step = False
         self.slices: dict[object, _Slice] = {}
@@ -424,9 +584,112 @@ class _MemoryRewrite(_Rewrite):
                             self.first_store[id(a)] = first
                             self.lane_local.discard(id(a))
 
+    # -- uniform statements and loops --------------------------------------------------------------------------
+    def _group_start(self, b: Builder, begin: Stmt, end: Stmt) -> tuple[Stmt, Stmt]:
+        """Groups cut per row when the uniformity's rows are (`_row_length`): group g is row g // C's lanes from
+        J0 = (g % C) * W, C = ceil(M / W) groups a row, the last one short."""
+        m = self.uni.rows
+        if m is None:
+            return super()._group_start(b, begin, end)
+        per_row = -(-m // self.width)
+        t = self.ity
+        row = b.emit(Op.RAW_DIV, t, (self.loop, b.const(per_row, t)))
+        first = b.mul(b.emit(Op.RAW_MOD, t, (self.loop, b.const(per_row, t))), b.const(self.width, t))
+        left = b.sub(b.const(m, t), first)
+        wide = b.const(self.width, t)
+        return b.add(b.mul(row, b.const(m, t)), first), b.cast(b.select(b.lt(left, wide), left, wide), dt.i32)
+
+    def _group_count(self, b: Builder, begin: Stmt, end: Stmt) -> Stmt:
+        m = self.uni.rows
+        if m is None:
+            return super()._group_count(b, begin, end)
+        return b.const(int(end.attrs["value"]) // m * -(-m // self.width), self.ity)
+
+    def _hoist(self, stmts: list[Stmt]) -> list[Stmt]:
+        """Move the uniform statements of `stmts` to the group's level (the builder's block), in order; returns the
+        others."""
+        rest = []
+        for s in stmts:
+            if not self.uni.uniform(s) or s.op is Op.RANGE_FOR:
+                rest.append(s)
+                continue
+            s.operands = tuple(self._group_value(o) for o in s.operands)
+            s.block = self.b.block
+            self.b.block.stmts.append(s)
+            self.group[id(s)] = s
+        return rest
+
+    def _group_value(self, o: Stmt) -> Stmt:
+        """o at the group's level: lane 0's value (a uniform statement moved there, an aligned one computed again)."""
+        if o.op is Op.CONST or (id(o) not in self.uni.inside and o is not self.loop):
+            return o
+        if o is self.loop:
+            return self.base
+        got = self.group.get(id(o))
+        if got is None:
+            assert self.uni.of(o) in (ALIGNED, ALIGNED_NONNEG), o
+            got = self.b.emit(o.op, o.type, tuple(self._group_value(x) for x in o.operands), dict(o.attrs))
+            self.group[id(o)] = got
+        return got
+
+    def _operand(self, o: Stmt) -> Stmt:
+        got = self.group.get(id(o))
+        if got is not None and self.uni.uniform(o):
+            return got
+        return super()._operand(o)
+
+    def _segment(self, k: int, stmts: list[Stmt], followed: bool) -> None:
+        super()._segment(k, self._hoist(stmts), followed)
+
+    def _uniform_step(self, k: int, loop: Stmt) -> None:
+        """A counted loop with the same trips in every lane: the loop itself at the group's level, each trip its
+        uniform statements once, then the others in one lane loop over all W lanes under `lane < n`. Its slices
+        are loaded before it and stored after, when it runs at all."""
+        outer_b = self.b
+        begin, end = (self._group_value(o) for o in loop.operands)
+        runs = self.b.emit(Op.IF, None, (self.b.lt(begin, end),), nblocks=2)
+        self.b = Builder(runs.blocks[0])
+        self.b.loc = loop.loc
+        self.slices = self.step_slices.get(k, {})
+        for sl in self.slices.values():
+            sl.read = True  # the lane's own elements: loaded whole, stored back whole
+            sl.slot = self.b.emit(Op.ALLOCA, sl.target.dtype, (), {"lanes": sl.size * self.width})
+        self._slice_loop(k, load=True)
+        stmts = loop.blocks[0].stmts
+        loop.operands = (begin, end)
+        loop.blocks = (Block(loop),)
+        loop.block = self.b.block
+        self.b.block.stmts.append(loop)
+        self.group[id(loop)] = loop
+        around_b, saved = self.b, dict(self.group)  # values computed in a trip stay in it
+        self.b = Builder(loop.blocks[0])
+        self.b.loc = loop.loc
+        rest = self._hoist(stmts)
+        self.memory_step = any(x.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE) and
+                               _key(x.operands[0].attrs["target"]) not in self.slices for x in _walk_list(rest))
+        lanes, lb = self._lane_loop(self.b.const(self.width, dt.i32))
+        self._enter(k, lanes, lb)
+        lb.loc = loop.loc
+        self.broke = None
+        self.store_if = None
+        body = Block(lanes)
+        self._predicated(rest, lb.lt(lanes, self.n), body)
+        for x in body.stmts:
+            x.block = lanes.blocks[0]
+        lanes.blocks[0].stmts += body.stmts
+        self.memory_step = False
+        self.group = saved
+        self.b = around_b
+        self._slice_loop(k, load=False)
+        self.slices = {}
+        self.b = outer_b
+
     def _step(self, k: int, w: Stmt) -> None:
         """The step loop, its slices loaded before and stored after it; a counted loop's only when a lane enters it
         (a group of iterations whose counts are all 0 does no step: loads, slices, nothing)."""
+        if id(w) in self.uni.steps:
+            self._uniform_step(k, w)
+            return
         outer_b = self.b
         self.slices = self.step_slices.get(k, {})
         for sl in self.slices.values():

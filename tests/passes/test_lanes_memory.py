@@ -11,6 +11,8 @@ import pytest
 
 import simgrad as ti
 from simgrad.ir.nodes import walk
+from simgrad.ir.ops import Op
+from simgrad.runtime.jit import get_jit
 from tests.passes.test_lanes import _both, _simt_loops, _task
 
 
@@ -99,12 +101,132 @@ def test_rasterizer_step_is_vector_code():
             assert "masked.scatter" not in task  # own elements through lane slots, not scattered
 
 
-def test_default_width_leaves_memory_loops_alone():
-    """At the host's width (-1) the pass does not run: on the machine measured (AMD Zen 5) a gather costs about a
-    scalar load per element, and the rasterizer's lock step lost on light frames."""
+def test_host_width_leaves_lanes_own_counts_alone():
+    """At the host's width (-1) a loop whose lanes count to bounds of their own is left alone: its lock step gathers
+    at each lane's index, and on the machine measured (AMD Zen 5) a gather costs about a scalar load per element.
+    3-pixel tiles: no power-of-two group of lanes shares a tile."""
     ti.init(arch=ti.cpu)
-    _, kernel, args = _rasterizer(16, 16, 3)
+    _, kernel, args = _rasterizer(16, 16, 3, tile=3)
     assert not _simt_loops(kernel, args)
+
+
+# -- uniform counted loops: the host's width -------------------------------------------------------------------
+def _host_lanes(tile: int) -> int:
+    return min(tile, max(8, get_jit().vector_bits() // 32))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
+@pytest.mark.parametrize("shape, tile", [((37, 29), 8), ((40, 24), 8), ((19, 45), 4), ((33, 17), 16)])
+def test_host_width_runs_shared_tiles_once_per_group(shape, tile, dtype, threads):
+    """Lanes of one tile share its triangle list: the group runs the counted loop once, loading each triangle once,
+    and only the sub-sample tests per lane. Rows of 29, 45 and 17 pixels are no multiple of the width (groups cut
+    per row, the last one short), 24 is (groups over the whole range); bit for bit the scalar loop's."""
+    (samples, pixels), kernel, args = _both(lambda: _rasterizer(*shape, 7, dtype, tile=tile), threads, lanes=-1,
+                                            default_fp=dtype)
+    (loop,) = _simt_loops(kernel, args)
+    assert loop.attrs["simt"] == _host_lanes(tile)
+    assert (samples != 1.0).any() and (samples == 1.0).any()
+
+
+def test_shared_tile_loads_are_scalar():
+    """The triangles' loads are the group's, once per triangle (in the triangle loop, outside its lane loop), their
+    tests vector code over the lanes; no scatter (own elements through lane slots)."""
+    ti.init(arch=ti.cpu)
+    _, kernel, args = _rasterizer(40, 40, 5, tile=8)
+    (loop,) = _simt_loops(kernel, args)
+    (guard,) = [s for s in loop.blocks[0].stmts if s.op is Op.IF]  # the triangle loop runs when it has trips
+    (triangles,) = [s for s in guard.blocks[0].stmts if s.op is Op.RANGE_FOR and not s.attrs.get("lanes")]
+    loads = [s for s in triangles.blocks[0].stmts if s.op is Op.GLOBAL_LOAD]
+    assert len(loads) == 1 + 6 + 9  # the list entry, A B C, c0 c1 c2
+    (lanes,) = [s for s in triangles.blocks[0].stmts if s.op is Op.RANGE_FOR]
+    assert not any(s.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE) for s in walk(lanes.blocks[0]))
+    task = _task(kernel, args)
+    assert "masked.scatter" not in task
+    assert f"fdiv nsz <{_host_lanes(8)} x float>" in task, task
+
+
+@pytest.mark.parametrize("what", ["ndrange_offsets", "flat", "three_d", "field_offset"])
+def test_uniform_counts_in_other_loop_shapes(what):
+    """ndrange bounds that start off 0 (j = digit + 8: aligned for at most 8 lanes, its // 4 for 4), a 1-D range,
+    a 3-D struct-for's innermost axis, a field with an index offset; per-lane arithmetic on a shared list's
+    entries, a local carried through the loop, own elements stored after it."""
+    def build():
+        lst = ti.field(ti.i32, shape=(40, 40, 6))
+        cnt = ti.field(ti.i32, shape=(40, 40))
+        tab = ti.field(ti.f32, shape=16)
+        out = ti.field(ti.f32, shape=(40, 40))
+        flat = ti.field(ti.f32, shape=203)
+        cube = ti.field(ti.f32, shape=(3, 5, 20))
+        shifted = ti.field(ti.f32, shape=(6, 20), offset=(-2, -4))
+
+        @ti.func
+        def walk_list(a, b, x):
+            acc = x * 0.01
+            for t in range(cnt[a, b]):
+                acc = acc * 0.5 + tab[lst[a, b, t]] * (x - t)
+            return acc
+
+        @ti.kernel
+        def k():
+            if ti.static(what == "ndrange_offsets"):
+                for i, j in ti.ndrange((2, 30), (8, 27)):
+                    out[i, j] = walk_list(i, j // 4, j)
+            if ti.static(what == "flat"):
+                for p in range(203):
+                    flat[p] = walk_list(p // 16, 3, p)
+            if ti.static(what == "three_d"):
+                for i, j, m in cube:
+                    cube[i, j, m] = walk_list(i + j, m // 4, m + i)
+            if ti.static(what == "field_offset"):
+                for i, j in shifted:
+                    shifted[i, j] = walk_list(i + 2, (j + 4) // 4, j)
+
+        rng = np.random.default_rng(11)
+        lst.from_numpy(rng.integers(0, 16, (40, 40, 6)).astype(np.int32))
+        cnt.from_numpy(rng.integers(0, 7, (40, 40)).astype(np.int32))
+        tab.from_numpy(rng.uniform(-1, 1, 16).astype(np.float32))
+        k()
+        return [out.to_numpy(), flat.to_numpy(), cube.to_numpy(), shifted.to_numpy()], k, ()
+
+    arrays, kernel, args = _both(build, lanes=-1)
+    (loop,) = _simt_loops(kernel, args)
+    assert loop.attrs["simt"] == {"ndrange_offsets": 4, "flat": _host_lanes(16), "three_d": 4,
+                                  "field_offset": 4}[what]
+    assert any(a.any() for a in arrays)
+
+
+@pytest.mark.parametrize("index", ["(j + 1) // 8", "j // 8 + j % 2", "lst[i, j, 0] // 8"])
+def test_counts_that_differ_between_lanes_are_left_alone(index):
+    """A tile index off the groups' alignment, one that mixes in the lane's parity, or read at the lane's own
+    element: the lanes' counts may differ, so the host's width leaves the loop alone."""
+    ti.init(arch=ti.cpu)
+    lst = ti.field(ti.i32, shape=(16, 16, 4))
+    cnt = ti.field(ti.i32, shape=(16, 16))
+    out = ti.field(ti.f32, shape=(16, 16))
+    @ti.func
+    def tile(i, j):
+        v = 0
+        if ti.static(index == "(j + 1) // 8"):
+            v = (j + 1) // 8
+        if ti.static(index == "j // 8 + j % 2"):
+            v = j // 8 + j % 2
+        if ti.static(index == "lst[i, j, 0] // 8"):
+            v = lst[i, j, 0] // 8
+        return v
+
+    @ti.kernel
+    def k():
+        for i, j in out:
+            acc = 0.0
+            for t in range(cnt[i, ti.min(tile(i, j), 15)]):
+                acc += lst[i, 3, t]
+            out[i, j] = acc
+
+    cnt.fill(2)
+    k()
+    assert not _simt_loops(k, ())
+    assert (out.to_numpy() == 0).all()
 
 
 def _guarded_list():
