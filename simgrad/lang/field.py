@@ -580,7 +580,13 @@ class MatrixField(Field):
     def fill(self, value) -> None:
         if _in_kernel():
             return _kernel_fill(self, value)
-        for comp, v in zip(self.comps, self._entries(value)):
+        entries = self._entries(value)
+        if len(np.unique(entries.view(f"u{entries.itemsize}"))) == 1:  # one value, bit for bit (0.0 is not -0.0)
+            packed = self._packed_view()
+            if packed is not None and packed.flags.c_contiguous:  # the cells hold nothing else: one pass
+                packed.reshape(-1)[...] = entries[0]
+                return
+        for comp, v in zip(self.comps, entries):
             comp.fill(v)
 
     def _entries(self, value) -> np.ndarray:

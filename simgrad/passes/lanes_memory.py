@@ -652,8 +652,9 @@ class _MemoryRewrite(_Rewrite):
         self.b.loc = loop.loc
         self.slices = self.step_slices.get(k, {})
         for sl in self.slices.values():
-            sl.read = True  # the lane's own elements: loaded whole, stored back whole
             sl.slot = self.b.emit(Op.ALLOCA, sl.target.dtype, (), {"lanes": sl.size * self.width})
+            if not sl.read:
+                sl.dirty = self.b.emit(Op.ALLOCA, dt.i32, (), {"lanes": sl.size * self.width})
         self._slice_loop(k, load=True)
         stmts = loop.blocks[0].stmts
         loop.operands = (begin, end)

@@ -196,3 +196,27 @@ def test_kernel_with_fill_is_taken_from_the_kernel_cache(tmp_path):
         outs.append(json.loads(next(s for s in proc.stdout.splitlines() if s.startswith("RESULT "))[7:]))
     assert outs[0] == [[[2.5, 2.5]] * 5, 0]
     assert outs[1] == [[[2.5, 2.5]] * 5, 1]
+
+
+@pytest.mark.parametrize("value", [[1.0, 1.0, 1.0], [0.0, -0.0, 0.0], [1.0, 2.0, 3.0], 7.5])
+@pytest.mark.parametrize("layout", ["alone", "shared_cells", "soa"])
+def test_python_scope_fill_of_vector_fields(value, layout):
+    """Python-scope fill of a vector field: one value for every component (written in one pass where the cells
+    hold nothing else), different ones, 0.0 next to -0.0 (different bits); neighbours in the same cells (a scalar
+    field placed beside it) and a struct-of-arrays layout keep their values. Compared with numpy, bit for bit."""
+    ti.init(arch=ti.cpu)
+    v = ti.Vector.field(3, ti.f32, shape=(7, 5), layout=ti.Layout.SOA) if layout == "soa" else \
+        ti.Vector.field(3, ti.f32)
+    other = ti.field(ti.f32)
+    if layout == "alone":
+        ti.root.dense(ti.ij, (7, 5)).place(v)
+        ti.root.dense(ti.i, 4).place(other)
+    elif layout == "shared_cells":
+        ti.root.dense(ti.ij, (7, 5)).place(v, other)
+    else:
+        ti.root.dense(ti.ij, (7, 5)).place(other)
+    other.fill(-4.0)
+    v.fill(value)
+    want = np.broadcast_to(np.asarray(value, np.float32), (7, 5, 3))
+    np.testing.assert_array_equal(v.to_numpy().view(np.uint32), want.view(np.uint32))
+    assert (other.to_numpy() == -4.0).all()
