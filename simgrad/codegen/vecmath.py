@@ -118,6 +118,29 @@ def _slow_functions(name: str, arity: int) -> list[str]:
     return out
 
 
+#: functions whose value where every operand is zero is exact and cheap (cos 0 = 1, exp 0 = 1, sin +-0 = +-0,
+#: tan +-0 = +-0, atan2(+-0, +0) = +-0), by what the result is: a constant, or the first operand
+_AT_ZERO = {Op.COS: 1.0, Op.EXP: 1.0, Op.SIN: None, Op.TAN: None, Op.ATAN2: None}
+
+
+def _zero_shortcut(op: Op, base: str, w: int, ty: str, arity: int, full: str) -> str:
+    """`{base}_v{w}`: the value at zero when every lane's operands are zeros (the flat part of a field: a zero
+    gradient's angle and its cosine in snow_phaseField), else `full`'s. Bit for bit libm's either way."""
+    vt = f"<{w} x {ty}>"
+    it = f"<{w} x i{64 if ty == 'double' else 32}>"
+    params = ", ".join(f"{vt} %a{i}" for i in range(arity))
+    lines = [f"define internal {vt} @{base}_v{w}({params}) nounwind {{", "entry:",
+             f"  %z{'0' if arity == 2 else ''} = fcmp oeq {vt} %a0, zeroinitializer"]
+    if arity == 2:  # atan2(y, x): x must be +0 (x = -0 gives +-pi)
+        lines += [f"  %xb = bitcast {vt} %a1 to {it}", f"  %z1 = icmp eq {it} %xb, zeroinitializer",
+                  f"  %z = and <{w} x i1> %z0, %z1"]
+    value = "%a0" if _AT_ZERO[op] is None else f"splat ({ty} {_literal(_AT_ZERO[op], ty)})"
+    lines += [f"  %bits = bitcast <{w} x i1> %z to i{w}", f"  %all = icmp eq i{w} %bits, -1",
+              "  br i1 %all, label %zero, label %full", f"zero:\n  ret {vt} {value}",
+              f"full:\n  %r = call {vt} {full}({params})\n  ret {vt} %r", "}"]
+    return "\n".join(lines)
+
+
 def libm_name(op: Op, ty: str) -> str:
     name = (vm.FUNCTIONS if ty == "float" else vm.FUNCTIONS64)[op][0]
     return name + ("f" if ty == "float" else "")
@@ -140,8 +163,11 @@ class _Variants:
             vt = be.t(ty)
             params = ", ".join(f"{vt} %a{i}" for i in range(arity))
             args = ", ".join(f"{vt} %a{i}" for i in range(arity))
-            self.functions.append("\n".join([f"define internal {vt} @{base}_v{w}({params}) nounwind {{", "entry:",
+            full = f"@{base}_v{w}" if op not in _AT_ZERO else f"@{base}_full{w}"
+            self.functions.append("\n".join([f"define internal {vt} {full}({params}) nounwind {{", "entry:",
                                              *be.lines, f"  ret {vt} {r.h}", "}"]))
+            if op in _AT_ZERO:
+                self.functions.append(_zero_shortcut(op, base, w, ty, arity, full))
             # masked: nothing computed when no lane is on (a vectorised branch its loop rarely takes, the else
             # side of snow_phaseField's `if gradNorm < 1e-8` on a mostly flat field); off lanes are don't-care
             self.functions.append(f"define internal {vt} @{base}_m{w}({params}, <{w} x i1> %m) nounwind {{\n"

@@ -384,3 +384,49 @@ def test_f64_gradients_match_central_differences(name):
     np.testing.assert_allclose(gx_got, (ref(xs + h, ys) - ref(xs - h, ys)) / (2 * h), rtol=1e-7, atol=1e-8)
     if name == "atan2":
         np.testing.assert_allclose(gy_got, (ref(xs, ys + h) - ref(xs, ys - h)) / (2 * h), rtol=1e-7, atol=1e-8)
+
+
+@pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
+def test_vectors_of_zeros_take_the_exact_value_at_zero(dtype):
+    """A vector whose lanes are all zeros returns the value at zero without the full algorithm (snow_phaseField's
+    flat field: a zero gradient's angle and its cosine). Blocks of 64 elements (whole vectors): +0, -0 (sin and
+    atan2 keep the sign), +-0 mixed, zeros with one nonzero lane, random values; atan2's x +0 (the value is y),
+    -0 (+-pi: no shortcut) and random. Every element is libm's bits where both operands are zeros, the model's
+    in the vector body elsewhere."""
+    ti.init(arch=ti.cpu, flush_denormals=False, cpu_max_num_threads=1, default_fp=dtype)
+    single = dtype is ti.f32  # (f64 has no vector tan)
+    t = dt.f32 if single else dt.f64
+    f = t.np
+    rng = np.random.default_rng(5)
+    blocks = [np.zeros(64), np.full(64, -0.0), np.where(rng.random(64) < 0.5, 0.0, -0.0),
+              np.where(np.arange(64) == 37, 0.25, 0.0), rng.uniform(-3, 3, 64)]
+    ys = np.concatenate(blocks * 3).astype(f)
+    xs = np.concatenate([np.zeros(320), np.full(320, -0.0), np.full(64, np.nan), rng.uniform(-3, 3, 256)]).astype(f)
+    n = len(ys) + 7  # a scalar remainder
+    ys, xs = np.concatenate([ys, np.zeros(7, f)]), np.concatenate([xs, np.zeros(7, f)])
+    y, x = ti.field(dtype, n), ti.field(dtype, n)
+    out = ti.field(dtype, (5, n))
+    y.from_numpy(ys)
+    x.from_numpy(xs)
+
+    @ti.kernel
+    def run():
+        for i in range(n):
+            out[0, i] = ti.sin(y[i])
+            out[1, i] = ti.cos(y[i])
+            out[2, i] = ti.exp(y[i])
+            out[3, i] = ti.atan2(y[i], x[i])
+            out[4, i] = ti.tan(y[i]) if ti.static(single) else ti.sin(y[i])
+
+    run()
+    got = out.to_numpy()
+    same = _same_bits if dtype is ti.f32 else _same64
+    algos = ALGO if dtype is ti.f32 else ALGO64
+    zero_y = ys == 0
+    for k, name, args in ((0, "sin", (ys,)), (1, "cos", (ys,)), (2, "exp", (ys,)), (3, "atan2", (ys, xs)),
+                          (4, "tan" if dtype is ti.f32 else "sin", (ys,))):
+        zeros = zero_y & (xs == 0) if name == "atan2" else zero_y
+        assert same(got[k][zeros], _libm(name, t, *(a[zeros] for a in args))).all(), name
+        body = ~zeros & (np.arange(n) < n - 128)
+        assert same(got[k][body], vm.evaluate(algos[name], *(a[body] for a in args),
+                                               **({} if dtype is ti.f32 else {"f64": True}))).all(), name
