@@ -565,6 +565,8 @@ class _MemoryRewrite(_Rewrite):
         # its value at the group's level (itself, moved there, or a copy computed for lane 0)
         self.crossing = {k: o for k, o in self.crossing.items() if not uni.uniform(o)}
         self.group: dict[int, Stmt] = {}
+        # an aligned statement's operands as the body had them (a lane loop it moves into rewrites them)
+        self.aligned = {id(x): x.operands for x in walk(loop.blocks[0]) if uni.of(x) in (ALIGNED, ALIGNED_NONNEG)}
         self.counted = counted
         self.memory_step = False
         self.slices: dict[object, _Slice] = {}
@@ -627,8 +629,7 @@ class _MemoryRewrite(_Rewrite):
             return self.base
         got = self.group.get(id(o))
         if got is None:
-            assert self.uni.of(o) in (ALIGNED, ALIGNED_NONNEG), o
-            got = self.b.emit(o.op, o.type, tuple(self._group_value(x) for x in o.operands), dict(o.attrs))
+            got = self.b.emit(o.op, o.type, tuple(self._group_value(x) for x in self.aligned[id(o)]), dict(o.attrs))
             self.group[id(o)] = got
         return got
 

@@ -146,7 +146,7 @@ def test_shared_tile_loads_are_scalar():
     assert f"fdiv nsz <{_host_lanes(8)} x float>" in task, task
 
 
-@pytest.mark.parametrize("what", ["ndrange_offsets", "flat", "three_d", "field_offset"])
+@pytest.mark.parametrize("what", ["ndrange_offsets", "flat", "three_d", "field_offset", "tile_in_loop"])
 def test_uniform_counts_in_other_loop_shapes(what):
     """ndrange bounds that start off 0 (j = digit + 8: aligned for at most 8 lanes, its // 4 for 4), a 1-D range,
     a 3-D struct-for's innermost axis, a field with an index offset; per-lane arithmetic on a shared list's
@@ -181,6 +181,12 @@ def test_uniform_counts_in_other_loop_shapes(what):
             if ti.static(what == "field_offset"):
                 for i, j in shifted:
                     shifted[i, j] = walk_list(i + 2, (j + 4) // 4, j)
+            if ti.static(what == "tile_in_loop"):  # (j + 4) // 4 - 1: first computed inside the counted loop
+                for i, j in out:
+                    acc = j * 0.01
+                    for t in range(cnt[i, 3]):
+                        acc = acc * 0.5 + tab[lst[i, (j + 4) // 4 - 1, t]] * (j - t)
+                    out[i, j] = acc
 
         rng = np.random.default_rng(11)
         lst.from_numpy(rng.integers(0, 16, (40, 40, 6)).astype(np.int32))
@@ -192,7 +198,7 @@ def test_uniform_counts_in_other_loop_shapes(what):
     arrays, kernel, args = _both(build, lanes=-1)
     (loop,) = _simt_loops(kernel, args)
     assert loop.attrs["simt"] == {"ndrange_offsets": 4, "flat": _host_lanes(16), "three_d": 4,
-                                  "field_offset": 4}[what]
+                                  "field_offset": 4, "tile_in_loop": 4}[what]
     assert any(a.any() for a in arrays)
 
 
