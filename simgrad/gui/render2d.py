@@ -204,6 +204,14 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
                             j = j0 + dj
                             if i <= i1 and j <= j1:
                                 _circle_pixel(img, i, j, cx, cy, r, c)
+                elif j1 - j0 < RUN and img.shape[1] >= RUN:
+                    # a small circle: every column visits RUN rows from the box's top, a loop of constant trip
+                    # count that vectorises (a 7-pixel column is shorter than one vector: scalar remainder code);
+                    # the rows past the box are further than r from the centre, coverage 0, written back as they were
+                    jb = ti.min(j0, img.shape[1] - RUN)
+                    for i in range(i0, i1 + 1):
+                        for dj in range(RUN):
+                            _circle_pixel(img, i, jb + dj, cx, cy, r, c)
                 else:
                     _circle(img, i0, i1, j0, j1, cx, cy, r, c)
 

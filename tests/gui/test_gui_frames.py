@@ -131,6 +131,28 @@ def test_a_few_circles_blend_as_the_kernel_blends(monkeypatch):
     np.testing.assert_array_equal(again, kernel)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_small_circles_at_every_edge_match_the_numpy_blend(monkeypatch, threads):
+    # a circle of fewer than render2d.RUN rows is drawn over RUN rows of each of its columns (moved up at the
+    # bottom edge), the rows past its box written back as they were: the same pixels as the numpy blend of its box
+    import simgrad as ti
+    from simgrad.gui import canvas, render2d
+
+    ti.init(arch=ti.cpu, cpu_max_num_threads=threads)
+    rng = np.random.default_rng(9)
+    base = rng.random((W, H, 3)).astype(np.float32)
+    c = np.array([[10.3, H - 1.2], [W - 0.5, H - 3.3], [30.0, 0.4], [20.6, H / 2]])
+    r = np.array([3.0, 6.5, 2.5, 7.4])
+    rgb = rng.random((4, 3))
+    kernel = base.copy()
+    render2d.circles(kernel, c, r, rgb)
+    monkeypatch.setattr(canvas, "_kernels", lambda: None)
+    few = base.copy()
+    canvas._circles(few, c, r, rgb)
+    np.testing.assert_array_equal(kernel, few)
+    assert (np.abs(kernel - base).max(axis=2) > 0).sum() > 100
+
+
 def test_get_image_writes_one_buffer_again_as_taichi_does():
     # taichi 1.7.4's GUI.get_image copies the canvas into its one `img` buffer and returns it: a later call
     # overwrites what an earlier one returned (no allocation per frame)
