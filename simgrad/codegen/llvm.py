@@ -472,9 +472,13 @@ class KernelCodegen:
         f.names[s] = i
         self.loop_body(f, s, exit_to, latch)  # a break leaves the strips too
         f.emit(f"{nxt} = add {ty} {i}, 1")
-        if s.attrs.get("unroll"):  # lower_access asks for a short loop whose copies fold (OwnBlock)
+        hint = "llvm.loop.unroll.full" if s.attrs.get("unroll") else \
+            "llvm.loop.vectorize.enable" if s.attrs.get("vectorize") else None
+        if hint is not None:  # unroll: lower_access's short loop whose copies fold (OwnBlock); vectorize: a loop of
+            # fewer trips than LLVM's tiny-trip-count threshold (16), which it would leave scalar
             k = 1000 + 2 * len(self.module.globals)
-            self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}", f'!{k + 1} = !{{!"llvm.loop.unroll.full"}}']
+            value = ", i1 true" if hint.endswith("enable") else ""
+            self.module.globals += [f"!{k} = distinct !{{!{k}, !{k + 1}}}", f'!{k + 1} = !{{!"{hint}"{value}}}']
             f.emit(f"br label %{head}, !llvm.loop !{k}")
         else:
             f.emit(f"br label %{head}{self.parallel_latch(f, s)}")

@@ -346,6 +346,8 @@ def _emit_loop(comp, begin, end, body) -> None:
     attrs = {"parallel": parallel, "top": top}
     if cfg.get("block_dim"):
         attrs["block_dim"] = cfg["block_dim"]
+    if cfg.get("vectorize") and not parallel:
+        attrs["vectorize"] = True  # (codegen/llvm.py: llvm.loop.vectorize.enable)
     if cfg.get("listgen"):
         attrs["listgen"] = True  # lists a struct-for's cells: forward code even when parallel (autodiff/reverse.py)
     loop = comp.builder.emit(Op.RANGE_FOR, t, (b.stmt, e.stmt), attrs, nblocks=1)

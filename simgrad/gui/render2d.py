@@ -204,6 +204,12 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
                             j = j0 + dj
                             if i <= i1 and j <= j1:
                                 _circle_pixel(img, i, j, cx, cy, r, c)
+                elif j1 - j0 < RUN // 2 and img.shape[1] >= RUN:  # (radius < 3.5: half the rows)
+                    jb = ti.min(j0, img.shape[1] - RUN // 2)
+                    for i in range(i0, i1 + 1):
+                        ti.loop_config(vectorize=True)
+                        for dj in range(RUN // 2):
+                            _circle_pixel(img, i, jb + dj, cx, cy, r, c)
                 elif j1 - j0 < RUN and img.shape[1] >= RUN:
                     # a small circle: every column visits RUN rows from the box's top, a loop of constant trip
                     # count that vectorises (a 7-pixel column is shorter than one vector: scalar remainder code);
@@ -361,10 +367,19 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, ban
                     if je - jb < RUN and img.shape[1] >= RUN:
                         # a short segment: every column visits the same RUN rows from the box's top, a loop of
                         # constant trip count (no per-column range, no run-time checks before the vector code)
-                        jb = ti.min(jb, img.shape[1] - RUN)
-                        for i in range(i0, i1 + 1):
-                            for dj in range(RUN):
-                                _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
+                        if je - jb < RUN // 2:  # (a mostly horizontal stroke: half the rows)
+                            jb = ti.min(jb, img.shape[1] - RUN // 2)
+                            for i in range(i0, i1 + 1):
+                                ti.loop_config(vectorize=True)
+                                for dj in range(RUN // 2):
+                                    _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb,
+                                                   per_vertex)
+                        else:
+                            jb = ti.min(jb, img.shape[1] - RUN)
+                            for i in range(i0, i1 + 1):
+                                for dj in range(RUN):
+                                    _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb,
+                                                   per_vertex)
                     else:
                         for i in range(i0, i1 + 1):
                             s0, s1 = _near(i + 0.5, ax, dx, near)

@@ -111,13 +111,15 @@ _loop_config: dict = {}
 
 
 def loop_config(*, serialize: bool = False, block_dim: int | None = None, parallelize: int | None = None,
-                block_dim_adaptive: bool = True, bit_vectorize: bool = False):
-    """Applies to the next for loop in the kernel (Taichi semantics)."""
+                block_dim_adaptive: bool = True, bit_vectorize: bool = False, vectorize: bool = False):
+    """Applies to the next for loop in the kernel (Taichi semantics). `vectorize` (simgrad's, not Taichi's): an
+    inner loop of a few known trips that should still be vector code (LLVM leaves loops of fewer than 16 scalar)."""
     from simgrad.ir import context
 
     comp = context.current()
     if comp is not None:
-        comp.next_loop_config = {"serialize": serialize or parallelize == 1, "block_dim": block_dim}
+        comp.next_loop_config = {"serialize": serialize or parallelize == 1, "block_dim": block_dim,
+                                 "vectorize": vectorize}
 
 
 # -- scheduling hints a CPU does not need: accepted so Taichi programs run, with no effect on results -------
