@@ -4,7 +4,9 @@ iterations in lock step. Every result must be bit for bit the one of the same ke
 (ti.init(simt_lanes=0)): per-lane trip counts read from a field (0, small, the most), ranges no multiple of W, loads
 at lane-varying indices that an off lane would take outside the field, own-element stores under an IF, a nested
 constant loop, 2-D struct-fors, f32 and f64. Loops the rewrite must not touch are left alone, and the rewritten
-step is vector code in the optimised LLVM IR."""
+step is vector code in the optimised LLVM IR. At the host's width (-1) only uniform counted loops are taken (a
+tile's shared count and list: rows no multiple of the width, tiles of 4/8/16, other loop shapes), their shared loads
+made once per trip; counts that may differ between lanes are left alone."""
 
 import numpy as np
 import pytest
