@@ -72,7 +72,10 @@ def lanes_memory(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
         return False
 
     def rewrite(loop: Stmt) -> list[Stmt] | None:
-        uni = _group_uniformity(loop, width, vector_bits)
+        if not _eligible(loop):
+            return None
+        inside = {id(x) for x in walk(loop.blocks[0])}
+        uni = _group_uniformity(loop, width, vector_bits, _Memory(loop, inside), inside)
         if uni is None:
             return None
         matched = _match(loop, uni, all_uniform=width < 0)
@@ -84,15 +87,15 @@ def lanes_memory(kernel: Kernel, width: int, vector_bits: int = 0) -> bool:
     return rewrite_loops(kernel, rewrite)
 
 
-def _group_uniformity(loop: Stmt, width: int, vector_bits: int) -> _Uniformity | None:
+def _group_uniformity(loop: Stmt, width: int, vector_bits: int, mem: _Memory, inside: set) -> _Uniformity | None:
     """The lanes' uniformity at the width the program asked for; at the host's (-1), at the widest of one f32
     vector register's lanes down to 4 where some counted loop's trip count is the same for all lanes of a group
     (None: none is, and the host's width leaves the loop alone)."""
     if width > 0:
-        return _Uniformity(loop, width)
+        return _Uniformity(loop, width, mem, inside)
     w = max(8, vector_bits // 32)
     while w >= 4:
-        uni = _Uniformity(loop, w)
+        uni = _Uniformity(loop, w, mem, inside)
         if uni.pays():
             return uni
         w //= 2
@@ -170,21 +173,24 @@ def _dense(ptr: Stmt) -> bool:
 
 
 # -- matching ------------------------------------------------------------------------------------------------
+def _eligible(loop: Stmt) -> bool:
+    """Whether the loop's plan and statements allow lanes at all (before any analysis of its memory)."""
+    plan = loop.attrs.get("strategy")
+    if not isinstance(plan, LoopStrategy) or plan.regions:
+        return False
+    if any(a.vtype.is_float for _place, adds in plan.reductions.values() for a in adds):
+        return False  # a float sum's rounding depends on the pool's chunks
+    return not any(x.op in _REFUSED for x in walk(loop.blocks[0]))
+
+
 def _match(loop: Stmt, uni: _Uniformity, all_uniform: bool) \
         -> tuple[list[list[Stmt] | Stmt], dict[int, tuple[Stmt, Stmt]]] | None:
     """The loop body cut into parts as passes/lanes.py `_match` does, its counted lock-step loops made whiles (the
     uniform ones, `uni.steps`, stay loops), and for those {id(while): (its counter, its end)}; None (and the loop
-    untouched) when the loop does not qualify, or with `all_uniform` some lock-step loop is not uniform."""
-    plan = loop.attrs.get("strategy")
-    if not isinstance(plan, LoopStrategy) or plan.regions:
-        return None
-    if any(a.vtype.is_float for _place, adds in plan.reductions.values() for a in adds):
-        return None  # a float sum's rounding depends on the pool's chunks
+    untouched) when the loop does not qualify, or with `all_uniform` some lock-step loop is not uniform. The loop is
+    `_eligible`; `uni` holds its memory facts."""
     body = loop.blocks[0]
-    inside = {id(x) for x in walk(body)}
-    if any(x.op in _REFUSED for x in walk(body)):
-        return None
-    mem = _Memory(loop, inside)
+    mem, inside = uni.mem, uni.inside
     steps = [s for s in body.stmts
              if (s.op is Op.WHILE or (s.op is Op.RANGE_FOR and not s.attrs.get("parallel")))
              and _lockstep(s, mem, inside)]
@@ -362,16 +368,15 @@ class _Uniformity:
     operands; X + lane floor-divided by a multiple of the width is uniform (lanes 0..W-1 stay in one block of it),
     taken modulo one stays aligned, as does adding a multiple of the width or widening it."""
 
-    def __init__(self, loop: Stmt, width: int):
+    def __init__(self, loop: Stmt, width: int, mem: _Memory, inside: set):
         self.loop = loop
         self.width = width
         self.rows = _row_length(loop, width)
-        body = loop.blocks[0]
-        self.inside = {id(x) for x in walk(body)}
-        self.mem = _Memory(loop, self.inside)
+        self.inside = inside  # the ids of the body's statements
+        self.mem = mem
         self.kind: dict[int, str] = {}
         self.steps: set[int] = set()
-        self._visit(body.stmts)
+        self._visit(loop.blocks[0].stmts)
 
     def of(self, o: Stmt) -> str | None:
         if o.op is Op.CONST or id(o) not in self.inside and o is not self.loop:
@@ -642,23 +647,11 @@ class _MemoryRewrite(_Rewrite):
     def _segment(self, k: int, stmts: list[Stmt], followed: bool) -> None:
         super()._segment(k, self._hoist(stmts), followed)
 
-    def _uniform_step(self, k: int, loop: Stmt) -> None:
-        """A counted loop with the same trips in every lane: the loop itself at the group's level, each trip its
-        uniform statements once, then the others in one lane loop over all W lanes under `lane < n`. Its slices
-        are loaded before it and stored after, when it runs at all."""
-        outer_b = self.b
-        begin, end = (self._group_value(o) for o in loop.operands)
-        runs = self.b.emit(Op.IF, None, (self.b.lt(begin, end),), nblocks=2)
-        self.b = Builder(runs.blocks[0])
-        self.b.loc = loop.loc
-        self.slices = self.step_slices.get(k, {})
-        for sl in self.slices.values():
-            sl.slot = self.b.emit(Op.ALLOCA, sl.target.dtype, (), {"lanes": sl.size * self.width})
-            if not sl.read:
-                sl.dirty = self.b.emit(Op.ALLOCA, dt.i32, (), {"lanes": sl.size * self.width})
-        self._slice_loop(k, load=True)
+    def _uniform_trips(self, k: int, loop: Stmt, bounds: tuple[Stmt, Stmt]) -> None:
+        """A counted loop with the same trips in every lane: the loop itself at the group's level over `bounds`,
+        each trip its uniform statements once, then the others in one lane loop over all W lanes under `lane < n`."""
         stmts = loop.blocks[0].stmts
-        loop.operands = (begin, end)
+        loop.operands = bounds
         loop.blocks = (Block(loop),)
         loop.block = self.b.block
         self.b.block.stmts.append(loop)
@@ -682,28 +675,32 @@ class _MemoryRewrite(_Rewrite):
         self.memory_step = False
         self.group = saved
         self.b = around_b
-        self._slice_loop(k, load=False)
-        self.slices = {}
-        self.b = outer_b
 
     def _step(self, k: int, w: Stmt) -> None:
         """The step loop, its slices loaded before and stored after it; a counted loop's only when a lane enters it
-        (a group of iterations whose counts are all 0 does no step: loads, slices, nothing)."""
-        if id(w) in self.uni.steps:
-            self._uniform_step(k, w)
-            return
+        (a group of iterations whose counts are all 0 does no step: loads, slices, nothing), a uniform one's
+        (`uni.steps`) when it has trips."""
         outer_b = self.b
         self.slices = self.step_slices.get(k, {})
         for sl in self.slices.values():
             sl.slot = self.b.emit(Op.ALLOCA, sl.target.dtype, (), {"lanes": sl.size * self.width})
             if not sl.read:
                 sl.dirty = self.b.emit(Op.ALLOCA, dt.i32, (), {"lanes": sl.size * self.width})
-        if id(w) in self.counted:
+        uniform = id(w) in self.uni.steps
+        if uniform:
+            begin, end = (self._group_value(o) for o in w.operands)
+            runs = self.b.emit(Op.IF, None, (self.b.lt(begin, end),), nblocks=2)
+            self.b = Builder(runs.blocks[0])
+            self.b.loc = w.loc
+        elif id(w) in self.counted:
             self.b = self._entered(k, *self.counted[id(w)])
         self._slice_loop(k, load=True)
-        self.memory_step = any(x.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE) for x in walk(w.blocks[0]))
-        super()._step(k, w)
-        self.memory_step = False
+        if uniform:
+            self._uniform_trips(k, w, (begin, end))
+        else:
+            self.memory_step = any(x.op in (Op.GLOBAL_LOAD, Op.GLOBAL_STORE) for x in walk(w.blocks[0]))
+            super()._step(k, w)
+            self.memory_step = False
         self._slice_loop(k, load=False)
         self.slices = {}
         self.b = outer_b
