@@ -156,6 +156,19 @@ def _circle(img, i0, i1, j0, j1, cx, cy, r, c):
 
 
 @ti.func
+def _circle_runs(img, i0, i1, j0, rows: ti.template(), cx, cy, r, c):
+    """Columns i0..i1 of a small circle, each the same `rows` rows from j0 (moved up to fit the image): a loop of
+    constant trip count that vectorises, where a 7-row column is all scalar remainder code. Fewer than RUN (16)
+    trips carry the vectorize hint: LLVM leaves loops of fewer than 16 scalar otherwise."""
+    jb = ti.min(j0, img.shape[1] - rows)
+    for i in range(i0, i1 + 1):
+        if ti.static(rows < RUN):
+            ti.loop_config(vectorize=True)
+        for dj in range(rows):
+            _circle_pixel(img, i, jb + dj, cx, cy, r, c)
+
+
+@ti.func
 def _circle_pixel(img, i, j, cx, cy, r, c):
     """Coverage clamp(r - distance) from integer pixel coordinates, blended."""
     dx = cx - i
@@ -205,19 +218,11 @@ def _circles_in_order(img: _IMG, centers: _G2, radii: _F1, colors: _C1, each: _I
                             if i <= i1 and j <= j1:
                                 _circle_pixel(img, i, j, cx, cy, r, c)
                 elif j1 - j0 < RUN // 2 and img.shape[1] >= RUN:  # (radius < 3.5: half the rows)
-                    jb = ti.min(j0, img.shape[1] - RUN // 2)
-                    for i in range(i0, i1 + 1):
-                        ti.loop_config(vectorize=True)
-                        for dj in range(RUN // 2):
-                            _circle_pixel(img, i, jb + dj, cx, cy, r, c)
+                    _circle_runs(img, i0, i1, j0, RUN // 2, cx, cy, r, c)
                 elif j1 - j0 < RUN and img.shape[1] >= RUN:
-                    # a small circle: every column visits RUN rows from the box's top, a loop of constant trip
-                    # count that vectorises (a 7-pixel column is shorter than one vector: scalar remainder code);
-                    # the rows past the box are further than r from the centre, coverage 0, written back as they were
-                    jb = ti.min(j0, img.shape[1] - RUN)
-                    for i in range(i0, i1 + 1):
-                        for dj in range(RUN):
-                            _circle_pixel(img, i, jb + dj, cx, cy, r, c)
+                    # a small circle: every column visits the same rows from the box's top (see _circle_runs); the
+                    # rows past the box are further than r from the centre, coverage 0, written back as they were
+                    _circle_runs(img, i0, i1, j0, RUN, cx, cy, r, c)
                 else:
                     _circle(img, i0, i1, j0, j1, cx, cy, r, c)
 
@@ -296,6 +301,18 @@ def _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_verte
 
 
 @ti.func
+def _segment_runs(img, i0, i1, j0, rows: ti.template(), ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex):
+    """Columns i0..i1 of a short segment, each the same `rows` rows from j0 (moved up to fit the image; see
+    _circle_runs)."""
+    jb = ti.min(j0, img.shape[1] - rows)
+    for i in range(i0, i1 + 1):
+        if ti.static(rows < RUN):
+            ti.loop_config(vectorize=True)
+        for dj in range(rows):
+            _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex)
+
+
+@ti.func
 def _near(p, a, d, pad):
     """The parameter range [s0, s1] within [0, 1] where a + s d is within ``pad`` of ``p`` (empty: s0 > s1)."""
     s0 = ti.cast(0.0, ti.f64)
@@ -365,21 +382,14 @@ def _lines_in_order(img: _IMG, ends: _G2, c0: _C1, c1: _C1, colouring: _I32, ban
                     jb = ti.cast(ti.max(ti.floor(ti.min(ay, ay + dy) - near - 0.5), 0.0), ti.i32)
                     je = ti.cast(ti.min(ti.ceil(ti.max(ay, ay + dy) + near - 0.5), h - 1.0), ti.i32)
                     if je - jb < RUN and img.shape[1] >= RUN:
-                        # a short segment: every column visits the same RUN rows from the box's top, a loop of
-                        # constant trip count (no per-column range, no run-time checks before the vector code)
-                        if je - jb < RUN // 2:  # (a mostly horizontal stroke: half the rows)
-                            jb = ti.min(jb, img.shape[1] - RUN // 2)
-                            for i in range(i0, i1 + 1):
-                                ti.loop_config(vectorize=True)
-                                for dj in range(RUN // 2):
-                                    _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb,
-                                                   per_vertex)
+                        # a short segment: every column visits the same RUN rows from the box's top (half as many
+                        # for a mostly horizontal stroke), a loop of constant trip count (no per-column range, no
+                        # run-time checks before the vector code)
+                        if je - jb < RUN // 2:
+                            _segment_runs(img, i0, i1, jb, RUN // 2, ax, ay, dx, dy, l2, r, ta, span, ca, cb,
+                                          per_vertex)
                         else:
-                            jb = ti.min(jb, img.shape[1] - RUN)
-                            for i in range(i0, i1 + 1):
-                                for dj in range(RUN):
-                                    _segment_pixel(img, i, jb + dj, ax, ay, dx, dy, l2, r, ta, span, ca, cb,
-                                                   per_vertex)
+                            _segment_runs(img, i0, i1, jb, RUN, ax, ay, dx, dy, l2, r, ta, span, ca, cb, per_vertex)
                     else:
                         for i in range(i0, i1 + 1):
                             s0, s1 = _near(i + 0.5, ax, dx, near)
