@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # kernel parameter annotations are simgrad types, opaque to m
     _F2: TypeAlias = Any
     _C1: TypeAlias = Any
     _I32: TypeAlias = Any
+    _ROWS: TypeAlias = Any
 else:
     _IMG = ti.types.ndarray(dtype=ti.types.vector(3, ti.f32), ndim=2)
     _I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
@@ -54,6 +55,7 @@ else:
     _F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
     _C1 = ti.types.ndarray(dtype=ti.types.vector(3, ti.f64), ndim=1)
     _I32 = ti.i32
+    _ROWS = ti.template()  # a compile-time row count (_circle_runs, _segment_runs)
 
 
 #: on a GPU, at most this many primitives are drawn as one tile covering the image (``tiles_y`` 0): one thread
@@ -156,7 +158,7 @@ def _circle(img, i0, i1, j0, j1, cx, cy, r, c):
 
 
 @ti.func
-def _circle_runs(img, i0, i1, j0, rows: ti.template(), cx, cy, r, c):
+def _circle_runs(img, i0, i1, j0, rows: _ROWS, cx, cy, r, c):
     """Columns i0..i1 of a small circle, each the same `rows` rows from j0 (moved up to fit the image): a loop of
     constant trip count that vectorises, where a 7-row column is all scalar remainder code. Fewer than RUN (16)
     trips carry the vectorize hint: LLVM leaves loops of fewer than 16 scalar otherwise."""
@@ -301,7 +303,7 @@ def _segment_pixel(img, i, j, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_verte
 
 
 @ti.func
-def _segment_runs(img, i0, i1, j0, rows: ti.template(), ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex):
+def _segment_runs(img, i0, i1, j0, rows: _ROWS, ax, ay, dx, dy, l2, r, ta, span, c0, c1, per_vertex):
     """Columns i0..i1 of a short segment, each the same `rows` rows from j0 (moved up to fit the image; see
     _circle_runs)."""
     jb = ti.min(j0, img.shape[1] - rows)
